@@ -1,0 +1,109 @@
+// PointBuffer: a point cloud with an arbitrary per-point record layout.
+//
+// Contract
+// - Modelled on sensor_msgs/PointCloud2 (and pcl::PCLPointCloud2) so that adapters copy bytes, never reinterpret:
+//   every point is a record of `layout.point_step` bytes; fields sit at byte offsets with a datatype numbered as in
+//   PointCloud2 (INT8=1 ... FLOAT64=8) and an element count.
+// - Records are stored densely (row_step == width * point_step) and little-endian (the host order on every target we
+//   build for). `width`/`height` keep the organisation of the source (height > 1: organised); size() = width*height.
+// - Values are read through `readAsDouble`, which memcpy's the bytes: no alignment or type assumptions.
+// - A PointBuffer owns its bytes; it is a value type, not thread-safe for concurrent mutation.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <cstring>
+#include <optional>
+#include <string>
+#include <vector>
+
+namespace hpds {
+
+/// Element datatypes, numbered exactly as sensor_msgs::PointField / pcl::PCLPointField.
+enum class FieldType : std::uint8_t {
+  Int8 = 1,
+  UInt8 = 2,
+  Int16 = 3,
+  UInt16 = 4,
+  Int32 = 5,
+  UInt32 = 6,
+  Float32 = 7,
+  Float64 = 8,
+};
+
+/// Bytes of one element of `type`; 0 for a value outside the enum.
+[[nodiscard]] std::size_t fieldTypeSize(FieldType type);
+/// True when `raw` is one of the eight PointCloud2 datatypes.
+[[nodiscard]] bool isValidFieldType(std::uint8_t raw);
+/// "float32", "uint8", ... (for messages).
+[[nodiscard]] const char *fieldTypeName(FieldType type);
+
+struct PointField {
+  std::string name;
+  std::uint32_t offset = 0;  ///< byte offset inside the record
+  FieldType type = FieldType::Float32;
+  std::uint32_t count = 1;  ///< elements (1 for scalars)
+
+  [[nodiscard]] std::size_t byteSize() const { return fieldTypeSize(type) * count; }
+  bool operator==(const PointField &o) const {
+    return name == o.name && offset == o.offset && type == o.type && count == o.count;
+  }
+};
+
+struct PointLayout {
+  std::vector<PointField> fields;
+  std::uint32_t point_step = 0;  ///< bytes per record (>= end of the last field; may include padding)
+
+  [[nodiscard]] const PointField *find(const std::string &name) const;
+  /// Appends a field at the current end of the record and grows point_step.
+  void append(const std::string &name, FieldType type, std::uint32_t count = 1);
+  /// Throws std::invalid_argument when a field overlaps the record end, has a bad type or count 0, or a name repeats.
+  void validate() const;
+  bool operator==(const PointLayout &o) const { return fields == o.fields && point_step == o.point_step; }
+  bool operator!=(const PointLayout &o) const { return !(*this == o); }
+};
+
+class PointBuffer {
+ public:
+  PointBuffer() = default;
+  explicit PointBuffer(PointLayout layout, std::size_t n = 0) : layout_(std::move(layout)) { resize(n); }
+
+  [[nodiscard]] const PointLayout &layout() const { return layout_; }
+  [[nodiscard]] std::size_t size() const { return layout_.point_step ? data_.size() / layout_.point_step : 0; }
+  [[nodiscard]] bool empty() const { return size() == 0; }
+  [[nodiscard]] std::uint32_t width() const { return width_; }
+  [[nodiscard]] std::uint32_t height() const { return height_; }
+  /// Sets the organisation; width*height must equal size().
+  void setOrganization(std::uint32_t width, std::uint32_t height);
+
+  /// Resizes to n records (new bytes zeroed); organisation becomes n x 1.
+  void resize(std::size_t n);
+  void reserve(std::size_t n) { data_.reserve(n * layout_.point_step); }
+  /// Appends one record copied from `record` (point_step bytes); organisation becomes size() x 1.
+  void pushBack(const std::uint8_t *record);
+
+  [[nodiscard]] std::uint8_t *record(std::size_t i) { return data_.data() + i * layout_.point_step; }
+  [[nodiscard]] const std::uint8_t *record(std::size_t i) const { return data_.data() + i * layout_.point_step; }
+  [[nodiscard]] std::vector<std::uint8_t> &bytes() { return data_; }
+  [[nodiscard]] const std::vector<std::uint8_t> &bytes() const { return data_; }
+
+ private:
+  PointLayout layout_;
+  std::vector<std::uint8_t> data_;
+  std::uint32_t width_ = 0;
+  std::uint32_t height_ = 1;
+};
+
+/// Reads element `element` of `field` in `record` converted to double (memcpy, any alignment).
+[[nodiscard]] double readAsDouble(const std::uint8_t *record, const PointField &field, std::uint32_t element = 0);
+/// Writes `value` converted to the field's type (saturating/rounding for integer types).
+void writeFromDouble(std::uint8_t *record, const PointField &field, double value, std::uint32_t element = 0);
+
+/// Copies one record's bytes of `src_field` into `dst_field` of another record; both fields must have equal
+/// type and count.
+inline void copyFieldBytes(std::uint8_t *dst_record, const PointField &dst_field, const std::uint8_t *src_record,
+                           const PointField &src_field) {
+  std::memcpy(dst_record + dst_field.offset, src_record + src_field.offset, src_field.byteSize());
+}
+
+}  // namespace hpds

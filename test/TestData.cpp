@@ -1,0 +1,42 @@
+#include "TestData.hpp"
+
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <array>
+#include <cstdio>
+#include <random>
+
+namespace hpds::test {
+
+std::filesystem::path sharedLidarDir() {
+  const std::filesystem::path dir(HPDS_SHARED_DATA_DIR);
+  std::error_code ec;
+  if (std::filesystem::is_directory(dir, ec) && std::filesystem::exists(dir / "hdl32_a.pcd", ec)) return dir;
+  return {};
+}
+
+std::filesystem::path scratchDir(const std::string &tag) {
+  static std::mt19937_64 rng(std::random_device{}());
+  const auto dir = std::filesystem::temp_directory_path() /
+                   ("hpds_test_" + tag + "_" + std::to_string(::getpid()) + "_" + std::to_string(rng() % 1000000));
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  return dir;
+}
+
+std::string cliPath() { return HPDS_CLI_PATH; }
+
+int runCommand(const std::string &command, std::string *output) {
+  FILE *pipe = ::popen((command + " 2>&1").c_str(), "r");
+  if (!pipe) return -1;
+  std::array<char, 4096> buf{};
+  std::string out;
+  std::size_t n;
+  while ((n = std::fread(buf.data(), 1, buf.size(), pipe)) > 0) out.append(buf.data(), n);
+  const int status = ::pclose(pipe);
+  if (output) *output = out;
+  return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + (WIFSIGNALED(status) ? WTERMSIG(status) : 0);
+}
+
+}  // namespace hpds::test
