@@ -30,7 +30,7 @@ struct HierarchyConfig {
 struct OrderConfig {
   InsertionOrder type = InsertionOrder::Random;  ///< order in which a frame's points are offered to the hierarchy
   std::uint64_t seed = 0;                        ///< seed of the random order (same input + seed = same output)
-  double feature_radius = 0.0;  ///< [m] PCA radius of the feature orders; 0 = twice the finest radius r_max_depth
+  double feature_radius = 0.0;  ///< [m] PCA radius of the feature orders; 0 = twice r_D of the output level
 };
 
 struct OutputConfig {

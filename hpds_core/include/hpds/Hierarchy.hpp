@@ -1,0 +1,192 @@
+// Hierarchy: the additive Poisson-disk hierarchy of Dieckmann & Klein, world-anchored and unbounded.
+//
+// Contract
+// - Level D (0..max_depth, max_depth <= 21) is a sparse grid of edge c_D = cell_size * 2^-D; its radius is
+//   r_D = sqrt(3)/2 * c_D. A level-D cell holds at most one level-D sample.
+// - Invariant kept by every insertion (also across frames in map mode): for samples a at level i and b at level j,
+//   |a - b| >= r_max(i,j). Hence the union of levels 0..D is a Poisson-disk set of radius r_D for every D.
+//   The paper's check (the r_D-ball against levels 0..D) suffices when a batch starts on an empty hierarchy; for
+//   later batches the candidate is also checked against finer levels l > D with their own r_l.
+// - Coverage: every offered point (not skipped) lies within 2 r_D of the union of levels 0..D, for every D.
+// - Positions are in the fixed frame, metres, double precision. Coordinates whose finest-level cell index would
+//   reach 2^30 are refused (counted as out_of_range) instead of producing wrong keys.
+// - Samples keep a copy of their input record (the bytes of every input field), the frame index that contributed
+//   them and the vector from sample to that frame's viewpoint (for normal orientation).
+// - Sample ids are stable until the sample is evicted; evicted ids are reused by later insertions.
+// - Not thread-safe for mutation; const queries may run concurrently.
+#pragma once
+
+#include <array>
+#include <cmath>
+#include <cstddef>
+#include <cstdint>
+#include <vector>
+
+#include "hpds/LevelGrid.hpp"
+#include "hpds/PointBuffer.hpp"
+
+namespace hpds {
+
+inline constexpr int kMaxDepthLimit = 21;
+inline constexpr std::uint8_t kFreeSlotLevel = 0xFF;
+
+/// One batch of candidate points offered to the hierarchy (a frame, already in the fixed frame).
+struct InsertBatch {
+  const double *xyz = nullptr;          ///< 3 doubles per point, fixed frame [m]
+  std::size_t size = 0;                 ///< number of points behind xyz
+  const std::uint32_t *order = nullptr; ///< point indices in insertion order (a subset of 0..size-1)
+  std::size_t order_size = 0;
+  const std::uint8_t *records = nullptr;  ///< input records (record_step bytes each, point i at i*step); may be null
+  std::size_t record_step = 0;
+  double viewpoint[3] = {0.0, 0.0, 0.0};  ///< sensor origin of this batch in the fixed frame
+  std::uint32_t frame_index = 0;
+};
+
+struct InsertResult {
+  std::vector<SampleId> accepted;               ///< new sample ids, in acceptance order
+  std::array<std::uint64_t, kMaxDepthLimit + 1> accepted_per_level{};
+  std::uint64_t dropped_depth = 0;  ///< rejected at every level down to max_depth
+  std::uint64_t out_of_range = 0;   ///< coordinates beyond the exact-key range (never inserted)
+};
+
+class Hierarchy {
+ public:
+  /// Throws std::invalid_argument for cell_size <= 0 / non-finite or max_depth outside 0..21.
+  Hierarchy(double cell_size, int max_depth);
+  Hierarchy(const Hierarchy &) = delete;
+  Hierarchy &operator=(const Hierarchy &) = delete;
+  Hierarchy(Hierarchy &&) noexcept = default;
+  Hierarchy &operator=(Hierarchy &&) noexcept = default;
+
+  /// Layout of the records samples keep. Must be set before the first insertion with records; changing it
+  /// on a non-empty hierarchy throws std::invalid_argument.
+  void setRecordLayout(const PointLayout &layout);
+  [[nodiscard]] const PointLayout &recordLayout() const { return record_layout_; }
+
+  /// Offers the batch's points level by level (breadth-first, as in the paper): every point tries level 0 in
+  /// order, the rejected ones then try level 1 in the same order, and so on.
+  InsertResult insert(const InsertBatch &batch);
+
+  /// Removes every sample farther than `distance` from `center`; returns how many.
+  std::size_t evictOutside(const double center[3], double distance);
+  /// Removes the samples farthest from `center` until at most `max_samples` remain; returns how many.
+  std::size_t evictToCap(const double center[3], std::size_t max_samples);
+  void clear();
+
+  [[nodiscard]] int maxDepth() const { return max_depth_; }
+  [[nodiscard]] double cellSize() const { return cell_size_; }
+  [[nodiscard]] double edge(int level) const { return edge_[level]; }
+  [[nodiscard]] double radius(int level) const { return radius_[level]; }
+
+  /// Live samples (all levels) and per level.
+  [[nodiscard]] std::size_t sampleCount() const { return live_; }
+  [[nodiscard]] std::size_t countAtLevel(int level) const { return grids_[level].size(); }
+  /// One past the largest sample id ever handed out (ids below it may be free slots).
+  [[nodiscard]] std::size_t idBound() const { return level_.size(); }
+  [[nodiscard]] bool isLive(SampleId id) const { return id < level_.size() && level_[id] != kFreeSlotLevel; }
+
+  [[nodiscard]] const double *position(SampleId id) const { return &xyz_[3 * std::size_t(id)]; }
+  [[nodiscard]] int level(SampleId id) const { return level_[id]; }
+  [[nodiscard]] std::uint32_t frameIndex(SampleId id) const { return frame_[id]; }
+  /// Vector from the sample to the viewpoint of the frame that contributed it [m].
+  [[nodiscard]] const float *toViewpoint(SampleId id) const { return &to_view_[3 * std::size_t(id)]; }
+  /// The sample's input record (recordLayout().point_step bytes), or nullptr without records.
+  [[nodiscard]] const std::uint8_t *record(SampleId id) const {
+    return record_layout_.point_step ? &records_[std::size_t(id) * record_layout_.point_step] : nullptr;
+  }
+  /// The sample at `level` in the cell containing `xyz`, or kNoSample.
+  [[nodiscard]] SampleId sampleInCell(int level, const double xyz[3]) const;
+  [[nodiscard]] const LevelGrid &grid(int level) const { return grids_[level]; }
+
+  /// Live sample ids of levels 0..max_level in increasing id order.
+  [[nodiscard]] std::vector<SampleId> samplesUpTo(int max_level) const;
+
+  /// Calls fn(SampleId, double squared_distance) for every sample of levels 0..max_level strictly within `radius`
+  /// of `q`, walking each level's cells that overlap the ball (no separate search structure).
+  template <typename Fn>
+  void forEachInBall(const double q[3], double radius, int max_level, Fn &&fn) const {
+    for (int l = 0; l <= max_level; ++l) visitBall(l, q, radius, fn);
+  }
+
+  /// Bytes held by grids and sample storage.
+  [[nodiscard]] std::size_t memUsage() const;
+
+ private:
+  bool keyAt(int level, const double q[3], CellKey &key) const;
+  /// True when some sample of `level` lies strictly within `radius` of q (skips q's own cell when skip_own).
+  bool conflictAt(int level, const double q[3], double radius, bool skip_own) const;
+  template <typename Fn>
+  void visitBall(int level, const double q[3], double radius, Fn &fn) const;
+  SampleId allocate();
+  void release(SampleId id);
+
+  double cell_size_;
+  int max_depth_;
+  std::array<double, kMaxDepthLimit + 1> edge_{};
+  std::array<double, kMaxDepthLimit + 1> inv_edge_{};
+  std::array<double, kMaxDepthLimit + 1> radius_{};
+  std::vector<LevelGrid> grids_;
+
+  PointLayout record_layout_;
+  std::vector<double> xyz_;
+  std::vector<std::uint8_t> level_;
+  std::vector<std::uint32_t> frame_;
+  std::vector<float> to_view_;
+  std::vector<std::uint8_t> records_;
+  std::vector<SampleId> free_ids_;
+  std::size_t live_ = 0;
+
+  // Per-insert scratch, kept to avoid reallocating per frame.
+  std::vector<std::vector<std::uint32_t>> buckets_;
+};
+
+template <typename Fn>
+void Hierarchy::visitBall(int level, const double q[3], double radius, Fn &fn) const {
+  const LevelGrid &grid = grids_[level];
+  if (grid.size() == 0) return;
+  CellKey k;
+  if (!keyAt(level, q, k)) return;
+  const double e = edge_[level];
+  const double span_f = std::ceil(radius / e);
+  const double r2 = radius * radius;
+  // A ball much larger than the level's cells: scanning the occupied cells is cheaper than walking the ball.
+  if (!(span_f < 64.0) || (2.0 * span_f + 1.0) * (2.0 * span_f + 1.0) * (2.0 * span_f + 1.0) > 4.0 * grid.capacity()) {
+    grid.forEach([&](const CellKey &, SampleId s) {
+      const double *p = position(s);
+      const double ddx = p[0] - q[0], ddy = p[1] - q[1], ddz = p[2] - q[2];
+      const double d2 = ddx * ddx + ddy * ddy + ddz * ddz;
+      if (d2 < r2) fn(s, d2);
+    });
+    return;
+  }
+  const int span = static_cast<int>(span_f);
+  double lo[3], hi[3];
+  const std::int32_t kc[3] = {k.x, k.y, k.z};
+  for (int a = 0; a < 3; ++a) {
+    lo[a] = offsetInCell(q[a], kc[a], e);
+    hi[a] = e - lo[a];
+  }
+  // Slack so that rounding in the gap sums never prunes a cell that holds a sample within the radius.
+  const double prune = r2 * (1.0 + 1e-9) + 1e-300;
+  auto gap = [&](int a, int d) { return d < 0 ? lo[a] + (-d - 1) * e : (d > 0 ? hi[a] + (d - 1) * e : 0.0); };
+  for (int dx = -span; dx <= span; ++dx) {
+    const double gx = gap(0, dx), gx2 = gx * gx;
+    if (gx2 > prune) continue;
+    for (int dy = -span; dy <= span; ++dy) {
+      const double gy = gap(1, dy), gxy2 = gx2 + gy * gy;
+      if (gxy2 > prune) continue;
+      for (int dz = -span; dz <= span; ++dz) {
+        const double gz = gap(2, dz);
+        if (gxy2 + gz * gz > prune) continue;
+        const SampleId s = grid.find(CellKey{k.x + dx, k.y + dy, k.z + dz});
+        if (s == kNoSample) continue;
+        const double *p = position(s);
+        const double ddx = p[0] - q[0], ddy = p[1] - q[1], ddz = p[2] - q[2];
+        const double d2 = ddx * ddx + ddy * ddy + ddz * ddz;
+        if (d2 < r2) fn(s, d2);
+      }
+    }
+  }
+}
+
+}  // namespace hpds

@@ -1,0 +1,243 @@
+#include "hpds/Hierarchy.hpp"
+
+#include <algorithm>
+#include <cstring>
+#include <numeric>
+#include <stdexcept>
+#include <string>
+
+namespace hpds {
+
+Hierarchy::Hierarchy(double cell_size, int max_depth) : cell_size_(cell_size), max_depth_(max_depth) {
+  if (!(cell_size > 0.0) || !std::isfinite(cell_size))
+    throw std::invalid_argument("hierarchy.cell_size: must be a finite number > 0");
+  if (max_depth < 0 || max_depth > kMaxDepthLimit)
+    throw std::invalid_argument("hierarchy.max_depth: must be in 0..21, got " + std::to_string(max_depth));
+  for (int d = 0; d <= max_depth; ++d) {
+    edge_[d] = std::ldexp(cell_size, -d);  // exact: a power-of-two scaling
+    inv_edge_[d] = 1.0 / edge_[d];
+    radius_[d] = 0.5 * std::sqrt(3.0) * edge_[d];
+  }
+  grids_.resize(static_cast<std::size_t>(max_depth) + 1);
+  buckets_.resize(static_cast<std::size_t>(max_depth) + 2);
+}
+
+void Hierarchy::setRecordLayout(const PointLayout &layout) {
+  if (layout == record_layout_) return;
+  if (live_ > 0 || !level_.empty())
+    throw std::invalid_argument("point layout differs from the layout of the samples already in the map");
+  layout.validate();
+  record_layout_ = layout;
+}
+
+bool Hierarchy::keyAt(int level, const double q[3], CellKey &key) const {
+  const double e = edge_[level], ie = inv_edge_[level];
+  if (!inCellRange(q[0], ie) || !inCellRange(q[1], ie) || !inCellRange(q[2], ie)) return false;
+  key = CellKey{exactCellCoord(q[0], e, ie), exactCellCoord(q[1], e, ie), exactCellCoord(q[2], e, ie)};
+  return true;
+}
+
+SampleId Hierarchy::sampleInCell(int level, const double xyz[3]) const {
+  CellKey k;
+  if (level < 0 || level > max_depth_ || !keyAt(level, xyz, k)) return kNoSample;
+  return grids_[level].find(k);
+}
+
+bool Hierarchy::conflictAt(int level, const double q[3], double radius, bool skip_own) const {
+  const LevelGrid &grid = grids_[level];
+  if (grid.size() == 0) return false;
+  const double e = edge_[level], ie = inv_edge_[level];
+  const CellKey k{exactCellCoord(q[0], e, ie), exactCellCoord(q[1], e, ie), exactCellCoord(q[2], e, ie)};
+  const double r2 = radius * radius;
+  // radius <= sqrt(3)/2 * edge of this level or of a coarser one, so the ball never reaches past the 26 neighbours.
+  double lo[3], hi[3];
+  const std::int32_t kc[3] = {k.x, k.y, k.z};
+  for (int a = 0; a < 3; ++a) {
+    lo[a] = offsetInCell(q[a], kc[a], e);
+    hi[a] = e - lo[a];
+  }
+  const double prune = r2 * (1.0 + 1e-9) + 1e-300;
+  const double g[3][3] = {{lo[0], 0.0, hi[0]}, {lo[1], 0.0, hi[1]}, {lo[2], 0.0, hi[2]}};
+  for (int dx = -1; dx <= 1; ++dx) {
+    const double gx2 = g[0][dx + 1] * g[0][dx + 1];
+    if (gx2 > prune) continue;
+    for (int dy = -1; dy <= 1; ++dy) {
+      const double gxy2 = gx2 + g[1][dy + 1] * g[1][dy + 1];
+      if (gxy2 > prune) continue;
+      for (int dz = -1; dz <= 1; ++dz) {
+        if (gxy2 + g[2][dz + 1] * g[2][dz + 1] > prune) continue;
+        if (skip_own && dx == 0 && dy == 0 && dz == 0) continue;
+        const SampleId s = grid.find(CellKey{k.x + dx, k.y + dy, k.z + dz});
+        if (s == kNoSample) continue;
+        const double *p = position(s);
+        const double ddx = p[0] - q[0], ddy = p[1] - q[1], ddz = p[2] - q[2];
+        if (ddx * ddx + ddy * ddy + ddz * ddz < r2) return true;
+      }
+    }
+  }
+  return false;
+}
+
+SampleId Hierarchy::allocate() {
+  if (!free_ids_.empty()) {
+    const SampleId id = free_ids_.back();
+    free_ids_.pop_back();
+    return id;
+  }
+  if (level_.size() >= kNoSample) throw std::length_error("hierarchy: more than 2^32-1 sample slots");
+  const SampleId id = static_cast<SampleId>(level_.size());
+  level_.push_back(kFreeSlotLevel);
+  frame_.push_back(0);
+  xyz_.resize(xyz_.size() + 3);
+  to_view_.resize(to_view_.size() + 3);
+  records_.resize(records_.size() + record_layout_.point_step);
+  return id;
+}
+
+void Hierarchy::release(SampleId id) {
+  CellKey k;
+  const int l = level_[id];
+  if (keyAt(l, position(id), k)) grids_[l].erase(k);
+  level_[id] = kFreeSlotLevel;
+  free_ids_.push_back(id);
+  --live_;
+}
+
+InsertResult Hierarchy::insert(const InsertBatch &batch) {
+  InsertResult result;
+  if (batch.records && batch.record_step != record_layout_.point_step)
+    throw std::invalid_argument("insert: record_step does not match the record layout");
+
+  // Highest level holding samples from earlier batches: only those need the finer-level check.
+  int finest_populated = -1;
+  for (int l = max_depth_; l >= 0; --l)
+    if (grids_[l].size() > 0) {
+      finest_populated = l;
+      break;
+    }
+
+  // Buckets hold ranks into batch.order, so sorting a bucket restores the caller's order.
+  for (auto &b : buckets_) b.clear();
+  auto &first = buckets_[0];
+  first.reserve(batch.order_size);
+  const double lim = inv_edge_[max_depth_];
+  for (std::uint32_t rank = 0; rank < batch.order_size; ++rank) {
+    const double *q = batch.xyz + 3 * std::size_t(batch.order[rank]);
+    // One range check at the finest level covers every coarser level.
+    if (inCellRange(q[0], lim) && inCellRange(q[1], lim) && inCellRange(q[2], lim))
+      first.push_back(rank);
+    else
+      ++result.out_of_range;
+  }
+
+  std::vector<bool> jumped_into(buckets_.size(), false);
+  for (int d = 0; d <= max_depth_; ++d) {
+    auto &bucket = buckets_[d];
+    if (bucket.empty()) continue;
+    if (jumped_into[d]) std::sort(bucket.begin(), bucket.end());
+    const double e = edge_[d], ie = inv_edge_[d], rd = radius_[d];
+    for (const std::uint32_t rank : bucket) {
+      const std::uint32_t pi = batch.order[rank];
+      const double *q = batch.xyz + 3 * std::size_t(pi);
+      const CellKey key{exactCellCoord(q[0], e, ie), exactCellCoord(q[1], e, ie), exactCellCoord(q[2], e, ie)};
+      int next = d + 1;
+      bool ok = grids_[d].find(key) == kNoSample && !conflictAt(d, q, rd, /*skip_own=*/true);
+      for (int l = d - 1; ok && l >= 0; --l) ok = !conflictAt(l, q, rd, false);
+      if (ok) {
+        // Samples of finer levels (earlier batches) keep their own, smaller radius. A conflict at level l rules
+        // out every level <= l, so the point continues at l + 1.
+        for (int l = finest_populated; l > d; --l)
+          if (conflictAt(l, q, radius_[l], false)) {
+            ok = false;
+            next = l + 1;
+            break;
+          }
+      }
+      if (ok) {
+        const SampleId id = allocate();
+        std::memcpy(&xyz_[3 * std::size_t(id)], q, 3 * sizeof(double));
+        level_[id] = static_cast<std::uint8_t>(d);
+        frame_[id] = batch.frame_index;
+        for (int a = 0; a < 3; ++a) to_view_[3 * std::size_t(id) + a] = static_cast<float>(batch.viewpoint[a] - q[a]);
+        if (batch.records && record_layout_.point_step)
+          std::memcpy(&records_[std::size_t(id) * record_layout_.point_step], batch.records + pi * batch.record_step,
+                      record_layout_.point_step);
+        grids_[d].insert(key, id);
+        ++live_;
+        ++result.accepted_per_level[d];
+        result.accepted.push_back(id);
+      } else if (next > max_depth_) {
+        ++result.dropped_depth;
+      } else {
+        if (next != d + 1) jumped_into[next] = true;
+        buckets_[next].push_back(rank);
+      }
+    }
+  }
+  return result;
+}
+
+std::size_t Hierarchy::evictOutside(const double center[3], double distance) {
+  const double r2 = distance * distance;
+  std::size_t n = 0;
+  for (SampleId id = 0; id < level_.size(); ++id) {
+    if (level_[id] == kFreeSlotLevel) continue;
+    const double *p = position(id);
+    const double dx = p[0] - center[0], dy = p[1] - center[1], dz = p[2] - center[2];
+    if (dx * dx + dy * dy + dz * dz > r2) {
+      release(id);
+      ++n;
+    }
+  }
+  return n;
+}
+
+std::size_t Hierarchy::evictToCap(const double center[3], std::size_t max_samples) {
+  if (live_ <= max_samples) return 0;
+  std::vector<std::pair<double, SampleId>> by_distance;
+  by_distance.reserve(live_);
+  for (SampleId id = 0; id < level_.size(); ++id) {
+    if (level_[id] == kFreeSlotLevel) continue;
+    const double *p = position(id);
+    const double dx = p[0] - center[0], dy = p[1] - center[1], dz = p[2] - center[2];
+    by_distance.emplace_back(dx * dx + dy * dy + dz * dz, id);
+  }
+  const std::size_t excess = live_ - max_samples;
+  // Farthest first; ties broken by id so the outcome is deterministic.
+  std::nth_element(by_distance.begin(), by_distance.begin() + static_cast<std::ptrdiff_t>(excess), by_distance.end(),
+                   [](const auto &a, const auto &b) { return a.first != b.first ? a.first > b.first : a.second < b.second; });
+  for (std::size_t i = 0; i < excess; ++i) release(by_distance[i].second);
+  return excess;
+}
+
+void Hierarchy::clear() {
+  for (auto &g : grids_) g.clear();
+  xyz_.clear();
+  level_.clear();
+  frame_.clear();
+  to_view_.clear();
+  records_.clear();
+  free_ids_.clear();
+  live_ = 0;
+}
+
+std::vector<SampleId> Hierarchy::samplesUpTo(int max_level) const {
+  std::vector<SampleId> ids;
+  std::size_t n = 0;
+  for (int l = 0; l <= std::min(max_level, max_depth_); ++l) n += grids_[l].size();
+  ids.reserve(n);
+  for (SampleId id = 0; id < level_.size(); ++id)
+    if (level_[id] != kFreeSlotLevel && level_[id] <= max_level) ids.push_back(id);
+  return ids;
+}
+
+std::size_t Hierarchy::memUsage() const {
+  std::size_t bytes = 0;
+  for (const auto &g : grids_) bytes += g.memUsage();
+  bytes += xyz_.capacity() * sizeof(double) + level_.capacity() + frame_.capacity() * sizeof(std::uint32_t) +
+           to_view_.capacity() * sizeof(float) + records_.capacity() + free_ids_.capacity() * sizeof(SampleId);
+  for (const auto &b : buckets_) bytes += b.capacity() * sizeof(std::uint32_t);
+  return bytes;
+}
+
+}  // namespace hpds

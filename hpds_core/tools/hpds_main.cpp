@@ -1,0 +1,2 @@
+// Placeholder until the CLI lands in this file.
+int main() { return 0; }

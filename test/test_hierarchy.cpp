@@ -1,0 +1,363 @@
+// The hierarchy against brute-force oracles: a naive O(N*S) implementation of the same greedy rule must make
+// exactly the same decisions, and the guarantees (one sample per cell, additive Poisson property, coverage) are
+// checked pairwise on the output.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <map>
+#include <numeric>
+#include <random>
+#include <tuple>
+
+#include "hpds/CellKey.hpp"
+#include "hpds/Hierarchy.hpp"
+#include "hpds/LevelGrid.hpp"
+
+namespace hpds {
+namespace {
+
+// ---------------------------------------------------------------- exact cell coordinates
+
+TEST(CellKey, FloorIsExactAtCellBoundaries) {
+  std::mt19937_64 rng(7);
+  for (double cell : {1.0, 0.3, 0.1, 4.0, 0.7071}) {
+    for (int depth : {0, 5, 10, 21}) {
+      const double e = std::ldexp(cell, -depth), ie = 1.0 / e;
+      std::uniform_int_distribution<std::int64_t> kd(-1000000, 1000000);
+      for (int i = 0; i < 2000; ++i) {
+        const std::int64_t k = kd(rng);
+        const double v = static_cast<double>(k) * e;  // the boundary, rounded
+        for (double x : {v, std::nextafter(v, -INFINITY), std::nextafter(v, INFINITY)}) {
+          if (!inCellRange(x, ie)) continue;
+          const std::int32_t q = exactCellCoord(x, e, ie);
+          // Oracle in 113-bit arithmetic: q*e and (q+1)*e are exact there.
+          const __float128 lo = static_cast<__float128>(q) * static_cast<__float128>(e);
+          const __float128 hi = static_cast<__float128>(q + 1) * static_cast<__float128>(e);
+          ASSERT_TRUE(lo <= static_cast<__float128>(x) && static_cast<__float128>(x) < hi)
+              << "x=" << x << " e=" << e << " q=" << q;
+        }
+      }
+    }
+  }
+}
+
+TEST(CellKey, MillimetreCellsAtAMillionMetres) {
+  const double e = std::ldexp(1.0, -10), ie = 1.0 / e;  // ~0.98 mm
+  const double x = 1e6 + 0.123456789;
+  ASSERT_TRUE(inCellRange(x, ie));
+  const std::int32_t q = exactCellCoord(x, e, ie);
+  EXPECT_EQ(q, static_cast<std::int32_t>(std::floor(static_cast<long double>(x) * 1024.0L)));
+  EXPECT_FALSE(inCellRange(1e7, std::ldexp(1.0, 21)));  // 2e13 cells: refused, not wrapped
+  EXPECT_FALSE(inCellRange(std::nan(""), 1.0));
+  EXPECT_FALSE(inCellRange(INFINITY, 1.0));
+}
+
+// ---------------------------------------------------------------- LevelGrid vs std::map
+
+TEST(LevelGrid, MatchesMapUnderRandomInsertEraseFind) {
+  std::mt19937_64 rng(3);
+  std::uniform_int_distribution<int> c(-20, 20), op(0, 9);
+  LevelGrid grid;
+  std::map<std::tuple<int, int, int>, SampleId> ref;
+  for (int i = 0; i < 200000; ++i) {
+    const CellKey k{c(rng), c(rng), c(rng)};
+    const auto t = std::make_tuple(k.x, k.y, k.z);
+    const int o = op(rng);
+    if (o < 5) {
+      const bool inserted = grid.insert(k, static_cast<SampleId>(i));
+      const bool ref_inserted = ref.emplace(t, static_cast<SampleId>(i)).second;
+      ASSERT_EQ(inserted, ref_inserted);
+    } else if (o < 8) {
+      ASSERT_EQ(grid.erase(k), ref.erase(t) == 1);
+    } else {
+      const auto it = ref.find(t);
+      ASSERT_EQ(grid.find(k), it == ref.end() ? kNoSample : it->second);
+    }
+    ASSERT_EQ(grid.size(), ref.size());
+  }
+  std::size_t visited = 0;
+  grid.forEach([&](const CellKey &k, SampleId id) {
+    ++visited;
+    EXPECT_EQ(ref.at(std::make_tuple(k.x, k.y, k.z)), id);
+  });
+  EXPECT_EQ(visited, ref.size());
+}
+
+// ---------------------------------------------------------------- brute-force reference of the greedy rule
+
+struct RefSample {
+  std::array<double, 3> p;
+  int level;
+  std::uint32_t point;
+  int batch;
+};
+
+double dist2(const double *a, const double *b) {
+  const double dx = a[0] - b[0], dy = a[1] - b[1], dz = a[2] - b[2];
+  return dx * dx + dy * dy + dz * dz;
+}
+
+long long refCell(double v, double e) { return static_cast<long long>(std::floor(static_cast<long double>(v) / e)); }
+
+/// Naive breadth-first insertion: every test is a linear scan over all samples.
+struct ReferenceHierarchy {
+  double cell;
+  int max_depth;
+  std::vector<RefSample> samples;
+  std::uint64_t dropped = 0;
+
+  double edge(int d) const { return std::ldexp(cell, -d); }
+  double radius(int d) const { return 0.5 * std::sqrt(3.0) * edge(d); }
+
+  void insert(const std::vector<double> &xyz, const std::vector<std::uint32_t> &order, int batch) {
+    std::vector<std::uint32_t> active(order.size());
+    std::iota(active.begin(), active.end(), 0u);  // ranks
+    for (int d = 0; d <= max_depth && !active.empty(); ++d) {
+      std::vector<std::uint32_t> next;
+      for (std::uint32_t rank : active) {
+        const double *q = &xyz[3 * order[rank]];
+        bool ok = true;
+        for (const auto &s : samples) {
+          if (s.level == d && refCell(s.p[0], edge(d)) == refCell(q[0], edge(d)) &&
+              refCell(s.p[1], edge(d)) == refCell(q[1], edge(d)) && refCell(s.p[2], edge(d)) == refCell(q[2], edge(d)))
+            ok = false;
+          const double r = radius(std::max(d, s.level));
+          if (dist2(s.p.data(), q) < r * r) ok = false;
+          if (!ok) break;
+        }
+        if (ok)
+          samples.push_back({{q[0], q[1], q[2]}, d, order[rank], batch});
+        else
+          next.push_back(rank);
+      }
+      active.swap(next);
+    }
+    dropped += active.size();
+  }
+};
+
+std::vector<double> randomCloud(std::mt19937_64 &rng, std::size_t n, double extent, bool planar) {
+  std::uniform_real_distribution<double> u(-extent, extent);
+  std::vector<double> xyz(3 * n);
+  for (std::size_t i = 0; i < n; ++i) {
+    xyz[3 * i] = u(rng);
+    xyz[3 * i + 1] = u(rng);
+    // "2D-like": a thin noisy slab, as a lidar sees a floor.
+    xyz[3 * i + 2] = planar ? 0.01 * u(rng) / extent : u(rng);
+  }
+  return xyz;
+}
+
+/// Clustered points with near-duplicates, as scan lines produce.
+std::vector<double> scanLineCloud(std::mt19937_64 &rng, std::size_t n, double extent) {
+  std::uniform_real_distribution<double> u(-extent, extent);
+  std::normal_distribution<double> jitter(0.0, 0.002);
+  std::vector<double> xyz(3 * n);
+  const int lines = 12;
+  for (std::size_t i = 0; i < n; ++i) {
+    const int line = static_cast<int>(i % lines);
+    xyz[3 * i] = u(rng);
+    xyz[3 * i + 1] = -extent + (2.0 * extent * line) / lines + jitter(rng);
+    xyz[3 * i + 2] = 0.05 * std::sin(xyz[3 * i]) + jitter(rng);
+  }
+  return xyz;
+}
+
+std::vector<std::uint32_t> shuffledOrder(std::size_t n, std::mt19937_64 &rng) {
+  std::vector<std::uint32_t> order(n);
+  std::iota(order.begin(), order.end(), 0u);
+  std::shuffle(order.begin(), order.end(), rng);
+  return order;
+}
+
+InsertResult insertAll(Hierarchy &h, const std::vector<double> &xyz, const std::vector<std::uint32_t> &order,
+                       std::uint32_t frame = 0) {
+  InsertBatch b;
+  b.xyz = xyz.data();
+  b.size = xyz.size() / 3;
+  b.order = order.data();
+  b.order_size = order.size();
+  b.frame_index = frame;
+  return h.insert(b);
+}
+
+/// The three guarantees, checked pairwise. `inserted` are all points offered so far (coverage).
+void expectGuarantees(const Hierarchy &h, const std::vector<std::array<double, 3>> &inserted) {
+  std::vector<SampleId> ids = h.samplesUpTo(h.maxDepth());
+  ASSERT_EQ(ids.size(), h.sampleCount());
+  for (int d = 0; d <= h.maxDepth(); ++d) {
+    const double e = h.edge(d), r = h.radius(d);
+    std::map<std::tuple<long long, long long, long long>, int> cells;
+    std::vector<SampleId> uni;
+    for (SampleId id : ids) {
+      const double *p = h.position(id);
+      if (h.level(id) == d) {
+        const auto cell = std::make_tuple(refCell(p[0], e), refCell(p[1], e), refCell(p[2], e));
+        ASSERT_EQ(++cells[cell], 1) << "two samples in a level-" << d << " cell";
+      }
+      if (h.level(id) <= d) uni.push_back(id);
+    }
+    for (std::size_t i = 0; i < uni.size(); ++i)
+      for (std::size_t j = i + 1; j < uni.size(); ++j)
+        ASSERT_GE(dist2(h.position(uni[i]), h.position(uni[j])), r * r)
+            << "levels 0.." << d << " violate r_" << d << " between samples " << uni[i] << " and " << uni[j];
+    for (const auto &q : inserted) {
+      double best = INFINITY;
+      for (SampleId id : uni) best = std::min(best, dist2(h.position(id), q.data()));
+      ASSERT_LE(best, 4.0 * r * r * (1 + 1e-12)) << "a point is farther than 2 r_" << d << " from levels 0.." << d;
+    }
+  }
+}
+
+struct Case {
+  const char *name;
+  double cell;
+  int depth;
+  std::size_t n;
+  int kind;  // 0 = 3D uniform, 1 = planar slab, 2 = scan lines
+  int batches;
+};
+
+class HierarchyOracle : public ::testing::TestWithParam<Case> {};
+
+TEST_P(HierarchyOracle, SameDecisionsAsBruteForceAndGuaranteesHold) {
+  const Case c = GetParam();
+  for (std::uint64_t seed : {1ull, 2ull, 3ull}) {
+    std::mt19937_64 rng(seed * 7919 + c.n);
+    Hierarchy h(c.cell, c.depth);
+    ReferenceHierarchy ref{c.cell, c.depth, {}, 0};
+    std::vector<std::array<double, 3>> inserted;
+    std::uint64_t dropped = 0;
+    for (int b = 0; b < c.batches; ++b) {
+      std::vector<double> xyz = c.kind == 0   ? randomCloud(rng, c.n, 2.0, false)
+                                : c.kind == 1 ? randomCloud(rng, c.n, 2.0, true)
+                                              : scanLineCloud(rng, c.n, 2.0);
+      // Later batches overlap the first but are shifted, as consecutive frames of a moving sensor.
+      for (std::size_t i = 0; i < xyz.size(); i += 3) xyz[i] += 0.5 * b;
+      const auto order = shuffledOrder(c.n, rng);
+      const InsertResult r = insertAll(h, xyz, order, static_cast<std::uint32_t>(b));
+      ref.insert(xyz, order, b);
+      dropped += r.dropped_depth;
+      EXPECT_EQ(r.out_of_range, 0u);
+      for (std::size_t i = 0; i < c.n; ++i) inserted.push_back({xyz[3 * i], xyz[3 * i + 1], xyz[3 * i + 2]});
+      // Identical decisions: same points accepted at the same levels, same drops.
+      ASSERT_EQ(h.sampleCount(), ref.samples.size()) << c.name << " seed " << seed << " batch " << b;
+      std::map<std::tuple<double, double, double>, std::pair<int, int>> ref_levels;
+      for (const auto &s : ref.samples) ref_levels[{s.p[0], s.p[1], s.p[2]}] = {s.level, s.batch};
+      for (SampleId id : h.samplesUpTo(c.depth)) {
+        const double *p = h.position(id);
+        const auto it = ref_levels.find({p[0], p[1], p[2]});
+        ASSERT_NE(it, ref_levels.end());
+        ASSERT_EQ(it->second.first, h.level(id));
+        ASSERT_EQ(static_cast<int>(h.frameIndex(id)), it->second.second);
+      }
+      ASSERT_EQ(dropped, ref.dropped);
+    }
+    expectGuarantees(h, inserted);
+  }
+}
+
+INSTANTIATE_TEST_SUITE_P(
+    RandomSets, HierarchyOracle,
+    ::testing::Values(Case{"uniform3d", 1.0, 5, 400, 0, 1}, Case{"planar", 1.0, 6, 500, 1, 1},
+                      Case{"scanlines", 0.8, 6, 500, 2, 1}, Case{"coarse_cells", 3.0, 3, 300, 0, 1},
+                      Case{"deep_drops", 1.0, 2, 600, 0, 1}, Case{"stream3d", 1.0, 5, 250, 0, 3},
+                      Case{"stream_planar", 0.7, 6, 300, 1, 3}, Case{"stream_scanlines", 1.3, 6, 300, 2, 3}),
+    [](const ::testing::TestParamInfo<Case> &param_info) { return std::string(param_info.param.name); });
+
+TEST(Hierarchy, DuplicatePointsGoToOneSampleAndDropTheRest) {
+  Hierarchy h(1.0, 4);
+  std::vector<double> xyz;
+  for (int i = 0; i < 10; ++i) xyz.insert(xyz.end(), {0.25, 0.25, 0.25});
+  std::vector<std::uint32_t> order(10);
+  std::iota(order.begin(), order.end(), 0u);
+  const auto r = insertAll(h, xyz, order);
+  EXPECT_EQ(h.sampleCount(), 1u);
+  EXPECT_EQ(r.dropped_depth, 9u);
+  EXPECT_EQ(r.accepted_per_level[0], 1u);
+}
+
+TEST(Hierarchy, TranslationByAMillionMetresChangesNothingWithMillimetreCells) {
+  std::mt19937_64 rng(11);
+  std::uniform_int_distribution<std::int64_t> u(0, (std::int64_t(1) << 26) - 1);
+  const std::size_t n = 3000;
+  std::vector<double> a(3 * n), b(3 * n);
+  const double offset[3] = {1e6, -1e6, 250000.0};  // whole multiples of the level-0 edge
+  for (std::size_t i = 0; i < 3 * n; ++i) {
+    a[i] = std::ldexp(static_cast<double>(u(rng)), -24);  // [0, 4) m on a 2^-24 lattice: a + offset is exact
+    b[i] = a[i] + offset[i % 3];
+  }
+  std::vector<std::uint32_t> order(n);
+  std::iota(order.begin(), order.end(), 0u);
+  Hierarchy ha(1.0, 10), hb(1.0, 10);  // finest edge 2^-10 m ~ 0.98 mm
+  const auto ra = insertAll(ha, a, order), rb = insertAll(hb, b, order);
+  EXPECT_EQ(rb.out_of_range, 0u);
+  ASSERT_EQ(ra.accepted.size(), rb.accepted.size());
+  for (std::size_t i = 0; i < ra.accepted.size(); ++i) {
+    ASSERT_EQ(ha.level(ra.accepted[i]), hb.level(rb.accepted[i]));
+    for (int k = 0; k < 3; ++k) ASSERT_EQ(ha.position(ra.accepted[i])[k] + offset[k], hb.position(rb.accepted[i])[k]);
+  }
+  EXPECT_EQ(ra.dropped_depth, rb.dropped_depth);
+}
+
+TEST(Hierarchy, CoordinatesBeyondTheExactKeyRangeAreCountedNotInserted) {
+  Hierarchy h(1.0, 21);
+  std::vector<double> xyz = {1e7, 0, 0, 0.5, 0.5, 0.5, std::nan(""), 0, 0, INFINITY, 1, 1, -3e3, 1, 1};
+  std::vector<std::uint32_t> order = {0, 1, 2, 3, 4};
+  const auto r = insertAll(h, xyz, order);
+  EXPECT_EQ(r.out_of_range, 4u);  // 1e7 and -3e3 m at 2^-21 m cells exceed 2^30 cells; NaN and Inf too
+  EXPECT_EQ(h.sampleCount(), 1u);
+}
+
+TEST(Hierarchy, EvictionKeepsGridsConsistentAndLaterInsertionsPoisson) {
+  std::mt19937_64 rng(5);
+  Hierarchy h(1.0, 5);
+  std::vector<std::array<double, 3>> kept_points;
+  for (int b = 0; b < 4; ++b) {
+    auto xyz = randomCloud(rng, 400, 3.0, false);
+    for (std::size_t i = 0; i < xyz.size(); i += 3) xyz[i] += 2.0 * b;
+    insertAll(h, xyz, shuffledOrder(400, rng), b);
+    const double center[3] = {2.0 * b, 0, 0};
+    h.evictOutside(center, 3.0);
+    for (SampleId id = 0; id < h.idBound(); ++id)
+      if (h.isLive(id)) {
+        const double *p = h.position(id);
+        ASSERT_LE(dist2(p, center), 9.0);
+        ASSERT_EQ(h.sampleInCell(h.level(id), p), id);
+      }
+  }
+  std::size_t per_level = 0;
+  for (int d = 0; d <= h.maxDepth(); ++d) per_level += h.countAtLevel(d);
+  EXPECT_EQ(per_level, h.sampleCount());
+  expectGuarantees(h, {});  // coverage is not promised after eviction; spacing and cells are
+  const double c[3] = {6, 0, 0};
+  h.evictToCap(c, 100);
+  EXPECT_EQ(h.sampleCount(), 100u);
+  expectGuarantees(h, {});
+}
+
+TEST(Hierarchy, BallQueryMatchesBruteForce) {
+  std::mt19937_64 rng(9);
+  Hierarchy h(1.0, 6);
+  const auto xyz = randomCloud(rng, 3000, 2.0, true);
+  insertAll(h, xyz, shuffledOrder(3000, rng));
+  std::uniform_real_distribution<double> u(-2, 2);
+  for (int t = 0; t < 200; ++t) {
+    const double q[3] = {u(rng), u(rng), 0.0};
+    const double radius = 0.05 + 0.5 * std::abs(u(rng));
+    const int max_level = t % 7;
+    std::vector<SampleId> got;
+    h.forEachInBall(q, radius, max_level, [&](SampleId id, double d2) {
+      EXPECT_DOUBLE_EQ(d2, dist2(h.position(id), q));
+      got.push_back(id);
+    });
+    std::vector<SampleId> want;
+    for (SampleId id : h.samplesUpTo(max_level))
+      if (dist2(h.position(id), q) < radius * radius) want.push_back(id);
+    std::sort(got.begin(), got.end());
+    ASSERT_EQ(got, want);
+  }
+}
+
+}  // namespace
+}  // namespace hpds
