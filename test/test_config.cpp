@@ -1,0 +1,310 @@
+// Config YAML edge: config/hpds.yaml vs the struct defaults, dump/load round trip, overlay, and every error path.
+#include <gtest/gtest.h>
+#include <yaml-cpp/yaml.h>
+
+#include <cstdint>
+#include <fstream>
+#include <functional>
+#include <limits>
+#include <set>
+#include <sstream>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "TestData.hpp"
+#include "hpds/Config.hpp"
+#include "hpds/ConfigYaml.hpp"
+
+namespace {
+
+using hpds::HpdsConfig;
+
+const std::string kDefaultYaml = HPDS_SOURCE_DIR "/config/hpds.yaml";
+
+// Compares every member and returns how many it compared. The structured bindings stop compiling when a member is
+// added to a config struct: extend them and the comparisons below, then add the key to the key table in
+// ConfigYaml.cpp and to config/hpds.yaml (DefaultYamlDocumentsEveryKey checks the file).
+std::size_t expectSameConfig(const HpdsConfig &a, const HpdsConfig &b) {
+  [[maybe_unused]] const auto &[mode, hierarchy, order, output, normals, map, input, threads] = a;
+  [[maybe_unused]] const auto &[cell_size, max_depth] = a.hierarchy;
+  [[maybe_unused]] const auto &[type, seed, feature_radius] = a.order;
+  [[maybe_unused]] const auto &[level, spacing] = a.output;
+  [[maybe_unused]] const auto &[enabled, radius, k, min_neighbors] = a.normals;
+  [[maybe_unused]] const auto &[evict_distance, max_samples] = a.map;
+  [[maybe_unused]] const auto &[skip_zero_points, min_range, max_range] = a.input;
+
+  std::size_t compared = 0;
+  auto same = [&compared](const char *key, const auto &x, const auto &y) {
+    ++compared;
+    EXPECT_EQ(x, y) << key;
+  };
+  same("mode", a.mode, b.mode);
+  same("hierarchy.cell_size", a.hierarchy.cell_size, b.hierarchy.cell_size);
+  same("hierarchy.max_depth", a.hierarchy.max_depth, b.hierarchy.max_depth);
+  same("order.type", a.order.type, b.order.type);
+  same("order.seed", a.order.seed, b.order.seed);
+  same("order.feature_radius", a.order.feature_radius, b.order.feature_radius);
+  same("output.level", a.output.level, b.output.level);
+  same("output.spacing", a.output.spacing, b.output.spacing);
+  same("normals.enabled", a.normals.enabled, b.normals.enabled);
+  same("normals.radius", a.normals.radius, b.normals.radius);
+  same("normals.k", a.normals.k, b.normals.k);
+  same("normals.min_neighbors", a.normals.min_neighbors, b.normals.min_neighbors);
+  same("map.evict_distance", a.map.evict_distance, b.map.evict_distance);
+  same("map.max_samples", a.map.max_samples, b.map.max_samples);
+  same("input.skip_zero_points", a.input.skip_zero_points, b.input.skip_zero_points);
+  same("input.min_range", a.input.min_range, b.input.min_range);
+  same("input.max_range", a.input.max_range, b.input.max_range);
+  same("threads", a.threads, b.threads);
+  return compared;
+}
+
+// Dotted paths of the leaves of a YAML map, walked independently of the library's key table.
+void collectLeafKeys(const YAML::Node &node, const std::string &prefix, std::set<std::string> &keys) {
+  for (const auto &entry : node) {
+    const std::string key = prefix.empty() ? entry.first.Scalar() : prefix + "." + entry.first.Scalar();
+    if (entry.second.IsMap()) {
+      collectLeafKeys(entry.second, key, keys);
+    } else {
+      keys.insert(key);
+    }
+  }
+}
+
+std::set<std::string> leafKeys(const YAML::Node &root) {
+  std::set<std::string> keys;
+  collectLeafKeys(root, "", keys);
+  return keys;
+}
+
+// A config where every key differs from its default (NonDefaultTouchesEveryKey holds it to that).
+HpdsConfig nonDefaultConfig() {
+  HpdsConfig c;
+  c.mode = hpds::Mode::Map;
+  c.hierarchy.cell_size = 2.5;
+  c.hierarchy.max_depth = 12;
+  c.order.type = hpds::InsertionOrder::SurfaceVariation;
+  c.order.seed = std::numeric_limits<std::uint64_t>::max();
+  c.order.feature_radius = 0.1;  // not exactly representable: the dump must still round-trip it
+  c.output.level = 5;
+  c.output.spacing = 0.3;
+  c.normals.enabled = true;
+  c.normals.radius = 1.0 / 3.0;
+  c.normals.k = 20;
+  c.normals.min_neighbors = 7;
+  c.map.evict_distance = 123.456;
+  c.map.max_samples = 1000000;
+  c.input.skip_zero_points = false;
+  c.input.min_range = 0.5;
+  c.input.max_range = 1e3;
+  c.threads = 4;
+  return c;
+}
+
+std::vector<std::string> lines(const std::string &text) {
+  std::vector<std::string> out;
+  std::istringstream in(text);
+  for (std::string line; std::getline(in, line);) out.push_back(line);
+  return out;
+}
+
+std::string errorOf(const std::function<void()> &action) {
+  try {
+    action();
+  } catch (const std::invalid_argument &e) {
+    return e.what();
+  }
+  return "<no std::invalid_argument thrown>";
+}
+
+std::string loadError(const std::string &yaml) {
+  return errorOf([&] { (void)hpds::loadConfigString(yaml); });
+}
+
+void writeFile(const std::filesystem::path &path, const std::string &text) {
+  std::ofstream(path) << text;
+}
+
+// ------------------------------------------------------------------------------------------------------------------
+
+TEST(ConfigYaml, DefaultYamlEqualsStructDefaults) {
+  const HpdsConfig loaded = hpds::loadConfigFile(kDefaultYaml);
+  const std::size_t compared = expectSameConfig(loaded, HpdsConfig{});
+  // The library's table must cover every member compared above, or some member is never read from YAML.
+  EXPECT_EQ(compared, hpds::configKeys().size());
+}
+
+TEST(ConfigYaml, DefaultYamlDocumentsEveryKey) {
+  const std::set<std::string> dumped = leafKeys(YAML::Load(hpds::dumpConfigYaml(HpdsConfig{})));
+  const std::set<std::string> documented = leafKeys(YAML::LoadFile(kDefaultYaml));
+  const std::vector<std::string> table = hpds::configKeys();
+  EXPECT_EQ(dumped, std::set<std::string>(table.begin(), table.end()));
+  for (const std::string &key : dumped) EXPECT_EQ(documented.count(key), 1u) << key << " missing from config/hpds.yaml";
+  for (const std::string &key : documented) EXPECT_EQ(dumped.count(key), 1u) << key << " in config/hpds.yaml is not a key";
+}
+
+TEST(ConfigYaml, NonDefaultTouchesEveryKey) {
+  const std::vector<std::string> defaults = lines(hpds::dumpConfigYaml(HpdsConfig{}));
+  const std::vector<std::string> custom = lines(hpds::dumpConfigYaml(nonDefaultConfig()));
+  ASSERT_EQ(defaults.size(), custom.size());
+  for (std::size_t i = 0; i < defaults.size(); ++i) {
+    const bool section_header = defaults[i].back() == ':';
+    if (!section_header) {
+      EXPECT_NE(defaults[i], custom[i]) << "nonDefaultConfig() leaves this key at its default";
+    }
+  }
+}
+
+TEST(ConfigYaml, DumpLoadRoundTrip) {
+  const HpdsConfig original = nonDefaultConfig();
+  const std::string dumped = hpds::dumpConfigYaml(original);
+  const HpdsConfig loaded = hpds::loadConfigString(dumped);
+  expectSameConfig(loaded, original);
+  EXPECT_EQ(hpds::dumpConfigYaml(loaded), dumped);
+  EXPECT_NE(dumped.find("seed: 18446744073709551615\n"), std::string::npos) << dumped;
+  EXPECT_NE(dumped.find("feature_radius: 0.1\n"), std::string::npos) << dumped;
+  EXPECT_NE(dumped.find("max_range: 1000.0\n"), std::string::npos) << dumped;
+
+  expectSameConfig(hpds::loadConfigString(hpds::dumpConfigYaml(HpdsConfig{})), HpdsConfig{});
+}
+
+TEST(ConfigYaml, EmptyDocumentsGiveDefaults) {
+  for (const char *text : {"", "# only a comment\n", "---\n", "hierarchy:\n", "\n\n"}) {
+    SCOPED_TRACE(text);
+    expectSameConfig(hpds::loadConfigString(text), HpdsConfig{});
+  }
+  const auto dir = hpds::test::scratchDir("config_empty");
+  writeFile(dir / "empty.yaml", "");
+  expectSameConfig(hpds::loadConfigFile((dir / "empty.yaml").string()), HpdsConfig{});
+}
+
+TEST(ConfigYaml, PartialOverlayKeepsAbsentKeys) {
+  HpdsConfig config = nonDefaultConfig();
+  hpds::applyConfigYaml("hierarchy:\n  max_depth: 10\nnormals: {enabled: false}\nmode: scan\n", config);
+  HpdsConfig expected = nonDefaultConfig();
+  expected.hierarchy.max_depth = 10;
+  expected.normals.enabled = false;
+  expected.mode = hpds::Mode::Scan;
+  expectSameConfig(config, expected);
+}
+
+TEST(ConfigYaml, AcceptedScalarSpellings) {
+  const HpdsConfig c = hpds::loadConfigString(
+      "hierarchy: {cell_size: 8, max_depth: +3}\n"  // an integer is a fine double
+      "order: {type: 'sphericity', seed: 42, feature_radius: 1.5e-1}\n"
+      "input: {min_range: .5, max_range: 2.}\n");
+  EXPECT_EQ(c.hierarchy.cell_size, 8.0);
+  EXPECT_EQ(c.hierarchy.max_depth, 3);
+  EXPECT_EQ(c.order.type, hpds::InsertionOrder::Sphericity);
+  EXPECT_EQ(c.order.seed, 42u);
+  EXPECT_EQ(c.order.feature_radius, 0.15);
+  EXPECT_EQ(c.input.min_range, 0.5);
+  EXPECT_EQ(c.input.max_range, 2.0);
+}
+
+TEST(ConfigYaml, FailedOverlayLeavesConfigUnchanged) {
+  HpdsConfig config = nonDefaultConfig();
+  // The first key is valid and would be applied before the second fails.
+  EXPECT_THROW(hpds::applyConfigYaml("threads: 2\nhierarchy: {max_depth: 30}\n", config), std::invalid_argument);
+  EXPECT_THROW(hpds::applyConfigYaml("threads: 2\nnormals: {min_neighbors: 2}\n", config), std::invalid_argument);
+  expectSameConfig(config, nonDefaultConfig());
+}
+
+struct InvalidCase {
+  const char *yaml;
+  const char *key;     // the message must start with this
+  const char *detail;  // and contain this
+};
+
+TEST(ConfigYaml, InvalidDocumentsNameTheKey) {
+  const InvalidCase cases[] = {
+      // values validateConfig rejects
+      {"hierarchy: {cell_size: -1.0}", "hierarchy.cell_size", "> 0"},
+      {"hierarchy: {cell_size: 0}", "hierarchy.cell_size", "> 0"},
+      {"hierarchy: {cell_size: .nan}", "hierarchy.cell_size", "finite"},
+      {"hierarchy: {cell_size: -.inf}", "hierarchy.cell_size", "finite"},
+      {"hierarchy: {max_depth: 22}", "hierarchy.max_depth", "0..21"},
+      {"hierarchy: {max_depth: -1}", "hierarchy.max_depth", "0..21"},
+      {"hierarchy: {max_depth: 4}\noutput: {level: 5}", "output.level", "max_depth"},
+      {"normals: {min_neighbors: 2}", "normals.min_neighbors", ">= 3"},
+      {"normals: {k: 4}", "normals.k", "min_neighbors"},
+      {"threads: -1", "threads", "0..1024"},
+      // unknown keys
+      {"bogus: 1", "bogus", "unknown key"},
+      {"hierarchy: {max_dpeth: 3}", "hierarchy.max_dpeth", "did you mean 'hierarchy.max_depth'"},
+      {"thread: 2", "thread", "did you mean 'threads'"},
+      {"hierachy: {max_depth: 3}", "hierachy", "did you mean 'hierarchy'"},
+      {"cell_size: 2.0", "cell_size", "did you mean 'hierarchy.cell_size'"},
+      {"output: {colour: red}", "output.colour", "unknown key"},
+      // wrong types
+      {"hierarchy: {max_depth: abc}", "hierarchy.max_depth", "expected an integer, got 'abc'"},
+      {"hierarchy: {max_depth: 3.5}", "hierarchy.max_depth", "expected an integer, got '3.5'"},
+      {"hierarchy: {max_depth: 0x10}", "hierarchy.max_depth", "expected an integer"},
+      {"hierarchy: {max_depth: 99999999999}", "hierarchy.max_depth", "out of range"},
+      {"hierarchy: {cell_size: abc}", "hierarchy.cell_size", "expected a number, got 'abc'"},
+      {"hierarchy: {cell_size: '4.0'}", "hierarchy.cell_size", "quoted string"},
+      {"hierarchy: {cell_size: }", "hierarchy.cell_size", "expected a number"},
+      {"hierarchy: {cell_size: 1e999}", "hierarchy.cell_size", "out of the range"},
+      {"order: {seed: -1}", "order.seed", "non-negative integer"},
+      {"order: {seed: 18446744073709551616}", "order.seed", "out of range"},
+      {"map: {max_samples: -5}", "map.max_samples", "non-negative integer"},
+      {"normals: {enabled: yes}", "normals.enabled", "expected true or false, got 'yes'"},
+      {"normals: {enabled: 1}", "normals.enabled", "true or false"},
+      {"threads: [1, 2]", "threads", "got a sequence"},
+      {"mode: {scan: true}", "mode", "got a map"},
+      // unknown enum strings
+      {"order: {type: fastest}", "order.type", "fastest"},
+      {"mode: batch", "mode", "batch"},
+      // structure
+      {"hierarchy: 4", "hierarchy", "expected a map"},
+      {"normals: [true]", "normals", "expected a map"},
+      {"- mode\n- scan\n", "(document)", "expected a map"},
+      {"just text", "(document)", "expected a map"},
+      {"threads: 2\nthreads: 3\n", "threads", "duplicate key"},
+      {"hierarchy: {max_depth: 3}\nhierarchy: {cell_size: 3}\n", "hierarchy", "duplicate key"},
+      {"hierarchy: {max_depth: 3, max_depth: 4}", "hierarchy.max_depth", "duplicate key"},
+      {"mode: scan\n---\nmode: map\n", "(document)", "one YAML document"},
+      // syntax
+      {"hierarchy: {cell_size: 4.0\nthreads: 1\n", "(document)", "line "},
+      {"hierarchy:\n  cell_size: 4.0\n max_depth: 3\n", "(document)", "YAML syntax error"},
+  };
+  for (const InvalidCase &c : cases) {
+    const std::string message = loadError(c.yaml);
+    EXPECT_EQ(message.rfind(std::string(c.key) + ":", 0), 0u) << "yaml: " << c.yaml << "\nmessage: " << message;
+    EXPECT_NE(message.find(c.detail), std::string::npos) << "yaml: " << c.yaml << "\nmessage: " << message;
+  }
+}
+
+TEST(ConfigYaml, FileErrorsNameThePath) {
+  const auto dir = hpds::test::scratchDir("config_errors");
+
+  const std::string missing = (dir / "does_not_exist.yaml").string();
+  std::string message = errorOf([&] { (void)hpds::loadConfigFile(missing); });
+  EXPECT_NE(message.find(missing), std::string::npos) << message;
+
+  message = errorOf([&] { (void)hpds::loadConfigFile(dir.string()); });
+  EXPECT_NE(message.find("directory"), std::string::npos) << message;
+
+  const std::string broken = (dir / "broken.yaml").string();
+  writeFile(broken, "mode: scan\nhierarchy: [1,\n");
+  message = errorOf([&] { (void)hpds::loadConfigFile(broken); });
+  EXPECT_EQ(message.rfind("(document): YAML syntax error at line ", 0), 0u) << message;
+  EXPECT_NE(message.find(broken), std::string::npos) << message;
+
+  const std::string bad_value = (dir / "bad_value.yaml").string();
+  writeFile(bad_value, "hierarchy:\n  max_depth: 22\n");
+  message = errorOf([&] { (void)hpds::loadConfigFile(bad_value); });
+  EXPECT_EQ(message.rfind("hierarchy.max_depth:", 0), 0u) << message;
+  EXPECT_NE(message.find(bad_value), std::string::npos) << message;
+}
+
+TEST(ConfigYaml, SourceLabelIsAppended) {
+  HpdsConfig config;
+  const std::string message =
+      errorOf([&] { hpds::applyConfigYaml("threads: -1", config, "rosparam /hpds_node"); });
+  EXPECT_EQ(message.rfind("threads:", 0), 0u) << message;
+  EXPECT_NE(message.find("(in rosparam /hpds_node)"), std::string::npos) << message;
+}
+
+}  // namespace
