@@ -43,9 +43,9 @@ SampleId Hierarchy::sampleInCell(int level, const double xyz[3]) const {
   return grids_[level].find(k);
 }
 
-bool Hierarchy::conflictAt(int level, const double q[3], double radius, bool skip_own) const {
+double Hierarchy::conflictAt(int level, const double q[3], double radius, bool skip_own) const {
   const LevelGrid &grid = grids_[level];
-  if (grid.size() == 0) return false;
+  if (grid.size() == 0) return -1.0;
   const double e = edge_[level], ie = inv_edge_[level];
   const CellKey k{exactCellCoord(q[0], e, ie), exactCellCoord(q[1], e, ie), exactCellCoord(q[2], e, ie)};
   const double r2 = radius * radius;
@@ -56,7 +56,9 @@ bool Hierarchy::conflictAt(int level, const double q[3], double radius, bool ski
     lo[a] = offsetInCell(q[a], kc[a], e);
     hi[a] = e - lo[a];
   }
-  const double prune = r2 * (1.0 + 1e-9) + 1e-300;
+  // A cell is skipped only when even the rounding-widened ball misses it.
+  const double reach = radius + pruneSlack(q, e);
+  const double prune = reach * reach;
   const double g[3][3] = {{lo[0], 0.0, hi[0]}, {lo[1], 0.0, hi[1]}, {lo[2], 0.0, hi[2]}};
   for (int dx = -1; dx <= 1; ++dx) {
     const double gx2 = g[0][dx + 1] * g[0][dx + 1];
@@ -71,11 +73,19 @@ bool Hierarchy::conflictAt(int level, const double q[3], double radius, bool ski
         if (s == kNoSample) continue;
         const double *p = position(s);
         const double ddx = p[0] - q[0], ddy = p[1] - q[1], ddz = p[2] - q[2];
-        if (ddx * ddx + ddy * ddy + ddz * ddz < r2) return true;
+        const double d2 = ddx * ddx + ddy * ddy + ddz * ddz;
+        if (d2 < r2) return d2;
       }
     }
   }
-  return false;
+  return -1.0;
+}
+
+int Hierarchy::nextLevelAfterConflict(int level, double d2) const {
+  int next = level + 1;
+  // Same comparison as conflictAt (d2 < r*r), so a skipped level is one that certainly rejects.
+  while (next <= max_depth_ && d2 < radius_[next] * radius_[next]) ++next;
+  return next;
 }
 
 SampleId Hierarchy::allocate() {
@@ -141,17 +151,32 @@ InsertResult Hierarchy::insert(const InsertBatch &batch) {
       const double *q = batch.xyz + 3 * std::size_t(pi);
       const CellKey key{exactCellCoord(q[0], e, ie), exactCellCoord(q[1], e, ie), exactCellCoord(q[2], e, ie)};
       int next = d + 1;
-      bool ok = grids_[d].find(key) == kNoSample && !conflictAt(d, q, rd, /*skip_own=*/true);
-      for (int l = d - 1; ok && l >= 0; --l) ok = !conflictAt(l, q, rd, false);
+      bool ok = true;
+      const SampleId occupant = grids_[d].find(key);
+      if (occupant != kNoSample) {
+        const double *p = position(occupant);
+        const double ddx = p[0] - q[0], ddy = p[1] - q[1], ddz = p[2] - q[2];
+        ok = false;
+        next = nextLevelAfterConflict(d, ddx * ddx + ddy * ddy + ddz * ddz);
+      }
+      for (int l = d; ok && l >= 0; --l) {
+        const double d2 = conflictAt(l, q, rd, /*skip_own=*/l == d);
+        if (d2 >= 0.0) {
+          ok = false;
+          next = nextLevelAfterConflict(d, d2);
+        }
+      }
       if (ok) {
         // Samples of finer levels (earlier batches) keep their own, smaller radius. A conflict at level l rules
-        // out every level <= l, so the point continues at l + 1.
-        for (int l = finest_populated; l > d; --l)
-          if (conflictAt(l, q, radius_[l], false)) {
+        // out every level <= l, so the point continues at l + 1 (or later, as above).
+        for (int l = finest_populated; l > d; --l) {
+          const double d2 = conflictAt(l, q, radius_[l], false);
+          if (d2 >= 0.0) {
             ok = false;
-            next = l + 1;
+            next = std::max(l + 1, nextLevelAfterConflict(d, d2));
             break;
           }
+        }
       }
       if (ok) {
         const SampleId id = allocate();

@@ -1,2 +1,31 @@
-// Placeholder until the CLI lands in this file.
-int main() { return 0; }
+// hpds: command-line front end. Errors go to stderr as "hpds: error: ..." with exit code 1 (2 for bad usage).
+#include <CLI/CLI.hpp>
+#include <exception>
+#include <iostream>
+
+#include "Commands.hpp"
+#ifdef HPDS_WITH_ROS
+#include "hpds_node/ReplayCommand.hpp"
+#endif
+
+int main(int argc, char **argv) {
+  CLI::App app{"hpds: hierarchical additive Poisson-disk sampling of lidar point clouds"};
+  app.require_subcommand(1);
+  hpds::cli::addSampleCommand(app);
+  hpds::cli::addVerifyCommand(app);
+  hpds::cli::addSynthCommand(app);
+#ifdef HPDS_WITH_ROS
+  hpds::cli::addReplayCommand(app);
+#endif
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::RuntimeError &e) {
+    return e.get_exit_code();
+  } catch (const CLI::ParseError &e) {
+    return app.exit(e) == 0 ? 0 : 2;
+  } catch (const std::exception &e) {
+    std::cerr << "hpds: error: " << e.what() << "\n";
+    return 1;
+  }
+  return 0;
+}

@@ -29,7 +29,12 @@ struct CellKey {
 
 /// floor(v / edge), exact; `inv_edge` is only a first estimate (1 / edge). Requires inCellRange(v, inv_edge).
 [[nodiscard]] inline std::int32_t exactCellCoord(double v, double edge, double inv_edge) {
-  double q = std::floor(v * inv_edge);
+  const double t = v * inv_edge;
+  double q = std::floor(t);
+  // |t - v/edge| < 5e-7 for |t| < 2^30 (two roundings of relative 2^-53), so away from an integer the estimate
+  // is already the floor; only near a boundary is the exact test needed (fma is a libm call without -mfma).
+  const double frac = t - q;
+  if (frac > 1e-6 && frac < 1.0 - 1e-6) return static_cast<std::int32_t>(q);
   // v - q*edge computed with one rounding keeps its sign, so the comparisons decide the true floor.
   if (std::fma(-q, edge, v) < 0.0) {
     q -= 1.0;
@@ -39,9 +44,13 @@ struct CellKey {
   return static_cast<std::int32_t>(q);
 }
 
-/// Offset of v inside its cell k, in [0, edge] up to one rounding (exact sign).
-[[nodiscard]] inline double offsetInCell(double v, std::int32_t k, double edge) {
-  return std::fma(-static_cast<double>(k), edge, v);
+/// Offset of v inside its cell k, within [0, edge] up to an absolute error below 3e-16 * (|v| + edge); callers that
+/// prune with it add `pruneSlack`.
+[[nodiscard]] inline double offsetInCell(double v, std::int32_t k, double edge) { return v - static_cast<double>(k) * edge; }
+
+/// Absolute slack [m] that covers the rounding of offsetInCell for a query at q (any level, any edge <= `edge`).
+[[nodiscard]] inline double pruneSlack(const double q[3], double edge) {
+  return 4e-16 * (std::fabs(q[0]) + std::fabs(q[1]) + std::fabs(q[2]) + 3.0 * edge);
 }
 
 }  // namespace hpds

@@ -113,8 +113,12 @@ class Hierarchy {
 
  private:
   bool keyAt(int level, const double q[3], CellKey &key) const;
-  /// True when some sample of `level` lies strictly within `radius` of q (skips q's own cell when skip_own).
-  bool conflictAt(int level, const double q[3], double radius, bool skip_own) const;
+  /// Squared distance to some sample of `level` strictly within `radius` of q (skipping q's own cell when
+  /// skip_own), or a negative value when there is none.
+  double conflictAt(int level, const double q[3], double radius, bool skip_own) const;
+  /// First level after `level` whose radius no longer rules out a point at squared distance d2 from a sample
+  /// of levels <= level: every level in between would reject the point for that same sample.
+  int nextLevelAfterConflict(int level, double d2) const;
   template <typename Fn>
   void visitBall(int level, const double q[3], double radius, Fn &fn) const;
   SampleId allocate();
@@ -166,8 +170,9 @@ void Hierarchy::visitBall(int level, const double q[3], double radius, Fn &fn) c
     lo[a] = offsetInCell(q[a], kc[a], e);
     hi[a] = e - lo[a];
   }
-  // Slack so that rounding in the gap sums never prunes a cell that holds a sample within the radius.
-  const double prune = r2 * (1.0 + 1e-9) + 1e-300;
+  // A cell is skipped only when even the rounding-widened ball misses it.
+  const double reach = radius + pruneSlack(q, e);
+  const double prune = reach * reach;
   auto gap = [&](int a, int d) { return d < 0 ? lo[a] + (-d - 1) * e : (d > 0 ? hi[a] + (d - 1) * e : 0.0); };
   for (int dx = -span; dx <= span; ++dx) {
     const double gx = gap(0, dx), gx2 = gx * gx;

@@ -1,0 +1,44 @@
+// Principal component analysis of a small neighbourhood: normal, eigenvalues, curvature, sphericity.
+//
+// Contract: eigenvalues ascending (l0 <= l1 <= l2) of the covariance of the neighbours about their centroid;
+// `normal` is the eigenvector of l0 (unit, sign arbitrary). `valid` is false for fewer than 3 points or a
+// degenerate (point- or line-like) neighbourhood, where the normal direction is undefined.
+#pragma once
+
+#include <cstddef>
+
+namespace hpds {
+
+struct LocalPca {
+  double normal[3] = {0.0, 0.0, 0.0};
+  double l0 = 0.0, l1 = 0.0, l2 = 0.0;
+  bool valid = false;
+
+  /// l0 / (l0 + l1 + l2): PCL's "curvature", the paper's surface variation.
+  [[nodiscard]] double surfaceVariation() const { return (l0 + l1 + l2) > 0.0 ? l0 / (l0 + l1 + l2) : 0.0; }
+  /// l0 / l2: the paper's sphericity.
+  [[nodiscard]] double sphericity() const { return l2 > 0.0 ? l0 / l2 : 0.0; }
+};
+
+/// Accumulates points (relative to a reference point, so that large coordinates keep their precision).
+class PcaAccumulator {
+ public:
+  explicit PcaAccumulator(const double reference[3]) : ref_{reference[0], reference[1], reference[2]} {}
+  void add(const double p[3]) {
+    const double x = p[0] - ref_[0], y = p[1] - ref_[1], z = p[2] - ref_[2];
+    ++n_;
+    s_[0] += x, s_[1] += y, s_[2] += z;
+    ss_[0] += x * x, ss_[1] += x * y, ss_[2] += x * z, ss_[3] += y * y, ss_[4] += y * z, ss_[5] += z * z;
+  }
+  [[nodiscard]] std::size_t count() const { return n_; }
+  /// Eigen-decomposition of the covariance; `accurate` uses the iterative solver (normals), else the closed form.
+  [[nodiscard]] LocalPca solve(bool accurate = true) const;
+
+ private:
+  double ref_[3];
+  double s_[3] = {0, 0, 0};
+  double ss_[6] = {0, 0, 0, 0, 0, 0};
+  std::size_t n_ = 0;
+};
+
+}  // namespace hpds

@@ -1,0 +1,84 @@
+// Pipeline: the per-frame flow shared by the CLI and the ROS node.
+//
+// Contract
+// - Scan mode: every frame is sampled on its own (the hierarchy is cleared first). Map mode: one persistent
+//   hierarchy in the fixed frame; earlier samples never move or change level; samples farther than
+//   map.evict_distance from the latest sensor position are evicted before the frame is inserted, and the store is
+//   cut back to map.max_samples (farthest first), so memory is bounded by the cap plus one frame.
+// - Points are transformed by frame.sensor_to_fixed (identity = sensor frame). NaN/Inf coordinates, exact (0,0,0)
+//   no-returns (input.skip_zero_points) and points outside input.min_range/max_range are skipped and counted.
+// - A frame without x/y/z fields, or (map mode) whose field layout differs from the first frame's, throws
+//   std::invalid_argument before anything changes.
+// - Same config (seed) and same frames give identical samples, whatever `threads` is.
+// - Not thread-safe: one thread drives a Pipeline.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <vector>
+
+#include "hpds/Config.hpp"
+#include "hpds/Frame.hpp"
+#include "hpds/Hierarchy.hpp"
+#include "hpds/NormalEstimator.hpp"
+#include "hpds/PointBuffer.hpp"
+
+namespace hpds {
+
+struct FrameCounters {
+  std::uint64_t input = 0;            ///< points in the frame
+  std::uint64_t skipped_invalid = 0;  ///< NaN/Inf coordinates
+  std::uint64_t skipped_zero = 0;     ///< exact (0,0,0) no-return points
+  std::uint64_t skipped_range = 0;    ///< outside input.min_range / input.max_range
+  std::uint64_t out_of_range = 0;     ///< coordinates beyond the hierarchy's exact key range
+  std::uint64_t dropped_depth = 0;    ///< rejected at every level down to max_depth
+  std::uint64_t accepted = 0;
+  std::uint64_t evicted = 0;  ///< samples removed from the map before this frame
+  std::array<std::uint64_t, kMaxDepthLimit + 1> accepted_per_level{};
+
+  FrameCounters &operator+=(const FrameCounters &o);
+};
+
+struct FrameResult {
+  FrameCounters counters;
+  std::vector<SampleId> new_samples;  ///< accepted from this frame, all levels, acceptance order
+  double seconds_order = 0.0;         ///< insertion order (features included)
+  double seconds_insert = 0.0;
+};
+
+class Pipeline {
+ public:
+  /// Validates the config (std::invalid_argument naming the key).
+  explicit Pipeline(const HpdsConfig &config);
+
+  /// Inserts one frame (see contract).
+  FrameResult addFrame(const Frame &frame);
+
+  /// Samples of levels 0..outputLevel(), increasing id order.
+  [[nodiscard]] std::vector<SampleId> outputSamples() const;
+  /// Of `ids`, those at levels <= outputLevel().
+  [[nodiscard]] std::vector<SampleId> atOutputLevels(const std::vector<SampleId> &ids) const;
+  /// Output-level samples strictly within `radius` of `center` (fixed frame).
+  [[nodiscard]] std::vector<SampleId> outputSamplesNear(const double center[3], double radius) const;
+  /// Output cloud of `ids` (normals estimated when normals.enabled), layout of OutputCloud.hpp.
+  [[nodiscard]] PointBuffer makeCloud(const std::vector<SampleId> &ids, bool with_frame_field,
+                                      double *seconds_normals = nullptr) const;
+
+  [[nodiscard]] const HpdsConfig &config() const { return config_; }
+  [[nodiscard]] const Hierarchy &hierarchy() const { return hierarchy_; }
+  [[nodiscard]] int outputLevel() const { return output_level_; }
+  [[nodiscard]] const FrameCounters &totals() const { return totals_; }
+  [[nodiscard]] std::uint32_t framesProcessed() const { return frames_; }
+
+ private:
+  HpdsConfig config_;
+  int output_level_;
+  Hierarchy hierarchy_;
+  FrameCounters totals_;
+  std::uint32_t frames_ = 0;
+  // Per-frame scratch.
+  std::vector<double> xyz_;
+  std::vector<std::uint32_t> candidates_;
+};
+
+}  // namespace hpds

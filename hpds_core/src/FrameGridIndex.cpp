@@ -1,0 +1,64 @@
+#include "hpds/FrameGridIndex.hpp"
+
+#include <algorithm>
+#include <cmath>
+
+namespace hpds {
+
+namespace {
+constexpr std::int64_t kAxisBits = 21;
+constexpr std::int64_t kAxisMax = (std::int64_t(1) << kAxisBits) - 2;  // keeps k+1 inside 21 bits
+}  // namespace
+
+FrameGridIndex::FrameGridIndex(const double *xyz, const std::vector<std::uint32_t> &subset, double radius)
+    : xyz_(xyz), radius_(radius), inv_(1.0 / radius) {
+  // Cells are counted from the frame's minimum corner so that 21 bits per axis cover 2M cells of `radius`.
+  if (!subset.empty()) {
+    for (int a = 0; a < 3; ++a) origin_[a] = xyz[3 * std::size_t(subset[0]) + a];
+    for (std::uint32_t i : subset)
+      for (int a = 0; a < 3; ++a) origin_[a] = std::min(origin_[a], xyz[3 * std::size_t(i) + a]);
+  }
+  std::vector<std::pair<std::uint64_t, std::uint32_t>> keyed;
+  keyed.reserve(subset.size());
+  for (std::uint32_t i : subset) {
+    std::int64_t k[3];
+    if (cellOf(xyz + 3 * std::size_t(i), k)) keyed.emplace_back(pack(k[0], k[1], k[2]), i);
+  }
+  std::sort(keyed.begin(), keyed.end());
+  points_.reserve(keyed.size());
+  for (std::size_t i = 0; i < keyed.size(); ++i) {
+    if (i == 0 || keyed[i].first != keyed[i - 1].first) {
+      keys_.push_back(keyed[i].first);
+      starts_.push_back(static_cast<std::uint32_t>(i));
+    }
+    points_.push_back(keyed[i].second);
+  }
+  starts_.push_back(static_cast<std::uint32_t>(keyed.size()));
+}
+
+bool FrameGridIndex::cellOf(const double *p, std::int64_t k[3]) const {
+  for (int a = 0; a < 3; ++a) {
+    const double c = std::floor((p[a] - origin_[a]) * inv_);
+    if (!(c >= 0.0 && c <= static_cast<double>(kAxisMax))) return false;  // far outliers: no neighbours
+    k[a] = static_cast<std::int64_t>(c);
+  }
+  return true;
+}
+
+std::uint64_t FrameGridIndex::pack(std::int64_t x, std::int64_t y, std::int64_t z) {
+  // -1 wraps to the all-ones pattern, which no real cell uses (kAxisMax < 2^21 - 1).
+  const std::uint64_t m = (std::uint64_t(1) << kAxisBits) - 1;
+  return ((static_cast<std::uint64_t>(x) & m) << (2 * kAxisBits)) | ((static_cast<std::uint64_t>(y) & m) << kAxisBits) |
+         (static_cast<std::uint64_t>(z) & m);
+}
+
+bool FrameGridIndex::range(std::uint64_t key, std::size_t &begin, std::size_t &end) const {
+  const auto it = std::lower_bound(keys_.begin(), keys_.end(), key);
+  if (it == keys_.end() || *it != key) return false;
+  const std::size_t i = static_cast<std::size_t>(it - keys_.begin());
+  begin = starts_[i];
+  end = starts_[i + 1];
+  return true;
+}
+
+}  // namespace hpds

@@ -1,0 +1,32 @@
+// Sampling options shared by `hpds sample` and `hpds replay`: one set of flags, applied over the config file in
+// one place, validated by the same validateConfig as the YAML and the ROS node.
+#pragma once
+
+#include <CLI/CLI.hpp>
+#include <optional>
+#include <string>
+
+#include "hpds/Config.hpp"
+
+namespace hpds::cli {
+
+struct SamplingOptions {
+  std::string config_file;
+  std::optional<double> cell_size;
+  std::optional<int> max_depth;
+  std::optional<int> level;
+  std::optional<double> spacing;
+  bool normals = false;
+  std::optional<std::string> order;
+  std::optional<std::uint64_t> seed;
+  std::optional<std::string> mode;
+  std::optional<int> threads;
+};
+
+/// Registers --config, --cell-size, --max-depth, --level, --spacing, --normals, --order, --seed, --mode, --threads.
+void addSamplingOptions(CLI::App &app, SamplingOptions &options);
+
+/// Defaults, then --config FILE, then the flags; throws std::invalid_argument naming the key on a bad value.
+[[nodiscard]] HpdsConfig resolveConfig(const SamplingOptions &options);
+
+}  // namespace hpds::cli

@@ -1,0 +1,99 @@
+#include "RunReport.hpp"
+
+#include <sys/resource.h>
+#include <unistd.h>
+
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <iomanip>
+#include <iostream>
+#include <sstream>
+#include <stdexcept>
+
+namespace hpds::cli {
+
+namespace {
+std::string num(double v) {
+  if (!std::isfinite(v)) return "null";
+  std::ostringstream s;
+  s << std::setprecision(9) << v;
+  return s.str();
+}
+}  // namespace
+
+std::uint64_t peakMemoryBytes() {
+  rusage ru{};
+  if (getrusage(RUSAGE_SELF, &ru) != 0) return 0;
+  return static_cast<std::uint64_t>(ru.ru_maxrss) * 1024u;  // Linux reports kilobytes
+}
+
+std::string toJson(const RunReport &r) {
+  std::ostringstream j;
+  const FrameCounters &t = r.totals;
+  j << "{\n";
+  j << "  \"command\": \"" << r.command << "\",\n";
+  j << "  \"mode\": \"" << toString(r.mode) << "\",\n";
+  j << "  \"frames\": " << r.frames << ",\n";
+  j << "  \"cell_size\": " << num(r.cell_size) << ",\n";
+  j << "  \"max_depth\": " << r.max_depth << ",\n";
+  j << "  \"output_level\": " << r.output_level << ",\n";
+  j << "  \"levels\": [";
+  for (std::size_t d = 0; d < r.samples_per_level.size(); ++d)
+    j << (d ? ", " : "") << "{\"level\": " << d << ", \"radius\": " << num(poissonRadius(r.cell_size, static_cast<int>(d)))
+      << ", \"count\": " << r.samples_per_level[d] << "}";
+  j << "],\n";
+  j << "  \"points\": {\"input\": " << t.input << ", \"skipped_invalid\": " << t.skipped_invalid
+    << ", \"skipped_zero\": " << t.skipped_zero << ", \"skipped_range\": " << t.skipped_range
+    << ", \"out_of_range\": " << t.out_of_range << ", \"dropped_depth\": " << t.dropped_depth
+    << ", \"accepted\": " << t.accepted << ", \"evicted\": " << t.evicted << "},\n";
+  j << "  \"output_points\": " << r.output_points << ",\n";
+  j << "  \"invalid_normals\": " << r.invalid_normals << ",\n";
+  j << "  \"seconds\": {\"read\": " << num(r.seconds.read) << ", \"insert\": " << num(r.seconds.insert)
+    << ", \"normals\": " << num(r.seconds.normals) << ", \"write\": " << num(r.seconds.write) << "},\n";
+  j << "  \"hierarchy_memory_bytes\": " << r.hierarchy_bytes << ",\n";
+  j << "  \"peak_memory_bytes\": " << peakMemoryBytes() << "\n";
+  j << "}\n";
+  return j.str();
+}
+
+void writeJsonFile(const std::string &path, const RunReport &report) {
+  std::ofstream f(path, std::ios::binary | std::ios::trunc);
+  if (!f) throw std::runtime_error("cannot write stats file '" + path + "'");
+  f << toJson(report);
+  if (!f) throw std::runtime_error("failed writing stats file '" + path + "'");
+}
+
+std::string levelSummary(const RunReport &r) {
+  std::ostringstream s;
+  s << "level  r_D [m]      samples     levels 0..D\n";
+  std::uint64_t cumulative = 0;
+  for (std::size_t d = 0; d < r.samples_per_level.size(); ++d) {
+    cumulative += r.samples_per_level[d];
+    char line[128];
+    std::snprintf(line, sizeof line, "%5zu  %-11.6g  %10llu  %12llu%s\n", d,
+                  poissonRadius(r.cell_size, static_cast<int>(d)), static_cast<unsigned long long>(r.samples_per_level[d]),
+                  static_cast<unsigned long long>(cumulative), static_cast<int>(d) == r.output_level ? "  <- output" : "");
+    s << line;
+  }
+  const FrameCounters &t = r.totals;
+  s << "points: " << t.input << " in, " << t.accepted << " accepted, " << t.dropped_depth << " dropped past max_depth, "
+    << t.skipped_invalid << " NaN/Inf, " << t.skipped_zero << " no-return (0,0,0), " << t.skipped_range
+    << " outside range limits, " << t.out_of_range << " beyond exact key range";
+  if (t.evicted) s << ", " << t.evicted << " evicted";
+  s << "\n";
+  return s.str();
+}
+
+Progress::Progress(std::size_t total) : total_(total), tty_(::isatty(STDERR_FILENO) == 1) {}
+
+void Progress::step(std::size_t done, const std::string &what) {
+  if (!tty_ || total_ < 2) return;
+  std::cerr << "\r\033[K[" << done << "/" << total_ << "] " << what << std::flush;
+}
+
+void Progress::finish() {
+  if (tty_ && total_ >= 2) std::cerr << "\r\033[K" << std::flush;
+}
+
+}  // namespace hpds::cli

@@ -1,0 +1,54 @@
+// What a run reports: the --stats JSON and the per-level summary printed on stdout, plus terminal progress.
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "hpds/Pipeline.hpp"
+
+namespace hpds::cli {
+
+struct StageSeconds {
+  double read = 0.0, insert = 0.0, normals = 0.0, write = 0.0;
+};
+
+struct RunReport {
+  std::string command;  ///< "sample", "replay"
+  Mode mode = Mode::Scan;
+  std::size_t frames = 0;
+  double cell_size = 0.0;
+  int max_depth = 0;
+  int output_level = 0;
+  std::vector<std::uint64_t> samples_per_level;  ///< samples per level (map: in the map; scan: summed over frames)
+  FrameCounters totals;
+  std::uint64_t output_points = 0;
+  std::uint64_t invalid_normals = 0;
+  std::uint64_t hierarchy_bytes = 0;
+  StageSeconds seconds;
+};
+
+/// Peak resident set size of this process in bytes (getrusage), 0 if unknown.
+[[nodiscard]] std::uint64_t peakMemoryBytes();
+
+/// JSON text of the report (per-level counts, skipped/dropped counts, "seconds": {read, insert, normals, write},
+/// peak memory).
+[[nodiscard]] std::string toJson(const RunReport &report);
+void writeJsonFile(const std::string &path, const RunReport &report);
+
+/// The table printed after a run: level, r_D, samples, cumulative union count.
+[[nodiscard]] std::string levelSummary(const RunReport &report);
+
+/// "\r[3/10] name" on stderr when stderr is a terminal; silent otherwise (logs and pipes stay clean).
+class Progress {
+ public:
+  explicit Progress(std::size_t total);
+  void step(std::size_t done, const std::string &what);
+  void finish();
+
+ private:
+  std::size_t total_;
+  bool tty_;
+};
+
+}  // namespace hpds::cli

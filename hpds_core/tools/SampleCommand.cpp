@@ -1,0 +1,143 @@
+// `hpds sample INPUT... -o OUT.ply`: files in, hierarchy, PLY out.
+#include <chrono>
+#include <cmath>
+#include <iostream>
+#include <stdexcept>
+
+#include "CliOptions.hpp"
+#include "Commands.hpp"
+#include "RunReport.hpp"
+#include "hpds/Pipeline.hpp"
+#include "hpds/io/PlyWriter.hpp"
+#include "hpds/io/PointCloudFile.hpp"
+#include "hpds/io/PoseFile.hpp"
+
+namespace hpds::cli {
+
+namespace {
+
+struct SampleArgs {
+  std::vector<std::string> inputs;
+  std::string output;
+  std::string poses;
+  std::string stats;
+  SamplingOptions sampling;
+};
+
+double since(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+
+std::uint64_t countInvalidNormals(const PointBuffer &cloud) {
+  const PointField *nx = cloud.layout().find("normal_x");
+  if (!nx) return 0;
+  std::uint64_t n = 0;
+  for (std::size_t i = 0; i < cloud.size(); ++i) n += std::isnan(readAsDouble(cloud.record(i), *nx)) ? 1 : 0;
+  return n;
+}
+
+void appendCloud(PointBuffer &all, const PointBuffer &part, const std::string &input) {
+  if (all.layout().point_step == 0) {
+    all = PointBuffer(part.layout());
+  } else if (all.layout() != part.layout()) {
+    throw std::invalid_argument("scan mode writes all frames into one file, but '" + input +
+                                "' has other point fields than the first input");
+  }
+  all.bytes().insert(all.bytes().end(), part.bytes().begin(), part.bytes().end());
+  all.setOrganization(static_cast<std::uint32_t>(all.size()), 1);
+}
+
+int runSample(const SampleArgs &a) {
+  const HpdsConfig config = resolveConfig(a.sampling);
+  std::vector<Eigen::Isometry3d> poses;
+  if (!a.poses.empty()) {
+    poses = readKittiPoses(a.poses);
+    if (poses.size() != a.inputs.size())
+      throw std::invalid_argument("--poses: '" + a.poses + "' has " + std::to_string(poses.size()) + " poses for " +
+                                  std::to_string(a.inputs.size()) + " inputs (one pose per input is required)");
+  }
+
+  Pipeline pipeline(config);
+  RunReport report;
+  report.command = "sample";
+  report.mode = config.mode;
+  report.cell_size = config.hierarchy.cell_size;
+  report.max_depth = config.hierarchy.max_depth;
+  report.output_level = pipeline.outputLevel();
+  report.samples_per_level.assign(static_cast<std::size_t>(config.hierarchy.max_depth) + 1, 0);
+
+  const bool scan = config.mode == Mode::Scan;
+  const bool frame_field = scan && a.inputs.size() > 1;
+  PointBuffer output;
+  Progress progress(a.inputs.size());
+  for (std::size_t i = 0; i < a.inputs.size(); ++i) {
+    progress.step(i + 1, a.inputs[i]);
+    auto t0 = std::chrono::steady_clock::now();
+    Frame frame;
+    frame.points = readPointCloud(a.inputs[i]);
+    frame.stamp = static_cast<double>(i);
+    if (!poses.empty()) frame.sensor_to_fixed = poses[i];
+    report.seconds.read += since(t0);
+
+    t0 = std::chrono::steady_clock::now();
+    FrameResult r;
+    try {
+      r = pipeline.addFrame(frame);
+    } catch (const std::invalid_argument &e) {
+      throw std::invalid_argument("'" + a.inputs[i] + "': " + e.what());
+    }
+    report.seconds.insert += since(t0);
+    if (scan) {
+      for (std::size_t d = 0; d < report.samples_per_level.size(); ++d)
+        report.samples_per_level[d] += r.counters.accepted_per_level[d];
+      double normals_s = 0.0;
+      appendCloud(output, pipeline.makeCloud(pipeline.outputSamples(), frame_field, &normals_s), a.inputs[i]);
+      report.seconds.normals += normals_s;
+    }
+  }
+  progress.finish();
+  if (!scan) {
+    for (std::size_t d = 0; d < report.samples_per_level.size(); ++d)
+      report.samples_per_level[d] = pipeline.hierarchy().countAtLevel(static_cast<int>(d));
+    output = pipeline.makeCloud(pipeline.outputSamples(), false, &report.seconds.normals);
+  }
+  report.frames = a.inputs.size();
+  report.totals = pipeline.totals();
+  report.output_points = output.size();
+  report.invalid_normals = countInvalidNormals(output);
+  report.hierarchy_bytes = pipeline.hierarchy().memUsage();
+
+  auto t0 = std::chrono::steady_clock::now();
+  writePly(a.output, output);
+  report.seconds.write = since(t0);
+
+  std::cout << levelSummary(report);
+  std::cout << "wrote " << output.size() << " samples (levels 0.." << report.output_level << ") to " << a.output;
+  if (config.normals.enabled) std::cout << ", " << report.invalid_normals << " without a valid normal";
+  std::cout << "\n";
+  if (report.totals.out_of_range > 0)
+    std::cerr << "hpds: warning: " << report.totals.out_of_range
+              << " points lie beyond the exact key range of the finest level (|coordinate| / cell edge >= 2^30) and "
+                 "were not inserted; lower hierarchy.max_depth or raise hierarchy.cell_size\n";
+  if (!a.stats.empty()) writeJsonFile(a.stats, report);
+  return 0;
+}
+
+}  // namespace
+
+void addSampleCommand(CLI::App &app) {
+  auto args = std::make_shared<SampleArgs>();
+  CLI::App *cmd = app.add_subcommand("sample", "sample point clouds into an additive Poisson-disk hierarchy");
+  cmd->add_option("inputs", args->inputs, "input clouds: .pcd, .ply, KITTI .bin (several = a stream of frames)")
+      ->required();
+  cmd->add_option("-o,--output", args->output, "output PLY (binary little-endian)")->required();
+  cmd->add_option("--poses", args->poses, "KITTI pose file: one 3x4 sensor-to-world matrix per line, one per input");
+  cmd->add_option("--stats", args->stats, "write run statistics as JSON");
+  addSamplingOptions(*cmd, args->sampling);
+  cmd->callback([args] {
+    const int rc = runSample(*args);
+    if (rc != 0) throw CLI::RuntimeError(rc);
+  });
+}
+
+}  // namespace hpds::cli
