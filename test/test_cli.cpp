@@ -1,0 +1,255 @@
+// The `hpds` command as users run it: real frames sampled and verified, the PLY contract, map and scan streams,
+// determinism, stats, and every class of bad input giving a clear error and a non-zero exit.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstring>
+#include <fstream>
+#include <map>
+#include <random>
+#include <set>
+
+#include "TestData.hpp"
+#include "hpds/io/KittiBin.hpp"
+#include "hpds/io/PlyWriter.hpp"
+#include "hpds/io/PointCloudFile.hpp"
+
+namespace hpds {
+namespace {
+
+using test::cliPath;
+using test::runCommand;
+
+std::string q(const std::filesystem::path &p) { return "'" + p.string() + "'"; }
+
+int hpds(const std::string &args, std::string *out = nullptr) { return runCommand(cliPath() + " " + args, out); }
+
+std::string readText(const std::filesystem::path &p) {
+  std::ifstream f(p);
+  return std::string(std::istreambuf_iterator<char>(f), {});
+}
+
+int maxLevel(const PointBuffer &b) {
+  const PointField *l = b.layout().find("level");
+  int m = -1;
+  for (std::size_t i = 0; i < b.size(); ++i) m = std::max(m, static_cast<int>(readAsDouble(b.record(i), *l)));
+  return m;
+}
+
+TEST(Cli, EveryRealSensorFrameSamplesVerifiesAndKeepsItsFields) {
+  HPDS_REQUIRE_SHARED_DATA();
+  const auto dir = test::sharedLidarDir();
+  const auto tmp = test::scratchDir("cli_real");
+  for (const char *name : {"hdl32_a.pcd", "hdl32_b.pcd", "velodyne_vlp16.pcd", "velodyne_vlp32.pcd",
+                           "velodyne_vls128.pcd", "hesai_xt32.pcd", "hesai_64.pcd", "hesai_ot128.pcd"}) {
+    SCOPED_TRACE(name);
+    const auto out = tmp / (std::string(name) + ".ply");
+    std::string log;
+    ASSERT_EQ(hpds("sample " + q(dir / name) + " -o " + q(out) + " --normals --spacing 0.1", &log), 0) << log;
+    ASSERT_EQ(hpds("verify " + q(out) + " --cell-size 4 --input " + q(dir / name), &log), 0) << log;
+    EXPECT_NE(log.find("OK: no violations"), std::string::npos) << log;
+    const PointBuffer in = readPointCloud((dir / name).string());
+    const PointBuffer s = readPointCloud(out.string());
+    ASSERT_GT(s.size(), 100u);
+    ASSERT_LT(s.size(), in.size());
+    // Layout contract: x y z float, level uchar, normals, then every other input field with its type.
+    const std::vector<std::string> head = {"x", "y", "z", "level", "normal_x", "normal_y", "normal_z", "curvature"};
+    for (std::size_t i = 0; i < head.size(); ++i) EXPECT_EQ(s.layout().fields[i].name, head[i]);
+    EXPECT_EQ(s.layout().find("level")->type, FieldType::UInt8);
+    EXPECT_EQ(s.layout().find("x")->type, FieldType::Float32);
+    for (const auto &f : in.layout().fields) {
+      if (f.name == "x" || f.name == "y" || f.name == "z") continue;
+      const PointField *o = s.layout().find(f.name);
+      ASSERT_NE(o, nullptr) << f.name << " lost";
+      EXPECT_EQ(o->type, f.type) << f.name;
+    }
+    EXPECT_LE(maxLevel(s), 6);  // coarsest level with r_D <= 0.1 at cell 4 m
+  }
+}
+
+TEST(Cli, LevelAndSpacingSelectTheWrittenLevels) {
+  HPDS_REQUIRE_SHARED_DATA();
+  const auto in = test::sharedLidarDir() / "hesai_xt32.pcd";
+  const auto tmp = test::scratchDir("cli_levels");
+  ASSERT_EQ(hpds("sample " + q(in) + " -o " + q(tmp / "l3.ply") + " --level 3"), 0);
+  EXPECT_EQ(maxLevel(readPointCloud((tmp / "l3.ply").string())), 3);
+  ASSERT_EQ(hpds("sample " + q(in) + " -o " + q(tmp / "s.ply") + " --spacing 0.5 --cell-size 2"), 0);
+  // r_D = sqrt(3)/2 * 2 / 2^D: r_1 = 0.866, r_2 = 0.433 <= 0.5 -> level 2.
+  EXPECT_EQ(maxLevel(readPointCloud((tmp / "s.ply").string())), 2);
+  std::string log;
+  EXPECT_EQ(hpds("sample " + q(in) + " -o " + q(tmp / "x.ply") + " --level 2 --spacing 0.5", &log), 2) << log;
+}
+
+TEST(Cli, Hdl32PairInMapModeWithPosesVerifies) {
+  HPDS_REQUIRE_SHARED_DATA();
+  const auto dir = test::sharedLidarDir();
+  const auto tmp = test::scratchDir("cli_map");
+  // KITTI pose file: frame a is the map frame, frame b's pose is the relative transform (3x4 of the 4x4).
+  std::ifstream rel(dir / "hdl32_relative.txt");
+  double m[16];
+  for (double &v : m) rel >> v;
+  ASSERT_TRUE(rel);
+  {
+    std::ofstream poses(tmp / "poses.txt");
+    poses << "1 0 0 0 0 1 0 0 0 0 1 0\n";
+    poses.precision(17);
+    for (int i = 0; i < 12; ++i) poses << m[i] << (i == 11 ? "\n" : " ");
+  }
+  std::string log;
+  ASSERT_EQ(hpds("sample " + q(dir / "hdl32_a.pcd") + " " + q(dir / "hdl32_b.pcd") + " --mode map --poses " +
+                     q(tmp / "poses.txt") + " --normals --spacing 0.2 -o " + q(tmp / "map.ply") + " --stats " +
+                     q(tmp / "stats.json"),
+                 &log),
+            0)
+      << log;
+  ASSERT_EQ(hpds("verify " + q(tmp / "map.ply") + " --cell-size 4", &log), 0) << log;
+  const PointBuffer map = readPointCloud((tmp / "map.ply").string());
+  EXPECT_EQ(map.layout().find("frame"), nullptr);
+  const std::string stats = readText(tmp / "stats.json");
+  std::size_t zeros = 0;  // no-return points of both frames (5032 in hdl32_a per the data README)
+  for (const char *name : {"hdl32_a.pcd", "hdl32_b.pcd"}) {
+    const PointBuffer in = readPointCloud((dir / name).string());
+    for (std::size_t i = 0; i < in.size(); ++i) {
+      bool zero = true;
+      for (int k = 0; k < 3; ++k) zero = zero && readAsDouble(in.record(i), in.layout().fields[k]) == 0.0;
+      zeros += zero ? 1 : 0;
+    }
+  }
+  EXPECT_GT(zeros, 5032u);
+  const std::string zero_key = "\"skipped_zero\": " + std::to_string(zeros);
+  for (const std::string &key : {std::string("\"seconds\""), std::string("\"read\""), std::string("\"insert\""),
+                                std::string("\"normals\""), std::string("\"write\""), std::string("\"peak_memory_bytes\""),
+                                std::string("\"levels\""), zero_key, std::string("\"frames\": 2"), std::string("\"mode\": \"map\"")})
+    EXPECT_NE(stats.find(key), std::string::npos) << key << " missing in " << stats;
+  // One pose too few is an error, not a silent identity.
+  {
+    std::ofstream one(tmp / "one.txt");
+    one << "1 0 0 0 0 1 0 0 0 0 1 0\n";
+  }
+  EXPECT_EQ(hpds("sample " + q(dir / "hdl32_a.pcd") + " " + q(dir / "hdl32_b.pcd") + " --mode map --poses " +
+                     q(tmp / "one.txt") + " -o " + q(tmp / "x.ply"),
+                 &log),
+            1);
+  EXPECT_NE(log.find("one pose per input"), std::string::npos) << log;
+}
+
+TEST(Cli, SyntheticStreamScanModeTagsFramesAndSeedsAreDeterministic) {
+  const auto tmp = test::scratchDir("cli_synth");
+  std::string log;
+  ASSERT_EQ(hpds("synth -o " + q(tmp / "s") + " --frames 2 --beams 8 --azimuth-steps 600", &log), 0) << log;
+  const std::string inputs = q(tmp / "s" / "frame_000000.pcd") + " " + q(tmp / "s" / "frame_000001.pcd");
+  ASSERT_EQ(hpds("sample " + inputs + " --mode scan --seed 5 -o " + q(tmp / "a.ply"), &log), 0) << log;
+  ASSERT_EQ(hpds("sample " + inputs + " --mode scan --seed 5 -o " + q(tmp / "b.ply")), 0);
+  ASSERT_EQ(hpds("sample " + inputs + " --mode scan --seed 6 -o " + q(tmp / "c.ply")), 0);
+  EXPECT_EQ(readText(tmp / "a.ply"), readText(tmp / "b.ply"));
+  EXPECT_NE(readText(tmp / "a.ply"), readText(tmp / "c.ply"));
+  const PointBuffer a = readPointCloud((tmp / "a.ply").string());
+  const PointField *frame = a.layout().find("frame");
+  ASSERT_NE(frame, nullptr);
+  EXPECT_EQ(frame->type, FieldType::UInt32);
+  std::set<double> frames;
+  for (std::size_t i = 0; i < a.size(); ++i) frames.insert(readAsDouble(a.record(i), *frame));
+  EXPECT_EQ(frames, (std::set<double>{0.0, 1.0}));
+  for (const char *name : {"intensity", "ring", "time"}) EXPECT_NE(a.layout().find(name), nullptr) << name;
+  ASSERT_EQ(hpds("sample " + inputs + " --mode map --poses " + q(tmp / "s" / "poses.txt") + " -o " + q(tmp / "m.ply") +
+                     " --order sphericity --normals --threads 2",
+                 &log),
+            0)
+      << log;
+  EXPECT_EQ(hpds("verify " + q(tmp / "m.ply") + " --cell-size 4", &log), 0) << log;
+}
+
+TEST(Cli, VerifyCatchesABrokenSampling) {
+  const auto tmp = test::scratchDir("cli_verify");
+  PointLayout l;
+  l.append("x", FieldType::Float32);
+  l.append("y", FieldType::Float32);
+  l.append("z", FieldType::Float32);
+  l.append("level", FieldType::UInt8);
+  PointBuffer b(l, 3);
+  const double pts[3][4] = {{0.5, 0.5, 0.5, 0}, {0.6, 0.5, 0.5, 1}, {9, 9, 9, 0}};  // 0.1 m apart at r_1 = 1.73 m
+  for (int i = 0; i < 3; ++i)
+    for (int k = 0; k < 4; ++k) writeFromDouble(b.record(i), l.fields[k], pts[i][k]);
+  writePly((tmp / "bad.ply").string(), b);
+  std::string log;
+  EXPECT_EQ(hpds("verify " + q(tmp / "bad.ply") + " --cell-size 4", &log), 1) << log;
+  EXPECT_NE(log.find("FAILED"), std::string::npos) << log;
+}
+
+TEST(Cli, BadInputGivesAClearErrorAndNonZeroExit) {
+  const auto tmp = test::scratchDir("cli_bad");
+  const std::string out = " -o " + q(tmp / "out.ply");
+  std::mt19937_64 rng(1);
+  {
+    std::ofstream g(tmp / "garbage.pcd", std::ios::binary);
+    for (int i = 0; i < 5000; ++i) g.put(static_cast<char>(rng()));
+  }
+  { std::ofstream e(tmp / "empty.pcd"); }
+  {
+    std::ofstream t(tmp / "truncated.pcd", std::ios::binary);
+    t << "# .PCD v0.7\nVERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 1000\nHEIGHT 1\n"
+         "VIEWPOINT 0 0 0 1 0 0 0\nPOINTS 1000\nDATA binary\n";
+    for (int i = 0; i < 100; ++i) t.put('\0');
+  }
+  { std::ofstream b(tmp / "odd.bin", std::ios::binary); b << "12345678901234567"; }
+  { std::ofstream y(tmp / "bad.yaml"); y << "hierarchy:\n  cell_sise: 2\n"; }
+  { std::ofstream y(tmp / "neg.yaml"); y << "hierarchy:\n  cell_size: -1\n"; }
+  struct Case {
+    std::string args;
+    int code;
+    std::string message;
+  };
+  const std::vector<Case> cases = {
+      {q(tmp / "missing.pcd") + out, 1, "missing.pcd"},
+      {q(tmp / "garbage.pcd") + out, 1, "garbage.pcd"},
+      {q(tmp / "empty.pcd") + out, 1, "empty.pcd"},
+      {q(tmp / "truncated.pcd") + out, 1, "truncated"},
+      {q(tmp / "odd.bin") + out, 1, "odd.bin"},
+      {q(tmp / "cloud.xyz") + out, 1, "cloud.xyz"},
+      {q(tmp / "odd.bin") + out + " --config " + q(tmp / "bad.yaml"), 1, "hierarchy.cell_sise"},
+      {q(tmp / "odd.bin") + out + " --config " + q(tmp / "neg.yaml"), 1, "hierarchy.cell_size"},
+      {q(tmp / "odd.bin") + out + " --max-depth 22", 1, "hierarchy.max_depth"},
+      {q(tmp / "odd.bin") + out + " --cell-size nan", 1, "hierarchy.cell_size"},
+      {q(tmp / "odd.bin") + out + " --order zigzag", 1, "zigzag"},
+      {q(tmp / "odd.bin"), 2, "output"},
+  };
+  for (const Case &c : cases) {
+    std::string log;
+    EXPECT_EQ(hpds("sample " + c.args, &log), c.code) << c.args << "\n" << log;
+    EXPECT_NE(log.find(c.message), std::string::npos) << c.args << "\n" << log;
+    if (c.code == 1) {
+      EXPECT_NE(log.find("hpds: error:"), std::string::npos) << log;
+    }
+  }
+  EXPECT_EQ(hpds("verify " + q(tmp / "garbage.pcd") + " --cell-size 4"), 1);
+}
+
+TEST(Cli, NanOnlyAndHugeCoordinateFramesAreCountedNotFatal) {
+  const auto tmp = test::scratchDir("cli_nan");
+  PointLayout l;
+  for (const char *n : {"x", "y", "z", "intensity"}) l.append(n, FieldType::Float32);
+  PointBuffer nan(l, 50), huge(l, 3);
+  for (std::size_t i = 0; i < 50; ++i)
+    for (int k = 0; k < 3; ++k) writeFromDouble(nan.record(i), l.fields[k], i % 2 ? NAN : INFINITY);
+  const double far[3][3] = {{1e7, 0, 0}, {0, -1e7, 5}, {1, 2, 3}};
+  for (int i = 0; i < 3; ++i)
+    for (int k = 0; k < 3; ++k) writeFromDouble(huge.record(i), l.fields[k], far[i][k]);
+  writeKittiBin((tmp / "nan.bin").string(), nan);
+  writeKittiBin((tmp / "huge.bin").string(), huge);
+  std::string log;
+  ASSERT_EQ(hpds("sample " + q(tmp / "nan.bin") + " -o " + q(tmp / "nan.ply") + " --stats " + q(tmp / "nan.json"), &log), 0)
+      << log;
+  EXPECT_NE(readText(tmp / "nan.json").find("\"skipped_invalid\": 50"), std::string::npos);
+  EXPECT_EQ(readPointCloud((tmp / "nan.ply").string()).size(), 0u);
+  // 1e7 m with 2^-21 * 1 m cells is beyond exact keys: counted and warned about, the near point still sampled.
+  ASSERT_EQ(hpds("sample " + q(tmp / "huge.bin") + " -o " + q(tmp / "huge.ply") + " --cell-size 1 --max-depth 21", &log), 0)
+      << log;
+  EXPECT_NE(log.find("beyond the exact key range"), std::string::npos) << log;
+  EXPECT_EQ(readPointCloud((tmp / "huge.ply").string()).size(), 1u);
+  // At 4 m cells and depth 8 the same coordinates are exact and all three are kept.
+  ASSERT_EQ(hpds("sample " + q(tmp / "huge.bin") + " -o " + q(tmp / "huge8.ply"), &log), 0) << log;
+  EXPECT_EQ(readPointCloud((tmp / "huge8.ply").string()).size(), 3u);
+}
+
+}  // namespace
+}  // namespace hpds
