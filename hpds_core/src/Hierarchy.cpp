@@ -202,6 +202,33 @@ InsertResult Hierarchy::insert(const InsertBatch &batch) {
   return result;
 }
 
+SampleId Hierarchy::restoreSample(const double xyz[3], int level, std::uint32_t frame_index, const float to_viewpoint[3],
+                                  const std::uint8_t *record) {
+  if (level < 0 || level > max_depth_) throw std::invalid_argument("restored sample has level " + std::to_string(level));
+  const double lim = inv_edge_[max_depth_];
+  if (!inCellRange(xyz[0], lim) || !inCellRange(xyz[1], lim) || !inCellRange(xyz[2], lim))
+    throw std::invalid_argument("restored sample lies beyond the exact key range");
+  CellKey key;
+  keyAt(level, xyz, key);
+  if (grids_[level].find(key) != kNoSample)
+    throw std::invalid_argument("restored sample's level-" + std::to_string(level) + " cell is already occupied");
+  const SampleId id = allocate();
+  std::memcpy(&xyz_[3 * std::size_t(id)], xyz, 3 * sizeof(double));
+  level_[id] = static_cast<std::uint8_t>(level);
+  frame_[id] = frame_index;
+  std::memcpy(&to_view_[3 * std::size_t(id)], to_viewpoint, 3 * sizeof(float));
+  if (record_layout_.point_step) {
+    std::uint8_t *dst = &records_[std::size_t(id) * record_layout_.point_step];
+    if (record)
+      std::memcpy(dst, record, record_layout_.point_step);
+    else
+      std::memset(dst, 0, record_layout_.point_step);
+  }
+  grids_[level].insert(key, id);
+  ++live_;
+  return id;
+}
+
 std::size_t Hierarchy::evictOutside(const double center[3], double distance) {
   const double r2 = distance * distance;
   std::size_t n = 0;

@@ -67,6 +67,12 @@ class Hierarchy {
   /// order, the rejected ones then try level 1 in the same order, and so on.
   InsertResult insert(const InsertBatch &batch);
 
+  /// Puts back a sample exactly as saved (persistence): no spacing test, but the position must be in range and its
+  /// level-`level` cell free, else std::invalid_argument (a file that breaks this is corrupt). `record` may be null
+  /// (zeroed record).
+  SampleId restoreSample(const double xyz[3], int level, std::uint32_t frame_index, const float to_viewpoint[3],
+                         const std::uint8_t *record);
+
   /// Removes every sample farther than `distance` from `center`; returns how many.
   std::size_t evictOutside(const double center[3], double distance);
   /// Removes the samples farthest from `center` until at most `max_samples` remain; returns how many.
