@@ -1,0 +1,125 @@
+// FrameProcessor: what happens to one PointCloud2, shared by the node/nodelet and `hpds replay` so that both give
+// the same samples from the same messages.
+//
+// Contract
+// - check(): validation only (CloudConversion rules); a refused message is counted and changes nothing.
+// - targetFrame(): the frame the caller must look up a transform into before process(): ros.fixed_frame in map
+//   mode, ros.output_frame in scan mode, or "" (scan mode without output_frame: no transform, input frame kept).
+// - process(msg, sensor_to_target, wants): converts, runs hpds::Pipeline::addFrame with Frame.sensor_to_fixed =
+//   sensor_to_target and builds the requested outputs, each stamped with the input stamp and in the target frame
+//   (or the input frame):
+//     output      scan: every sample of levels 0..L of this frame.
+//                 map: the samples of levels 0..L "hit" by this frame: those with at least one of the frame's
+//                 accepted points within 2 r_L (the hierarchy's coverage radius, so every accepted point has at
+//                 least one such sample). Old samples count as well as new ones: it is the map as this sweep saw it.
+//     new_samples map: samples accepted from this frame at levels 0..L.
+//     levels      one cloud per ros.publish_levels entry D: samples of exactly level D (scan: all of them; map:
+//                 those hit by the frame with radius 2 r_D).
+//     local_map   map: samples of levels 0..L within ros.local_map_radius of the sensor, when the frame's stamp is
+//                 at least 1 / ros.local_map_rate after the last local map (or went backwards: a looped bag).
+//   Clouds use the OutputCloud layout (x y z float32, level uint8, [normal_x/y/z curvature], input fields).
+// - Drops: a message whose fields differ from the map's (map mode) is dropped and counted (LayoutChanged).
+// - Deterministic: same config and same sequence of (message, transform) give byte-identical outputs.
+// - Not thread-safe: one thread drives a FrameProcessor; stats() copies are safe to hand to other threads.
+#pragma once
+
+#include <sensor_msgs/PointCloud2.h>
+#include <tf2/buffer_core.h>
+
+#include <Eigen/Geometry>
+#include <array>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "hpds/Pipeline.hpp"
+#include "hpds_node/CloudConversion.hpp"
+#include "hpds_node/NodeConfig.hpp"
+
+namespace hpds_node {
+
+/// Why a frame was not processed, beyond malformed messages (which are counted per CloudError).
+enum class DropReason { NoTransform = 0, LayoutChanged, Overload, NoSubscribers };
+inline constexpr int kDropReasonCount = 4;
+[[nodiscard]] const char *toString(DropReason reason);
+
+/// Which outputs to build for this frame (the node asks only for topics with subscribers).
+struct OutputRequest {
+  bool output = true;
+  bool new_samples = true;
+  bool local_map = true;
+  std::vector<bool> levels;  ///< parallel to ros.publish_levels; missing entries mean true
+
+  [[nodiscard]] bool any() const;
+  [[nodiscard]] static OutputRequest all() { return {}; }
+  [[nodiscard]] static OutputRequest none(std::size_t level_count);
+};
+
+struct ProcessedFrame {
+  bool processed = false;  ///< false: dropped (see `malformed` / `drop`)
+  CloudError malformed = CloudError::None;
+  DropReason drop = DropReason::NoTransform;
+  std::string why;  ///< reason text for the log when not processed
+
+  hpds::FrameCounters counters;
+  bool has_output = false, has_new_samples = false, has_local_map = false;
+  sensor_msgs::PointCloud2 output, new_samples, local_map;
+  std::vector<std::pair<int, sensor_msgs::PointCloud2>> levels;  ///< (D, cloud) for the requested levels
+  double seconds = 0.0;                                          ///< conversion + pipeline + outputs
+};
+
+/// Running totals for diagnostics and --stats.
+struct ProcessorStats {
+  std::uint64_t received = 0;   ///< messages offered to the processor (or the node's queue)
+  std::uint64_t processed = 0;  ///< frames inserted
+  std::uint64_t empty = 0;      ///< processed frames with zero points
+  std::array<std::uint64_t, kCloudErrorCount> malformed{};  ///< indexed by CloudError
+  std::array<std::uint64_t, kDropReasonCount> dropped{};    ///< indexed by DropReason
+  double seconds_sum = 0.0, seconds_max = 0.0;              ///< processing time of processed frames
+  hpds::FrameCounters points;                               ///< pipeline point counters, all frames
+
+  [[nodiscard]] std::uint64_t malformedTotal() const;
+  [[nodiscard]] std::uint64_t droppedTotal() const;  ///< malformed + every DropReason
+};
+
+class FrameProcessor {
+ public:
+  /// Validates the config (std::invalid_argument naming the key).
+  explicit FrameProcessor(const NodeConfig &config);
+
+  [[nodiscard]] std::string targetFrame() const;
+
+  /// Counts a received message and validates it; a refused message is counted as malformed.
+  [[nodiscard]] CloudError check(const sensor_msgs::PointCloud2 &msg, std::string *why = nullptr);
+
+  /// See the contract. `msg` must have passed check(). sensor_to_target is ignored when targetFrame() is empty.
+  ProcessedFrame process(const sensor_msgs::PointCloud2 &msg, const Eigen::Isometry3d &sensor_to_target,
+                         const OutputRequest &wants);
+
+  /// Counts a frame dropped before process() (no transform, overload, nobody listening).
+  void countDrop(DropReason reason);
+
+  [[nodiscard]] const ProcessorStats &stats() const { return stats_; }
+  [[nodiscard]] const hpds::Pipeline &pipeline() const { return pipeline_; }
+  [[nodiscard]] const NodeConfig &config() const { return config_; }
+
+ private:
+  [[nodiscard]] std::vector<hpds::SampleId> samplesHit(const hpds::PointBuffer &points,
+                                                       const Eigen::Isometry3d &sensor_to_target, int min_level,
+                                                       int max_level, double hit_radius) const;
+  void toMsg(const std::vector<hpds::SampleId> &ids, const std_msgs::Header &header,
+             sensor_msgs::PointCloud2 &out) const;
+
+  NodeConfig config_;
+  hpds::Pipeline pipeline_;
+  ProcessorStats stats_;
+  bool local_map_sent_ = false;
+  double last_local_map_stamp_ = 0.0;
+};
+
+/// Pose of frame `source` (the sensor) in `target` at `stamp` from any tf2 buffer (the node's listener buffer or
+/// the replay's, filled from the bag); false with `why` set when the buffer cannot answer.
+bool lookupSensorPose(const tf2::BufferCore &buffer, const std::string &target, const std::string &source,
+                      const ros::Time &stamp, Eigen::Isometry3d &pose, std::string *why = nullptr);
+
+}  // namespace hpds_node

@@ -1,0 +1,98 @@
+// HpdsServer: the ROS side of hpds, one class behind both entry points (node main, nodelet onInit).
+//
+// Contract
+// - Construction reads the private parameters (config_file, then the config keys and `ros/*`, see NodeConfig.hpp)
+//   and throws std::invalid_argument naming the parameter when one is invalid: the node must not start with a
+//   half-understood configuration.
+// - Topics (private, remap them): ~input (sensor_msgs/PointCloud2) in; ~output, and in map mode ~new_samples and
+//   ~local_map, plus ~level_<D> for each ros.publish_levels entry, out. Diagnostics on /diagnostics.
+// - Threads: the subscriber callback only queues the message (ros.queue_size deep; when full the oldest is
+//   dropped and counted as overload, so the newest frame wins); one worker thread validates, waits for tf (at most
+//   ros.tf_timeout of wall time, then drops and counts), runs the shared FrameProcessor and publishes.
+// - Work is skipped when nobody listens: scan mode drops the frame (counted as no_subscribers) before converting;
+//   map mode still inserts it (the map must stay complete) but builds only the clouds that have subscribers.
+// - Destruction stops the worker after its current frame.
+#pragma once
+
+#include <diagnostic_updater/diagnostic_updater.h>
+#include <ros/ros.h>
+#include <sensor_msgs/PointCloud2.h>
+#include <tf2_ros/buffer.h>
+#include <tf2_ros/transform_listener.h>
+
+#include <condition_variable>
+#include <deque>
+#include <memory>
+#include <mutex>
+#include <thread>
+
+#include "hpds_node/FrameProcessor.hpp"
+#include "hpds_node/NodeConfig.hpp"
+
+namespace hpds_node {
+
+/// Defaults, then the YAML file in ~config_file (if set), then every other private parameter, all through
+/// applyNodeConfigYaml. Throws std::invalid_argument naming the parameter.
+[[nodiscard]] NodeConfig loadNodeConfigFromParams(const ros::NodeHandle &private_nh);
+
+class HpdsServer {
+ public:
+  /// `name` is the node or nodelet name, used by the diagnostics.
+  HpdsServer(ros::NodeHandle nh, ros::NodeHandle private_nh, const std::string &name);
+  ~HpdsServer();
+  HpdsServer(const HpdsServer &) = delete;
+  HpdsServer &operator=(const HpdsServer &) = delete;
+
+ private:
+  void onCloud(const sensor_msgs::PointCloud2::ConstPtr &msg);
+  void workerLoop();
+  /// Returns the processing time of the frame, 0 when it was dropped.
+  double handle(const sensor_msgs::PointCloud2::ConstPtr &msg);
+  bool waitForPose(const std::string &target, const std_msgs::Header &header, Eigen::Isometry3d &pose,
+                   std::string *why);
+  [[nodiscard]] OutputRequest subscribedOutputs() const;
+  void publish(ProcessedFrame &frame);
+  void takeSnapshot(double frame_seconds);
+  void diagnose(diagnostic_updater::DiagnosticStatusWrapper &status);
+
+  ros::NodeHandle nh_, pnh_;
+  NodeConfig config_;
+  std::unique_ptr<FrameProcessor> processor_;  // worker thread only
+  std::string target_frame_;
+
+  tf2_ros::Buffer tf_buffer_;
+  std::unique_ptr<tf2_ros::TransformListener> tf_listener_;
+  ros::Publisher pub_output_, pub_new_samples_, pub_local_map_;
+  std::vector<ros::Publisher> pub_levels_;
+  ros::Subscriber sub_;
+  diagnostic_updater::Updater updater_;
+  ros::WallTimer diagnostics_timer_;
+
+  // Queue between the subscriber callback and the worker.
+  std::mutex queue_mutex_;
+  std::condition_variable queue_cv_;
+  std::deque<sensor_msgs::PointCloud2::ConstPtr> queue_;
+  bool stopping_ = false;
+  std::uint64_t received_ = 0;  // guarded by queue_mutex_
+  std::uint64_t overload_ = 0;  // guarded by queue_mutex_
+
+  // What the diagnostics see: a copy the worker refreshes after every frame.
+  struct Snapshot {
+    ProcessorStats stats;
+    std::vector<std::size_t> samples_per_level;
+    std::size_t samples_total = 0;
+    std::size_t memory_bytes = 0;
+    double seconds_max_window = 0.0;  // reset by each diagnostics report
+  };
+  std::mutex snapshot_mutex_;
+  Snapshot snapshot_;
+  // Diagnostics window (diagnostics callback only).
+  ros::WallTime window_start_;
+  std::uint64_t window_received_ = 0;
+  ProcessorStats window_stats_;
+  std::uint64_t window_overload_ = 0;
+
+  std::thread worker_;  // last: started once everything above exists
+};
+
+}  // namespace hpds_node

@@ -1,0 +1,341 @@
+#include "hpds_node/HpdsServer.hpp"
+
+#include <yaml-cpp/yaml.h>
+
+#include <algorithm>
+#include <charconv>
+#include <cmath>
+#include <sstream>
+
+namespace hpds_node {
+
+namespace {
+
+// Private parameters that belong to other components sharing the namespace, not to the config.
+const std::vector<std::string> kForeignParams = {"config_file", "diagnostic_period"};
+
+void emitParam(YAML::Emitter &out, XmlRpc::XmlRpcValue &v) {
+  switch (v.getType()) {
+    case XmlRpc::XmlRpcValue::TypeStruct:
+      out << YAML::BeginMap;
+      for (auto &item : v) {
+        out << YAML::Key << item.first << YAML::Value;
+        emitParam(out, item.second);
+      }
+      out << YAML::EndMap;
+      break;
+    case XmlRpc::XmlRpcValue::TypeArray:
+      out << YAML::Flow << YAML::BeginSeq;
+      for (int i = 0; i < v.size(); ++i) emitParam(out, v[i]);
+      out << YAML::EndSeq;
+      break;
+    case XmlRpc::XmlRpcValue::TypeInt:
+      out << static_cast<int>(v);
+      break;
+    case XmlRpc::XmlRpcValue::TypeDouble: {
+      // Shortest round-trip text, so the value the loader sees is the double rosparam holds.
+      const double d = static_cast<double>(v);
+      char buf[64];
+      const auto [end, ec] = std::to_chars(buf, buf + sizeof buf, d);
+      std::string text = std::isnan(d) ? ".nan" : std::isinf(d) ? (d > 0 ? ".inf" : "-.inf") : std::string(buf, end);
+      if (ec == std::errc() && std::isfinite(d) && text.find_first_of(".e") == std::string::npos) text += ".0";
+      out << text;
+      break;
+    }
+    case XmlRpc::XmlRpcValue::TypeBoolean:
+      out << (static_cast<bool>(v) ? "true" : "false");
+      break;
+    case XmlRpc::XmlRpcValue::TypeString:
+      // Quoted: a string parameter "4.0" must reach the loader as a string, which it refuses for a number key.
+      out << YAML::DoubleQuoted << static_cast<std::string &>(v);
+      break;
+    default:
+      out << YAML::DoubleQuoted << "<unsupported parameter type>";
+      break;
+  }
+}
+
+double mean(double sum, std::uint64_t n) { return n ? sum / double(n) : 0.0; }
+
+}  // namespace
+
+NodeConfig loadNodeConfigFromParams(const ros::NodeHandle &private_nh) {
+  NodeConfig config;
+  const std::string ns = private_nh.getNamespace();
+  std::string file;
+  if (private_nh.getParam("config_file", file) && !file.empty()) {
+    try {
+      config = loadNodeConfigFile(file);
+    } catch (const std::invalid_argument &e) {
+      throw std::invalid_argument(std::string(e.what()) + " [parameter " + ns + "/config_file]");
+    }
+  }
+  XmlRpc::XmlRpcValue params;
+  if (private_nh.getParam(ns, params) && params.getType() == XmlRpc::XmlRpcValue::TypeStruct) {
+    YAML::Emitter out;
+    emitParam(out, params);
+    try {
+      applyNodeConfigYaml(out.c_str(), config, "", kForeignParams);
+    } catch (const std::invalid_argument &e) {
+      // The loader names the dotted key ("hierarchy.max_depth: ..."); say which parameter that is.
+      const std::string what = e.what();
+      const std::size_t colon = what.find(": ");
+      const std::string key = what.substr(0, colon);
+      if (colon == std::string::npos || key.empty() || key.find_first_of(" ()'") != std::string::npos)
+        throw std::invalid_argument(what + " (in the private parameters of " + ns + ")");
+      std::string param = key;
+      std::replace(param.begin(), param.end(), '.', '/');
+      throw std::invalid_argument("parameter " + ns + "/" + param + what.substr(colon));
+    }
+  }
+  return config;
+}
+
+HpdsServer::HpdsServer(ros::NodeHandle nh, ros::NodeHandle private_nh, const std::string &name)
+    : nh_(nh),
+      pnh_(private_nh),
+      config_(loadNodeConfigFromParams(private_nh)),
+      processor_(std::make_unique<FrameProcessor>(config_)),
+      target_frame_(processor_->targetFrame()),
+      updater_(nh, private_nh, name) {
+  const bool map_mode = config_.hpds.mode == hpds::Mode::Map;
+  if (!target_frame_.empty()) tf_listener_ = std::make_unique<tf2_ros::TransformListener>(tf_buffer_, nh_);
+
+  pub_output_ = pnh_.advertise<sensor_msgs::PointCloud2>("output", 4);
+  if (map_mode) {
+    pub_new_samples_ = pnh_.advertise<sensor_msgs::PointCloud2>("new_samples", 4);
+    if (config_.ros.local_map_rate > 0.0) pub_local_map_ = pnh_.advertise<sensor_msgs::PointCloud2>("local_map", 1);
+  }
+  for (int d : config_.ros.publish_levels)
+    pub_levels_.push_back(pnh_.advertise<sensor_msgs::PointCloud2>("level_" + std::to_string(d), 4));
+
+  updater_.setHardwareID("none");
+  updater_.add("processing", this, &HpdsServer::diagnose);
+  window_start_ = ros::WallTime::now();
+  // The updater rate-limits itself to ~diagnostic_period; a fast timer just gives it the chance.
+  diagnostics_timer_ = nh_.createWallTimer(ros::WallDuration(0.1), [this](const ros::WallTimerEvent &) {
+    updater_.update();
+  });
+  takeSnapshot(0.0);
+
+  worker_ = std::thread([this] { workerLoop(); });
+  // roscpp's own queue only has to absorb bursts while onCloud runs; the counted dropping happens in queue_.
+  sub_ = pnh_.subscribe("input", static_cast<std::uint32_t>(config_.ros.queue_size) + 4, &HpdsServer::onCloud, this);
+
+  std::ostringstream summary;
+  summary << "hpds: " << hpds::toString(config_.hpds.mode) << " mode, output levels 0.."
+          << processor_->pipeline().outputLevel() << " (spacing "
+          << hpds::poissonRadius(config_.hpds.hierarchy.cell_size, processor_->pipeline().outputLevel()) << " m)";
+  if (!target_frame_.empty()) summary << ", outputs in frame '" << target_frame_ << "'";
+  ROS_INFO_STREAM_NAMED("hpds", summary.str() << "; input " << sub_.getTopic() << ", output "
+                                              << pub_output_.getTopic());
+}
+
+HpdsServer::~HpdsServer() {
+  sub_.shutdown();
+  {
+    std::lock_guard<std::mutex> lock(queue_mutex_);
+    stopping_ = true;
+  }
+  queue_cv_.notify_all();
+  if (worker_.joinable()) worker_.join();
+}
+
+void HpdsServer::onCloud(const sensor_msgs::PointCloud2::ConstPtr &msg) {
+  {
+    std::lock_guard<std::mutex> lock(queue_mutex_);
+    ++received_;
+    if (queue_.size() >= static_cast<std::size_t>(config_.ros.queue_size)) {
+      queue_.pop_front();
+      ++overload_;
+    }
+    queue_.push_back(msg);
+  }
+  queue_cv_.notify_one();
+}
+
+void HpdsServer::workerLoop() {
+  for (;;) {
+    sensor_msgs::PointCloud2::ConstPtr msg;
+    {
+      std::unique_lock<std::mutex> lock(queue_mutex_);
+      queue_cv_.wait(lock, [this] { return stopping_ || !queue_.empty(); });
+      if (stopping_) return;
+      msg = queue_.front();
+      queue_.pop_front();
+    }
+    double seconds = 0.0;
+    try {
+      seconds = handle(msg);
+    } catch (const std::exception &e) {
+      // A bug must not take the node down with it; the frame is lost and said so.
+      ROS_ERROR_STREAM_THROTTLE_NAMED(5.0, "hpds", "hpds: frame dropped by an internal error: " << e.what());
+    }
+    takeSnapshot(seconds);
+  }
+}
+
+OutputRequest HpdsServer::subscribedOutputs() const {
+  OutputRequest r;
+  r.output = pub_output_.getNumSubscribers() > 0;
+  r.new_samples = pub_new_samples_ && pub_new_samples_.getNumSubscribers() > 0;
+  r.local_map = pub_local_map_ && pub_local_map_.getNumSubscribers() > 0;
+  for (const ros::Publisher &p : pub_levels_) r.levels.push_back(p.getNumSubscribers() > 0);
+  return r;
+}
+
+bool HpdsServer::waitForPose(const std::string &target, const std_msgs::Header &header, Eigen::Isometry3d &pose,
+                             std::string *why) {
+  // Polled against wall time rather than tf2_ros::Buffer::canTransform(timeout): under use_sim_time that timeout
+  // runs on the bag clock and never expires once the bag stops, which would wedge the worker.
+  const ros::WallTime deadline = ros::WallTime::now() + ros::WallDuration(config_.ros.tf_timeout);
+  for (;;) {
+    if (tf_buffer_.canTransform(target, header.frame_id, header.stamp))
+      return lookupSensorPose(tf_buffer_, target, header.frame_id, header.stamp, pose, why);
+    if (ros::WallTime::now() >= deadline || !ros::ok()) break;
+    {
+      std::lock_guard<std::mutex> lock(queue_mutex_);
+      if (stopping_) break;
+    }
+    ros::WallDuration(0.002).sleep();
+  }
+  return lookupSensorPose(tf_buffer_, target, header.frame_id, header.stamp, pose, why);
+}
+
+double HpdsServer::handle(const sensor_msgs::PointCloud2::ConstPtr &msg) {
+  // 1. Validate before any work.
+  std::string why;
+  const CloudError error = processor_->check(*msg, &why);
+  if (error != CloudError::None) {
+    ROS_ERROR_STREAM_THROTTLE_NAMED(5.0, "hpds", "hpds: dropped malformed PointCloud2 ("
+                                                      << toString(error) << "): " << why);
+    return 0.0;
+  }
+
+  // 2. Nobody listening: scan mode has nothing to keep, map mode still has to grow the map.
+  const OutputRequest wants = subscribedOutputs();
+  if (config_.hpds.mode == hpds::Mode::Scan && !wants.any()) {
+    processor_->countDrop(DropReason::NoSubscribers);
+    return 0.0;
+  }
+
+  // 3. Sensor pose in the target frame at the message stamp.
+  Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
+  if (!target_frame_.empty() && !waitForPose(target_frame_, msg->header, pose, &why)) {
+    processor_->countDrop(DropReason::NoTransform);
+    ROS_WARN_STREAM_THROTTLE_NAMED(5.0, "hpds", "hpds: dropped frame at " << msg->header.stamp << ": no transform '"
+                                                                           << msg->header.frame_id << "' -> '"
+                                                                           << target_frame_ << "': " << why);
+    return 0.0;
+  }
+
+  // 4. Shared per-frame processing, then publish what was built.
+  ProcessedFrame frame = processor_->process(*msg, pose, wants);
+  if (!frame.processed) {
+    ROS_ERROR_STREAM_THROTTLE_NAMED(5.0, "hpds", "hpds: dropped frame: " << frame.why);
+    return 0.0;
+  }
+  publish(frame);
+  return frame.seconds;
+}
+
+void HpdsServer::publish(ProcessedFrame &frame) {
+  // Published as shared pointers so that nodelets in the same manager get them without a copy.
+  auto send = [](const ros::Publisher &pub, sensor_msgs::PointCloud2 &cloud) {
+    auto msg = boost::make_shared<sensor_msgs::PointCloud2>();
+    msg->header = cloud.header;
+    msg->height = cloud.height;
+    msg->width = cloud.width;
+    msg->fields.swap(cloud.fields);
+    msg->is_bigendian = cloud.is_bigendian;
+    msg->point_step = cloud.point_step;
+    msg->row_step = cloud.row_step;
+    msg->data.swap(cloud.data);
+    msg->is_dense = cloud.is_dense;
+    pub.publish(msg);
+  };
+  if (frame.has_output) send(pub_output_, frame.output);
+  if (frame.has_new_samples) send(pub_new_samples_, frame.new_samples);
+  if (frame.has_local_map) send(pub_local_map_, frame.local_map);
+  for (auto &[level, cloud] : frame.levels) {
+    for (std::size_t i = 0; i < config_.ros.publish_levels.size(); ++i)
+      if (config_.ros.publish_levels[i] == level) send(pub_levels_[i], cloud);
+  }
+}
+
+void HpdsServer::takeSnapshot(double frame_seconds) {
+  const hpds::Hierarchy &h = processor_->pipeline().hierarchy();
+  Snapshot s;
+  s.stats = processor_->stats();
+  for (int d = 0; d <= h.maxDepth(); ++d) s.samples_per_level.push_back(h.countAtLevel(d));
+  s.samples_total = h.sampleCount();
+  s.memory_bytes = h.memUsage();
+  std::lock_guard<std::mutex> lock(snapshot_mutex_);
+  s.seconds_max_window = std::max(snapshot_.seconds_max_window, frame_seconds);
+  snapshot_ = std::move(s);
+}
+
+void HpdsServer::diagnose(diagnostic_updater::DiagnosticStatusWrapper &status) {
+  Snapshot s;
+  {
+    std::lock_guard<std::mutex> lock(snapshot_mutex_);
+    s = snapshot_;
+    snapshot_.seconds_max_window = 0.0;
+  }
+  std::uint64_t received, overload;
+  {
+    std::lock_guard<std::mutex> lock(queue_mutex_);
+    received = received_;
+    overload = overload_;
+  }
+  const ros::WallTime now = ros::WallTime::now();
+  const double window = std::max(1e-6, (now - window_start_).toSec());
+  const ProcessorStats &t = s.stats, &w = window_stats_;
+  const std::uint64_t frames_window = t.processed - w.processed;
+  const std::uint64_t dropped_window =
+      (t.droppedTotal() - w.droppedTotal()) + (overload - window_overload_) -
+      (t.dropped[int(DropReason::NoSubscribers)] - w.dropped[int(DropReason::NoSubscribers)]);
+
+  status.add("input rate [Hz]", double(received - window_received_) / window);
+  status.add("frames received", received);
+  status.add("frames processed", t.processed);
+  status.add("frames empty", t.empty);
+  status.add("processing time mean [ms]", 1e3 * mean(t.seconds_sum - w.seconds_sum, frames_window));
+  status.add("processing time max [ms]", 1e3 * s.seconds_max_window);
+  status.add("processing time mean, all frames [ms]", 1e3 * mean(t.seconds_sum, t.processed));
+  status.add("processing time max, all frames [ms]", 1e3 * t.seconds_max);
+  status.add("dropped total", t.droppedTotal() + overload);
+  status.add("dropped malformed", t.malformedTotal());
+  for (int e = 1; e < kCloudErrorCount; ++e)
+    status.add(std::string("dropped malformed ") + toString(CloudError(e)), t.malformed[e]);
+  status.add("dropped overload", overload);
+  for (DropReason r : {DropReason::NoTransform, DropReason::LayoutChanged, DropReason::NoSubscribers})
+    status.add(std::string("dropped ") + toString(r), t.dropped[int(r)]);
+  status.add("points input", t.points.input);
+  status.add("points skipped invalid", t.points.skipped_invalid);
+  status.add("points skipped zero", t.points.skipped_zero);
+  status.add("points skipped range", t.points.skipped_range);
+  status.add("points out of key range", t.points.out_of_range);
+  status.add("points dropped below max depth", t.points.dropped_depth);
+  status.add("samples stored", s.samples_total);
+  for (std::size_t d = 0; d < s.samples_per_level.size(); ++d)
+    status.add("samples level " + std::to_string(d), s.samples_per_level[d]);
+  status.add("memory in use [bytes]", s.memory_bytes);
+
+  if (dropped_window > 0) {
+    status.summaryf(diagnostic_msgs::DiagnosticStatus::WARN, "%llu frames dropped in the last %.1f s",
+                    static_cast<unsigned long long>(dropped_window), window);
+  } else if (received == window_received_) {
+    status.summary(diagnostic_msgs::DiagnosticStatus::OK, "waiting for input");
+  } else {
+    status.summaryf(diagnostic_msgs::DiagnosticStatus::OK, "%.1f Hz in, %.1f ms per frame",
+                    double(received - window_received_) / window,
+                    1e3 * mean(t.seconds_sum - w.seconds_sum, frames_window));
+  }
+  window_start_ = now;
+  window_received_ = received;
+  window_overload_ = overload;
+  window_stats_ = t;
+}
+
+}  // namespace hpds_node

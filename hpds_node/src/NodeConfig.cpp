@@ -1,0 +1,247 @@
+#include "hpds_node/NodeConfig.hpp"
+
+#include <yaml-cpp/yaml.h>
+
+#include <algorithm>
+#include <charconv>
+#include <cmath>
+#include <fstream>
+#include <iterator>
+#include <limits>
+#include <sstream>
+#include <stdexcept>
+
+#include "hpds/ConfigYaml.hpp"
+
+namespace hpds_node {
+
+namespace {
+
+[[noreturn]] void fail(const std::string &key, const std::string &why) {
+  throw std::invalid_argument(key + ": " + why);
+}
+
+// yaml-cpp tags quoted scalars "!"; numbers must be plain, as in ConfigYaml, so a quoted "0.1" is reported.
+bool isQuoted(const YAML::Node &n) { return n.Tag() == "!"; }
+
+std::string describe(const YAML::Node &n) {
+  if (n.IsNull()) return "nothing (null)";
+  if (n.IsSequence()) return "a sequence";
+  if (n.IsMap()) return "a map";
+  return isQuoted(n) ? "the quoted string '" + n.Scalar() + "'" : "'" + n.Scalar() + "'";
+}
+
+double parseNumber(const YAML::Node &n, const std::string &key) {
+  if (!n.IsScalar() || isQuoted(n)) fail(key, "expected a number, got " + describe(n));
+  const std::string &text = n.Scalar();
+  if (text == ".inf" || text == "+.inf") return std::numeric_limits<double>::infinity();
+  if (text == "-.inf") return -std::numeric_limits<double>::infinity();
+  if (text == ".nan") return std::numeric_limits<double>::quiet_NaN();
+  const char *begin = text.data() + (!text.empty() && text[0] == '+' ? 1 : 0);
+  double value = 0.0;
+  const auto [end, ec] = std::from_chars(begin, text.data() + text.size(), value);
+  // from_chars also takes "inf"/"nan" and hex-less forms YAML would read as strings; digits are required.
+  const bool has_digit = std::any_of(text.begin(), text.end(), [](char c) { return c >= '0' && c <= '9'; });
+  if (ec != std::errc() || end != text.data() + text.size() || !has_digit)
+    fail(key, "expected a number, got '" + text + "'");
+  return value;
+}
+
+int parseInt(const YAML::Node &n, const std::string &key) {
+  if (!n.IsScalar() || isQuoted(n)) fail(key, "expected an integer, got " + describe(n));
+  const std::string &text = n.Scalar();
+  const char *begin = text.data() + (!text.empty() && text[0] == '+' ? 1 : 0);
+  int value = 0;
+  const auto [end, ec] = std::from_chars(begin, text.data() + text.size(), value);
+  if (ec != std::errc() || end != text.data() + text.size()) fail(key, "expected an integer, got '" + text + "'");
+  return value;
+}
+
+std::string parseString(const YAML::Node &n, const std::string &key) {
+  if (n.IsNull()) return "";
+  if (!n.IsScalar()) fail(key, "expected a string, got " + describe(n));
+  return n.Scalar();
+}
+
+std::string parseFrameId(const YAML::Node &n, const std::string &key) {
+  std::string id = parseString(n, key);
+  // tf2 refuses ids with a leading slash; ROS 1 launch files still commonly write them.
+  while (!id.empty() && id.front() == '/') id.erase(id.begin());
+  if (id.find_first_of(" \t\n") != std::string::npos) fail(key, "frame id '" + id + "' contains whitespace");
+  return id;
+}
+
+void applyRosSection(const YAML::Node &section, RosConfig &ros) {
+  if (section.IsNull()) return;
+  if (!section.IsMap()) fail("ros", "expected a map of ros.* keys, got " + describe(section));
+  std::vector<std::string> seen;
+  for (const auto &item : section) {
+    if (!item.first.IsScalar()) fail("ros", "map keys must be strings");
+    const std::string leaf = item.first.Scalar();
+    const std::string key = "ros." + leaf;
+    if (std::find(seen.begin(), seen.end(), leaf) != seen.end()) fail(key, "duplicate key");
+    seen.push_back(leaf);
+    const YAML::Node &v = item.second;
+    if (leaf == "fixed_frame") {
+      ros.fixed_frame = parseFrameId(v, key);
+    } else if (leaf == "output_frame") {
+      ros.output_frame = parseFrameId(v, key);
+    } else if (leaf == "tf_timeout") {
+      ros.tf_timeout = parseNumber(v, key);
+    } else if (leaf == "local_map_radius") {
+      ros.local_map_radius = parseNumber(v, key);
+    } else if (leaf == "local_map_rate") {
+      ros.local_map_rate = parseNumber(v, key);
+    } else if (leaf == "queue_size") {
+      ros.queue_size = parseInt(v, key);
+    } else if (leaf == "publish_levels") {
+      ros.publish_levels.clear();
+      YAML::Node list = v;
+      // roslaunch <param> and <arg> values are strings: "[2, 4]" is taken as the list it spells.
+      if (v.IsScalar() && isQuoted(v)) {
+        try {
+          list = YAML::Load(v.Scalar());
+        } catch (const YAML::Exception &) {
+          fail(key, "expected a list of levels, e.g. [2, 4], got " + describe(v));
+        }
+      }
+      if (list.IsNull()) continue;
+      if (!list.IsSequence()) fail(key, "expected a list of levels, e.g. [2, 4], got " + describe(v));
+      for (std::size_t i = 0; i < list.size(); ++i) ros.publish_levels.push_back(parseInt(list[i], key));
+    } else {
+      fail(key,
+           "unknown key (ros keys: fixed_frame, output_frame, tf_timeout, local_map_radius, local_map_rate, "
+           "publish_levels, queue_size)");
+    }
+  }
+}
+
+// Re-emits a parsed node for hpds::applyConfigYaml, keeping quoted scalars quoted so that its "quoted numbers are
+// errors" rule still sees them.
+void emit(YAML::Emitter &out, const YAML::Node &n) {
+  if (n.IsMap()) {
+    out << YAML::BeginMap;
+    for (const auto &item : n) {
+      out << YAML::Key;
+      emit(out, item.first);
+      out << YAML::Value;
+      emit(out, item.second);
+    }
+    out << YAML::EndMap;
+  } else if (n.IsSequence()) {
+    out << YAML::Flow << YAML::BeginSeq;
+    for (const auto &item : n) emit(out, item);
+    out << YAML::EndSeq;
+  } else if (n.IsScalar()) {
+    if (isQuoted(n)) out << YAML::DoubleQuoted;
+    out << n.Scalar();
+  } else {
+    out << YAML::Null;
+  }
+}
+
+std::string formatDouble(double v) {
+  if (std::isnan(v)) return ".nan";
+  if (std::isinf(v)) return v > 0 ? ".inf" : "-.inf";
+  char buf[64];
+  const auto [end, ec] = std::to_chars(buf, buf + sizeof buf, v);
+  std::string s(buf, ec == std::errc() ? end : buf);
+  if (s.find_first_of(".e") == std::string::npos) s += ".0";
+  return s;
+}
+
+std::string quoted(const std::string &s) {
+  YAML::Emitter e;
+  e << YAML::DoubleQuoted << s;
+  return e.c_str();
+}
+
+}  // namespace
+
+void validateRosConfig(const RosConfig &ros, const hpds::HpdsConfig &config) {
+  if (!std::isfinite(ros.tf_timeout) || ros.tf_timeout < 0.0)
+    fail("ros.tf_timeout", "must be a finite number >= 0 [s], got " + formatDouble(ros.tf_timeout));
+  if (!std::isfinite(ros.local_map_radius) || ros.local_map_radius <= 0.0)
+    fail("ros.local_map_radius", "must be a finite number > 0 [m], got " + formatDouble(ros.local_map_radius));
+  if (!std::isfinite(ros.local_map_rate) || ros.local_map_rate < 0.0)
+    fail("ros.local_map_rate", "must be a finite number >= 0 [Hz] (0 = off), got " + formatDouble(ros.local_map_rate));
+  if (ros.queue_size < 1 || ros.queue_size > 1000)
+    fail("ros.queue_size", "must be in 1..1000, got " + std::to_string(ros.queue_size));
+  for (std::size_t i = 0; i < ros.publish_levels.size(); ++i) {
+    const int d = ros.publish_levels[i];
+    if (d < 0 || d > config.hierarchy.max_depth)
+      fail("ros.publish_levels", "level " + std::to_string(d) + " is outside 0..hierarchy.max_depth (" +
+                                     std::to_string(config.hierarchy.max_depth) + ")");
+    if (std::find(ros.publish_levels.begin(), ros.publish_levels.begin() + i, d) != ros.publish_levels.begin() + i)
+      fail("ros.publish_levels", "level " + std::to_string(d) + " is listed twice");
+  }
+  if (config.mode == hpds::Mode::Map && ros.fixed_frame.empty())
+    fail("ros.fixed_frame", "must be set in map mode (the frame the map is built in)");
+}
+
+void applyNodeConfigYaml(const std::string &yaml_text, NodeConfig &config, const std::string &source,
+                         const std::vector<std::string> &ignored_keys) {
+  const std::string suffix = source.empty() ? "" : " (in " + source + ")";
+  YAML::Node root;
+  try {
+    root = YAML::Load(yaml_text);
+  } catch (const YAML::Exception &) {
+    // Let the shared loader word the syntax error exactly as the CLI does.
+    hpds::HpdsConfig scratch = config.hpds;
+    hpds::applyConfigYaml(yaml_text, scratch, source);
+    throw std::invalid_argument("(document): YAML syntax error" + suffix);
+  }
+  NodeConfig result = config;
+  if (!root.IsMap()) {
+    hpds::applyConfigYaml(yaml_text, result.hpds, source);  // empty document: defaults; anything else: its error
+  } else {
+    YAML::Node rest(YAML::NodeType::Map);
+    try {
+      for (const auto &entry : root) {
+        const std::string name = entry.first.IsScalar() ? entry.first.Scalar() : std::string();
+        if (name == "ros") {
+          applyRosSection(entry.second, result.ros);
+        } else if (std::find(ignored_keys.begin(), ignored_keys.end(), name) == ignored_keys.end()) {
+          rest[entry.first] = entry.second;
+        }
+      }
+    } catch (const std::invalid_argument &e) {
+      throw std::invalid_argument(e.what() + suffix);
+    }
+    YAML::Emitter out;
+    emit(out, rest);
+    hpds::applyConfigYaml(rest.size() ? std::string(out.c_str()) : std::string(), result.hpds, source);
+  }
+  try {
+    validateRosConfig(result.ros, result.hpds);
+  } catch (const std::invalid_argument &e) {
+    throw std::invalid_argument(e.what() + suffix);
+  }
+  config = std::move(result);
+}
+
+NodeConfig loadNodeConfigFile(const std::string &path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw std::invalid_argument("config file '" + path + "': cannot be opened");
+  const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  NodeConfig config;
+  applyNodeConfigYaml(text, config, path);
+  return config;
+}
+
+std::string dumpRosConfigYaml(const RosConfig &ros) {
+  std::ostringstream s;
+  s << "ros:\n";
+  s << "  fixed_frame: " << quoted(ros.fixed_frame) << "\n";
+  s << "  output_frame: " << quoted(ros.output_frame) << "\n";
+  s << "  tf_timeout: " << formatDouble(ros.tf_timeout) << "\n";
+  s << "  local_map_radius: " << formatDouble(ros.local_map_radius) << "\n";
+  s << "  local_map_rate: " << formatDouble(ros.local_map_rate) << "\n";
+  s << "  publish_levels: [";
+  for (std::size_t i = 0; i < ros.publish_levels.size(); ++i) s << (i ? ", " : "") << ros.publish_levels[i];
+  s << "]\n";
+  s << "  queue_size: " << ros.queue_size << "\n";
+  return s.str();
+}
+
+}  // namespace hpds_node
