@@ -1,0 +1,131 @@
+#include "RosTestUtil.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <filesystem>
+#include <unordered_map>
+
+#include "hpds/io/PointCloudFile.hpp"
+#include "hpds_node/CloudConversion.hpp"
+
+namespace hpds_test {
+
+std::string sharedDataDir() {
+  std::string dir;
+  ros::NodeHandle("~").param<std::string>("data_dir", dir, "");
+  std::error_code ec;
+  if (dir.empty() || !std::filesystem::exists(std::filesystem::path(dir) / "hdl32_a.pcd", ec)) return "";
+  return dir;
+}
+
+sensor_msgs::PointCloud2Ptr loadFrame(const std::string &path, const std::string &frame_id, const ros::Time &stamp) {
+  const hpds::PointBuffer cloud = hpds::readPointCloud(path);
+  auto msg = boost::make_shared<sensor_msgs::PointCloud2>();
+  std_msgs::Header header;
+  header.frame_id = frame_id;
+  header.stamp = stamp;
+  hpds_node::toRosCloud(cloud, header, *msg);
+  return msg;
+}
+
+bool waitFor(const std::function<bool()> &pred, double timeout_s) {
+  const ros::WallTime deadline = ros::WallTime::now() + ros::WallDuration(timeout_s);
+  while (!pred()) {
+    if (ros::WallTime::now() > deadline || !ros::ok()) return pred();
+    ros::WallDuration(0.01).sleep();
+  }
+  return true;
+}
+
+hpds::PointBuffer toBuffer(const sensor_msgs::PointCloud2 &msg) {
+  hpds::PointBuffer buf;
+  std::string why;
+  const hpds_node::CloudError e = hpds_node::fromRosCloud(msg, buf, &why);
+  if (e != hpds_node::CloudError::None) ADD_FAILURE() << "output cloud does not convert: " << why;
+  return buf;
+}
+
+std::vector<Eigen::Vector3d> positions(const hpds::PointBuffer &cloud) {
+  std::vector<Eigen::Vector3d> out;
+  const hpds::PointField *fx = cloud.layout().find("x"), *fy = cloud.layout().find("y"),
+                         *fz = cloud.layout().find("z");
+  if (!fx || !fy || !fz) return out;
+  out.reserve(cloud.size());
+  for (std::size_t i = 0; i < cloud.size(); ++i) {
+    const std::uint8_t *r = cloud.record(i);
+    out.emplace_back(hpds::readAsDouble(r, *fx), hpds::readAsDouble(r, *fy), hpds::readAsDouble(r, *fz));
+  }
+  return out;
+}
+
+double minDistanceBelow(const std::vector<Eigen::Vector3d> &points, double limit) {
+  struct Key {
+    std::int64_t x, y, z;
+    bool operator==(const Key &o) const { return x == o.x && y == o.y && z == o.z; }
+  };
+  struct Hash {
+    std::size_t operator()(const Key &k) const {
+      return std::size_t(k.x * 73856093) ^ std::size_t(k.y * 19349663) ^ std::size_t(k.z * 83492791);
+    }
+  };
+  std::unordered_map<Key, std::vector<std::size_t>, Hash> grid;
+  auto keyOf = [&](const Eigen::Vector3d &p) {
+    return Key{std::int64_t(std::floor(p.x() / limit)), std::int64_t(std::floor(p.y() / limit)),
+               std::int64_t(std::floor(p.z() / limit))};
+  };
+  for (std::size_t i = 0; i < points.size(); ++i) grid[keyOf(points[i])].push_back(i);
+  double best = limit;
+  for (std::size_t i = 0; i < points.size(); ++i) {
+    const Key k = keyOf(points[i]);
+    for (int dx = -1; dx <= 1; ++dx)
+      for (int dy = -1; dy <= 1; ++dy)
+        for (int dz = -1; dz <= 1; ++dz) {
+          const auto it = grid.find(Key{k.x + dx, k.y + dy, k.z + dz});
+          if (it == grid.end()) continue;
+          for (std::size_t j : it->second)
+            if (j > i) best = std::min(best, (points[i] - points[j]).norm());
+        }
+  }
+  return best;
+}
+
+DiagnosticsReader::DiagnosticsReader(ros::NodeHandle &nh, const std::string &node_name) : node_name_(node_name) {
+  sub_ = nh.subscribe<diagnostic_msgs::DiagnosticArray>(
+      "/diagnostics", 100, [this](const diagnostic_msgs::DiagnosticArray::ConstPtr &m) {
+        for (const auto &status : m->status) {
+          if (status.name.find(node_name_) == std::string::npos) continue;
+          std::lock_guard<std::mutex> lock(mutex_);
+          for (const auto &kv : status.values) values_[kv.key] = kv.value;
+          ++updates_;
+        }
+      });
+}
+
+double DiagnosticsReader::value(const std::string &key) const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  const auto it = values_.find(key);
+  return it == values_.end() ? -1.0 : std::stod(it->second);
+}
+
+std::size_t DiagnosticsReader::updates() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return updates_;
+}
+
+void expectOutputLayout(const sensor_msgs::PointCloud2 &out, const sensor_msgs::PointCloud2 &input, bool normals) {
+  std::vector<std::pair<std::string, int>> expected = {{"x", 7}, {"y", 7}, {"z", 7}, {"level", 2}};
+  if (normals)
+    for (const char *n : {"normal_x", "normal_y", "normal_z", "curvature"}) expected.emplace_back(n, 7);
+  for (const auto &f : input.fields)
+    if (f.name != "x" && f.name != "y" && f.name != "z") expected.emplace_back(f.name, f.datatype);
+  ASSERT_EQ(out.fields.size(), expected.size());
+  for (std::size_t i = 0; i < expected.size(); ++i) {
+    EXPECT_EQ(out.fields[i].name, expected[i].first) << "field " << i;
+    EXPECT_EQ(int(out.fields[i].datatype), expected[i].second) << "field " << out.fields[i].name;
+    EXPECT_EQ(out.fields[i].count, 1u) << "field " << out.fields[i].name;
+  }
+  EXPECT_FALSE(out.is_bigendian);
+}
+
+}  // namespace hpds_test

@@ -1,0 +1,91 @@
+// Helpers of the rostest test nodes: real frames as PointCloud2, collecting messages, checks on output clouds,
+// reading the node's diagnostics.
+#pragma once
+
+#include <diagnostic_msgs/DiagnosticArray.h>
+#include <ros/ros.h>
+#include <sensor_msgs/PointCloud2.h>
+
+#include <Eigen/Core>
+#include <condition_variable>
+#include <functional>
+#include <map>
+#include <mutex>
+#include <string>
+#include <vector>
+
+#include "hpds/PointBuffer.hpp"
+
+namespace hpds_test {
+
+/// The shared lidar folder from the test node's ~data_dir parameter, or empty when it is absent.
+std::string sharedDataDir();
+
+/// A real frame from the shared data as a PointCloud2 (every field of the file kept).
+sensor_msgs::PointCloud2Ptr loadFrame(const std::string &path, const std::string &frame_id, const ros::Time &stamp);
+
+/// Spins (the caller runs an AsyncSpinner) until pred() or the wall-clock timeout; returns pred().
+bool waitFor(const std::function<bool()> &pred, double timeout_s);
+
+/// Subscribes and keeps every message of one topic.
+template <typename Msg>
+class Collector {
+ public:
+  Collector(ros::NodeHandle &nh, const std::string &topic) {
+    sub_ = nh.subscribe<Msg>(topic, 100, [this](const typename Msg::ConstPtr &m) {
+      std::lock_guard<std::mutex> lock(mutex_);
+      messages_.push_back(m);
+    });
+  }
+  std::size_t size() const {
+    std::lock_guard<std::mutex> lock(mutex_);
+    return messages_.size();
+  }
+  std::vector<typename Msg::ConstPtr> messages() const {
+    std::lock_guard<std::mutex> lock(mutex_);
+    return messages_;
+  }
+  bool connected() const { return sub_.getNumPublishers() > 0; }
+  void clear() {
+    std::lock_guard<std::mutex> lock(mutex_);
+    messages_.clear();
+  }
+
+ private:
+  ros::Subscriber sub_;
+  mutable std::mutex mutex_;
+  std::vector<typename Msg::ConstPtr> messages_;
+};
+
+/// Output cloud as a PointBuffer; fails the current test (ADD_FAILURE) and returns an empty buffer when the
+/// message does not convert.
+hpds::PointBuffer toBuffer(const sensor_msgs::PointCloud2 &msg);
+
+/// x/y/z of every point, as double.
+std::vector<Eigen::Vector3d> positions(const hpds::PointBuffer &cloud);
+
+/// Smallest distance between two of `points` that is below `limit` (searched with a grid of edge `limit`), or
+/// `limit` when no pair is that close.
+double minDistanceBelow(const std::vector<Eigen::Vector3d> &points, double limit);
+
+/// Latest key/value pairs of the diagnostics status whose name contains `node_name`.
+class DiagnosticsReader {
+ public:
+  DiagnosticsReader(ros::NodeHandle &nh, const std::string &node_name);
+  /// Value of `key` as a number, or -1 when not reported yet.
+  double value(const std::string &key) const;
+  std::size_t updates() const;
+
+ private:
+  std::string node_name_;
+  ros::Subscriber sub_;
+  mutable std::mutex mutex_;
+  std::map<std::string, std::string> values_;
+  std::size_t updates_ = 0;
+};
+
+/// Checks the layout of an hpds output cloud: x y z float32, level uint8, normals when `normals`, then every field
+/// of `input` except x/y/z with the same name, datatype and count.
+void expectOutputLayout(const sensor_msgs::PointCloud2 &out, const sensor_msgs::PointCloud2 &input, bool normals);
+
+}  // namespace hpds_test
