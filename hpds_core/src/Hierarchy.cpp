@@ -19,7 +19,7 @@ Hierarchy::Hierarchy(double cell_size, int max_depth) : cell_size_(cell_size), m
     radius_[d] = 0.5 * std::sqrt(3.0) * edge_[d];
   }
   grids_.resize(static_cast<std::size_t>(max_depth) + 1);
-  buckets_.resize(static_cast<std::size_t>(max_depth) + 2);
+  pending_.resize(static_cast<std::size_t>(max_depth) + 1);
 }
 
 void Hierarchy::setRecordLayout(const PointLayout &layout) {
@@ -43,32 +43,34 @@ SampleId Hierarchy::sampleInCell(int level, const double xyz[3]) const {
   return grids_[level].find(k);
 }
 
-double Hierarchy::conflictAt(int level, const double q[3], double radius, bool skip_own) const {
+double Hierarchy::conflictAt(int level, const double q[3], const CellKey &k, double radius, bool skip_own) const {
   const LevelGrid &grid = grids_[level];
   if (grid.size() == 0) return -1.0;
-  const double e = edge_[level], ie = inv_edge_[level];
-  const CellKey k{exactCellCoord(q[0], e, ie), exactCellCoord(q[1], e, ie), exactCellCoord(q[2], e, ie)};
+  const double e = edge_[level];
   const double r2 = radius * radius;
   // radius <= sqrt(3)/2 * edge of this level or of a coarser one, so the ball never reaches past the 26 neighbours.
-  double lo[3], hi[3];
-  const std::int32_t kc[3] = {k.x, k.y, k.z};
-  for (int a = 0; a < 3; ++a) {
-    lo[a] = offsetInCell(q[a], kc[a], e);
-    hi[a] = e - lo[a];
-  }
-  // A cell is skipped only when even the rounding-widened ball misses it.
+  // A neighbour side is visited only when even the rounding-widened ball reaches it.
   const double reach = radius + pruneSlack(q, e);
   const double prune = reach * reach;
-  const double g[3][3] = {{lo[0], 0.0, hi[0]}, {lo[1], 0.0, hi[1]}, {lo[2], 0.0, hi[2]}};
-  for (int dx = -1; dx <= 1; ++dx) {
-    const double gx2 = g[0][dx + 1] * g[0][dx + 1];
-    if (gx2 > prune) continue;
-    for (int dy = -1; dy <= 1; ++dy) {
-      const double gxy2 = gx2 + g[1][dy + 1] * g[1][dy + 1];
+  double g[3][3];
+  int lo[3], hi[3];
+  const std::int32_t kc[3] = {k.x, k.y, k.z};
+  for (int a = 0; a < 3; ++a) {
+    const double below = offsetInCell(q[a], kc[a], e), above = e - below;
+    g[a][0] = below * below;
+    g[a][1] = 0.0;
+    g[a][2] = above * above;
+    lo[a] = g[a][0] <= prune ? -1 : 0;
+    hi[a] = g[a][2] <= prune ? 1 : 0;
+  }
+  for (int dx = lo[0]; dx <= hi[0]; ++dx) {
+    const double gx2 = g[0][dx + 1];
+    for (int dy = lo[1]; dy <= hi[1]; ++dy) {
+      const double gxy2 = gx2 + g[1][dy + 1];
       if (gxy2 > prune) continue;
-      for (int dz = -1; dz <= 1; ++dz) {
-        if (gxy2 + g[2][dz + 1] * g[2][dz + 1] > prune) continue;
-        if (skip_own && dx == 0 && dy == 0 && dz == 0) continue;
+      for (int dz = lo[2]; dz <= hi[2]; ++dz) {
+        if (gxy2 + g[2][dz + 1] > prune) continue;
+        if (skip_own && (dx | dy | dz) == 0) continue;
         const SampleId s = grid.find(CellKey{k.x + dx, k.y + dy, k.z + dz});
         if (s == kNoSample) continue;
         const double *p = position(s);
@@ -126,76 +128,80 @@ InsertResult Hierarchy::insert(const InsertBatch &batch) {
       break;
     }
 
-  // Buckets hold ranks into batch.order, so sorting a bucket restores the caller's order.
-  for (auto &b : buckets_) b.clear();
-  auto &first = buckets_[0];
-  first.reserve(batch.order_size);
-  const double lim = inv_edge_[max_depth_];
-  for (std::uint32_t rank = 0; rank < batch.order_size; ++rank) {
+  // The finest-level cell of every point, computed exactly once; coarser cells are shifts of it. One range check
+  // at the finest level covers every coarser level.
+  const std::size_t n = batch.order_size;
+  const std::size_t words = (n + 63) / 64;
+  for (auto &p : pending_) p.assign(words, 0);
+  finest_keys_.resize(n);
+  const double ef = edge_[max_depth_], ief = inv_edge_[max_depth_];
+  for (std::uint32_t rank = 0; rank < n; ++rank) {
     const double *q = batch.xyz + 3 * std::size_t(batch.order[rank]);
-    // One range check at the finest level covers every coarser level.
-    if (inCellRange(q[0], lim) && inCellRange(q[1], lim) && inCellRange(q[2], lim))
-      first.push_back(rank);
-    else
+    if (inCellRange(q[0], ief) && inCellRange(q[1], ief) && inCellRange(q[2], ief)) {
+      finest_keys_[rank] = CellKey{exactCellCoord(q[0], ef, ief), exactCellCoord(q[1], ef, ief), exactCellCoord(q[2], ef, ief)};
+      pending_[0][rank >> 6] |= std::uint64_t(1) << (rank & 63);
+    } else {
       ++result.out_of_range;
+    }
   }
 
-  std::vector<bool> jumped_into(buckets_.size(), false);
   for (int d = 0; d <= max_depth_; ++d) {
-    auto &bucket = buckets_[d];
-    if (bucket.empty()) continue;
-    if (jumped_into[d]) std::sort(bucket.begin(), bucket.end());
-    const double e = edge_[d], ie = inv_edge_[d], rd = radius_[d];
-    for (const std::uint32_t rank : bucket) {
-      const std::uint32_t pi = batch.order[rank];
-      const double *q = batch.xyz + 3 * std::size_t(pi);
-      const CellKey key{exactCellCoord(q[0], e, ie), exactCellCoord(q[1], e, ie), exactCellCoord(q[2], e, ie)};
-      int next = d + 1;
-      bool ok = true;
-      const SampleId occupant = grids_[d].find(key);
-      if (occupant != kNoSample) {
-        const double *p = position(occupant);
-        const double ddx = p[0] - q[0], ddy = p[1] - q[1], ddz = p[2] - q[2];
-        ok = false;
-        next = nextLevelAfterConflict(d, ddx * ddx + ddy * ddy + ddz * ddz);
-      }
-      for (int l = d; ok && l >= 0; --l) {
-        const double d2 = conflictAt(l, q, rd, /*skip_own=*/l == d);
-        if (d2 >= 0.0) {
+    const double rd = radius_[d];
+    const std::vector<std::uint64_t> &todo = pending_[d];
+    for (std::size_t w = 0; w < words; ++w) {
+      for (std::uint64_t bits = todo[w]; bits != 0; bits &= bits - 1) {
+        const std::uint32_t rank = static_cast<std::uint32_t>(w * 64 + static_cast<std::size_t>(__builtin_ctzll(bits)));
+        const std::uint32_t pi = batch.order[rank];
+        const double *q = batch.xyz + 3 * std::size_t(pi);
+        const CellKey &finest = finest_keys_[rank];
+        const CellKey key = coarsen(finest, d);
+        int next = d + 1;
+        bool ok = true;
+        const SampleId occupant = grids_[d].find(key);
+        if (occupant != kNoSample) {
+          const double *p = position(occupant);
+          const double ddx = p[0] - q[0], ddy = p[1] - q[1], ddz = p[2] - q[2];
           ok = false;
-          next = nextLevelAfterConflict(d, d2);
+          next = nextLevelAfterConflict(d, ddx * ddx + ddy * ddy + ddz * ddz);
         }
-      }
-      if (ok) {
-        // Samples of finer levels (earlier batches) keep their own, smaller radius. A conflict at level l rules
-        // out every level <= l, so the point continues at l + 1 (or later, as above).
-        for (int l = finest_populated; l > d; --l) {
-          const double d2 = conflictAt(l, q, radius_[l], false);
+        for (int l = d; ok && l >= 0; --l) {
+          const double d2 = conflictAt(l, q, l == d ? key : coarsen(finest, l), rd, /*skip_own=*/l == d);
           if (d2 >= 0.0) {
             ok = false;
-            next = std::max(l + 1, nextLevelAfterConflict(d, d2));
-            break;
+            next = nextLevelAfterConflict(d, d2);
           }
         }
-      }
-      if (ok) {
-        const SampleId id = allocate();
-        std::memcpy(&xyz_[3 * std::size_t(id)], q, 3 * sizeof(double));
-        level_[id] = static_cast<std::uint8_t>(d);
-        frame_[id] = batch.frame_index;
-        for (int a = 0; a < 3; ++a) to_view_[3 * std::size_t(id) + a] = static_cast<float>(batch.viewpoint[a] - q[a]);
-        if (batch.records && record_layout_.point_step)
-          std::memcpy(&records_[std::size_t(id) * record_layout_.point_step], batch.records + pi * batch.record_step,
-                      record_layout_.point_step);
-        grids_[d].insert(key, id);
-        ++live_;
-        ++result.accepted_per_level[d];
-        result.accepted.push_back(id);
-      } else if (next > max_depth_) {
-        ++result.dropped_depth;
-      } else {
-        if (next != d + 1) jumped_into[next] = true;
-        buckets_[next].push_back(rank);
+        if (ok) {
+          // Samples of finer levels (earlier batches) keep their own, smaller radius. A conflict at level l rules
+          // out every level <= l, so the point continues at l + 1 (or later, as above).
+          for (int l = finest_populated; l > d; --l) {
+            const double d2 = conflictAt(l, q, coarsen(finest, l), radius_[l], false);
+            if (d2 >= 0.0) {
+              ok = false;
+              next = std::max(l + 1, nextLevelAfterConflict(d, d2));
+              break;
+            }
+          }
+        }
+        if (ok) {
+          const SampleId id = allocate();
+          std::memcpy(&xyz_[3 * std::size_t(id)], q, 3 * sizeof(double));
+          level_[id] = static_cast<std::uint8_t>(d);
+          frame_[id] = batch.frame_index;
+          for (int a = 0; a < 3; ++a)
+            to_view_[3 * std::size_t(id) + a] = static_cast<float>(batch.viewpoint[a] - q[a]);
+          if (batch.records && record_layout_.point_step)
+            std::memcpy(&records_[std::size_t(id) * record_layout_.point_step], batch.records + pi * batch.record_step,
+                        record_layout_.point_step);
+          grids_[d].insert(key, id);
+          ++live_;
+          ++result.accepted_per_level[d];
+          result.accepted.push_back(id);
+        } else if (next > max_depth_) {
+          ++result.dropped_depth;
+        } else {
+          pending_[next][rank >> 6] |= std::uint64_t(1) << (rank & 63);
+        }
       }
     }
   }
@@ -288,7 +294,8 @@ std::size_t Hierarchy::memUsage() const {
   for (const auto &g : grids_) bytes += g.memUsage();
   bytes += xyz_.capacity() * sizeof(double) + level_.capacity() + frame_.capacity() * sizeof(std::uint32_t) +
            to_view_.capacity() * sizeof(float) + records_.capacity() + free_ids_.capacity() * sizeof(SampleId);
-  for (const auto &b : buckets_) bytes += b.capacity() * sizeof(std::uint32_t);
+  bytes += finest_keys_.capacity() * sizeof(CellKey);
+  for (const auto &p : pending_) bytes += p.capacity() * sizeof(std::uint64_t);
   return bytes;
 }
 

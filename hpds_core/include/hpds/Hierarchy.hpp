@@ -120,8 +120,13 @@ class Hierarchy {
  private:
   bool keyAt(int level, const double q[3], CellKey &key) const;
   /// Squared distance to some sample of `level` strictly within `radius` of q (skipping q's own cell when
-  /// skip_own), or a negative value when there is none.
-  double conflictAt(int level, const double q[3], double radius, bool skip_own) const;
+  /// skip_own), or a negative value when there is none. `key` is q's cell at `level`.
+  double conflictAt(int level, const double q[3], const CellKey &key, double radius, bool skip_own) const;
+  /// q's cell at `level` from its finest-level cell: nested power-of-two cells make this an exact shift.
+  [[nodiscard]] CellKey coarsen(const CellKey &finest, int level) const {
+    const int shift = max_depth_ - level;
+    return CellKey{finest.x >> shift, finest.y >> shift, finest.z >> shift};
+  }
   /// First level after `level` whose radius no longer rules out a point at squared distance d2 from a sample
   /// of levels <= level: every level in between would reject the point for that same sample.
   int nextLevelAfterConflict(int level, double d2) const;
@@ -146,8 +151,10 @@ class Hierarchy {
   std::vector<SampleId> free_ids_;
   std::size_t live_ = 0;
 
-  // Per-insert scratch, kept to avoid reallocating per frame.
-  std::vector<std::vector<std::uint32_t>> buckets_;
+  // Per-insert scratch, kept to avoid reallocating per frame: the finest-level cell of each ranked point and, per
+  // level, a bitset of the ranks still to try there (scanning it yields rank order without sorting).
+  std::vector<CellKey> finest_keys_;
+  std::vector<std::vector<std::uint64_t>> pending_;
 };
 
 template <typename Fn>
