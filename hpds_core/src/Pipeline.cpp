@@ -130,6 +130,14 @@ FrameResult Pipeline::addFrame(const Frame &frame) {
   return result;
 }
 
+void Pipeline::replaceMap(Hierarchy &&map, std::uint32_t next_frame) {
+  if (config_.mode != Mode::Map) throw std::invalid_argument("mode: replacing the map needs map mode");
+  if (map.cellSize() != config_.hierarchy.cell_size || map.maxDepth() != config_.hierarchy.max_depth)
+    throw std::invalid_argument("hierarchy: the map's cell_size/max_depth differ from the configuration's");
+  hierarchy_ = std::move(map);
+  frames_ = next_frame;
+}
+
 std::vector<SampleId> Pipeline::outputSamples() const { return hierarchy_.samplesUpTo(output_level_); }
 
 std::vector<SampleId> Pipeline::atOutputLevels(const std::vector<SampleId> &ids) const {

@@ -7,6 +7,7 @@
 #include "CliOptions.hpp"
 #include "Commands.hpp"
 #include "RunReport.hpp"
+#include "hpds/HierarchyFile.hpp"
 #include "hpds/Pipeline.hpp"
 #include "hpds/io/PlyWriter.hpp"
 #include "hpds/io/PointCloudFile.hpp"
@@ -21,6 +22,8 @@ struct SampleArgs {
   std::string output;
   std::string poses;
   std::string stats;
+  std::string load_map;
+  std::string save_map;
   SamplingOptions sampling;
 };
 
@@ -57,7 +60,10 @@ int runSample(const SampleArgs &a) {
                                   std::to_string(a.inputs.size()) + " inputs (one pose per input is required)");
   }
 
+  if ((!a.load_map.empty() || !a.save_map.empty()) && config.mode != Mode::Map)
+    throw std::invalid_argument("--load-map/--save-map need --mode map (scan mode keeps no map)");
   Pipeline pipeline(config);
+  if (!a.load_map.empty()) loadMap(a.load_map, pipeline);
   RunReport report;
   report.command = "sample";
   report.mode = config.mode;
@@ -109,6 +115,7 @@ int runSample(const SampleArgs &a) {
 
   auto t0 = std::chrono::steady_clock::now();
   writePly(a.output, output);
+  if (!a.save_map.empty()) saveMap(a.save_map, pipeline);
   report.seconds.write = since(t0);
 
   std::cout << levelSummary(report);
@@ -133,6 +140,8 @@ void addSampleCommand(CLI::App &app) {
   cmd->add_option("-o,--output", args->output, "output PLY (binary little-endian)")->required();
   cmd->add_option("--poses", args->poses, "KITTI pose file: one 3x4 sensor-to-world matrix per line, one per input");
   cmd->add_option("--stats", args->stats, "write run statistics as JSON");
+  cmd->add_option("--load-map", args->load_map, "map mode: start from a map saved by --save-map (same cell size and depth)");
+  cmd->add_option("--save-map", args->save_map, "map mode: save the final map (written atomically) for a later --load-map");
   addSamplingOptions(*cmd, args->sampling);
   cmd->callback([args] {
     const int rc = runSample(*args);

@@ -70,6 +70,11 @@ class Pipeline {
   [[nodiscard]] const FrameCounters &totals() const { return totals_; }
   [[nodiscard]] std::uint32_t framesProcessed() const { return frames_; }
 
+  /// Map mode: replaces the map with `map` (e.g. read by loadMap in HierarchyFile.hpp) and numbers the next frame
+  /// `next_frame`, as if the frames that built `map` had gone through this pipeline. Throws std::invalid_argument,
+  /// leaving the pipeline unchanged, outside map mode or when the map's cell_size/max_depth differ from the config.
+  void replaceMap(Hierarchy &&map, std::uint32_t next_frame);
+
  private:
   HpdsConfig config_;
   int output_level_;

@@ -1,0 +1,409 @@
+// Map persistence: save/load round trips bit for bit, a loaded map continues exactly like an uninterrupted run,
+// and every damaged, forged or mismatched file is refused with a message naming it, never half-loaded.
+#include <gtest/gtest.h>
+
+#include <sys/stat.h>
+
+#include <cstring>
+#include <fstream>
+#include <map>
+#include <set>
+#include <tuple>
+
+#include "TestData.hpp"
+#include "hpds/HierarchyFile.hpp"
+#include "hpds/Pipeline.hpp"
+#include "hpds/SyntheticLidar.hpp"
+#include "hpds/io/PointCloudFile.hpp"
+#include "hpds/io/PoseFile.hpp"
+
+namespace hpds {
+namespace {
+
+namespace fs = std::filesystem;
+
+std::vector<std::uint8_t> readBytes(const fs::path &p) {
+  std::ifstream f(p, std::ios::binary);
+  return std::vector<std::uint8_t>(std::istreambuf_iterator<char>(f), {});
+}
+
+void writeBytes(const fs::path &p, const std::vector<std::uint8_t> &b) {
+  std::ofstream f(p, std::ios::binary | std::ios::trunc);
+  f.write(reinterpret_cast<const char *>(b.data()), static_cast<std::streamsize>(b.size()));
+}
+
+std::uint32_t u32At(const std::vector<std::uint8_t> &b, std::size_t at) {
+  std::uint32_t v;
+  std::memcpy(&v, b.data() + at, 4);
+  return v;
+}
+
+// Recomputes both checksums so that a deliberately forged file passes the integrity check and reaches the
+// semantic checks behind it.
+void refreshCrcs(std::vector<std::uint8_t> &b) {
+  const std::uint32_t header_size = u32At(b, 12);
+  const std::uint32_t h = crc32(b.data(), header_size - 4);
+  std::memcpy(b.data() + header_size - 4, &h, 4);
+  const std::uint32_t body = crc32(b.data() + header_size, b.size() - header_size - 4);
+  std::memcpy(b.data() + b.size() - 4, &body, 4);
+}
+
+SyntheticLidarConfig drive(int frames) {
+  SyntheticLidarConfig c;
+  c.beams = 16;
+  c.azimuth_steps = 600;
+  c.frames = frames;
+  c.speed = 3.0;
+  return c;
+}
+
+HpdsConfig mapConfig() {
+  HpdsConfig c;
+  c.mode = Mode::Map;
+  c.hierarchy.max_depth = 6;
+  c.map.evict_distance = 25.0;  // leaves free slots behind, which the file must compact
+  c.order.seed = 7;
+  return c;
+}
+
+using SampleKey = std::tuple<double, double, double, int, std::uint32_t>;
+
+std::set<SampleKey> sampleSet(const Hierarchy &h) {
+  std::set<SampleKey> s;
+  for (SampleId id = 0; id < h.idBound(); ++id)
+    if (h.isLive(id)) s.emplace(h.position(id)[0], h.position(id)[1], h.position(id)[2], h.level(id), h.frameIndex(id));
+  return s;
+}
+
+void expectIdentical(const Hierarchy &a, const Hierarchy &b) {
+  ASSERT_EQ(a.sampleCount(), b.sampleCount());
+  ASSERT_EQ(a.recordLayout(), b.recordLayout());
+  ASSERT_EQ(a.cellSize(), b.cellSize());
+  ASSERT_EQ(a.maxDepth(), b.maxDepth());
+  const std::size_t step = a.recordLayout().point_step;
+  SampleId j = 0;  // saved in increasing id order, loaded densely in that order
+  for (SampleId i = 0; i < a.idBound(); ++i) {
+    if (!a.isLive(i)) continue;
+    ASSERT_TRUE(b.isLive(j));
+    ASSERT_EQ(std::memcmp(a.position(i), b.position(j), 24), 0) << i;
+    ASSERT_EQ(a.level(i), b.level(j));
+    ASSERT_EQ(a.frameIndex(i), b.frameIndex(j));
+    ASSERT_EQ(std::memcmp(a.toViewpoint(i), b.toViewpoint(j), 12), 0);
+    if (step) {
+      ASSERT_EQ(std::memcmp(a.record(i), b.record(j), step), 0);
+    }
+    ASSERT_EQ(b.sampleInCell(b.level(j), b.position(j)), j);  // the grids know it
+    ++j;
+  }
+  EXPECT_EQ(b.idBound(), j);
+  for (int l = 0; l <= a.maxDepth(); ++l) EXPECT_EQ(a.countAtLevel(l), b.countAtLevel(l));
+}
+
+class MapFile : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    lidar_ = new SyntheticLidar(drive(12));
+    pipeline_ = new Pipeline(mapConfig());
+    for (int i = 0; i < 8; ++i) pipeline_->addFrame(lidar_->frame(i).frame);
+    // An empty frame 15 m further on evicts without inserting, so free slots remain that the file must compact.
+    Frame ahead = lidar_->frame(7).frame;
+    ahead.points = PointBuffer(ahead.points.layout(), 0);
+    ahead.sensor_to_fixed.translation().x() += 15.0;
+    pipeline_->addFrame(ahead);
+  }
+  static void TearDownTestSuite() {
+    delete pipeline_;
+    delete lidar_;
+  }
+  fs::path savedMap(const fs::path &dir) {
+    const fs::path p = dir / "map.hpdsmap";
+    saveMap(p.string(), *pipeline_);
+    return p;
+  }
+  static SyntheticLidar *lidar_;
+  static Pipeline *pipeline_;
+};
+SyntheticLidar *MapFile::lidar_ = nullptr;
+Pipeline *MapFile::pipeline_ = nullptr;
+
+TEST_F(MapFile, RoundTripKeepsEverySampleBitForBit) {
+  const auto dir = test::scratchDir("map_roundtrip");
+  ASSERT_GT(pipeline_->totals().evicted, 0u);
+  ASSERT_LT(pipeline_->hierarchy().sampleCount(), pipeline_->hierarchy().idBound());  // there are holes
+  const fs::path p = savedMap(dir);
+  const LoadedHierarchy loaded = loadHierarchy(p.string());
+  EXPECT_EQ(loaded.next_frame, 9u);
+  expectIdentical(pipeline_->hierarchy(), loaded.hierarchy);
+  // Exact size: nothing but the header, the entries and the checksum.
+  const auto &l = pipeline_->hierarchy().recordLayout();
+  EXPECT_EQ(fs::file_size(p), u32At(readBytes(p), 12) + pipeline_->hierarchy().sampleCount() * (41 + l.point_step) + 4);
+  // Saving what was loaded reproduces the file byte for byte.
+  saveHierarchy((dir / "again.hpdsmap").string(), loaded.hierarchy, loaded.next_frame);
+  EXPECT_EQ(readBytes(p), readBytes(dir / "again.hpdsmap"));
+  // No temporaries are left beside the file.
+  std::size_t entries = 0;
+  for (const auto &e : fs::directory_iterator(dir)) entries += e.path().string().find(".tmp.") == std::string::npos;
+  EXPECT_EQ(entries, std::size_t(std::distance(fs::directory_iterator(dir), fs::directory_iterator())));
+}
+
+TEST_F(MapFile, EmptyAndRecordlessHierarchiesRoundTrip) {
+  const auto dir = test::scratchDir("map_empty");
+  Hierarchy empty(2.0, 3);
+  saveHierarchy((dir / "e.hpdsmap").string(), empty, 5);
+  const LoadedHierarchy a = loadHierarchy((dir / "e.hpdsmap").string());
+  EXPECT_EQ(a.hierarchy.sampleCount(), 0u);
+  EXPECT_EQ(a.next_frame, 5u);
+  EXPECT_EQ(a.hierarchy.cellSize(), 2.0);
+  Hierarchy bare(1.0, 4);  // no record layout: samples without records
+  const double p[3] = {0.5, 0.25, -3.0};
+  const float v[3] = {1, 2, 3};
+  bare.restoreSample(p, 2, 9, v, nullptr);
+  saveHierarchy((dir / "b.hpdsmap").string(), bare);
+  expectIdentical(bare, loadHierarchy((dir / "b.hpdsmap").string()).hierarchy);
+}
+
+TEST_F(MapFile, LoadedMapContinuesExactlyLikeAnUninterruptedRun) {
+  const auto dir = test::scratchDir("map_continue");
+  Pipeline whole(mapConfig());
+  for (int i = 0; i < 12; ++i) whole.addFrame(lidar_->frame(i).frame);
+
+  Pipeline first(mapConfig());
+  for (int i = 0; i < 5; ++i) first.addFrame(lidar_->frame(i).frame);
+  saveMap((dir / "m.hpdsmap").string(), first);
+  Pipeline second(mapConfig());
+  loadMap((dir / "m.hpdsmap").string(), second);
+  EXPECT_EQ(second.framesProcessed(), 5u);
+  for (int i = 5; i < 12; ++i) second.addFrame(lidar_->frame(i).frame);
+  EXPECT_EQ(sampleSet(whole.hierarchy()), sampleSet(second.hierarchy()));
+  EXPECT_GT(whole.hierarchy().sampleCount(), 1000u);
+}
+
+TEST_F(MapFile, MismatchedConfigAndScanModeAreRefusedAndLeaveThePipelineUnchanged) {
+  const auto dir = test::scratchDir("map_mismatch");
+  const fs::path p = savedMap(dir);
+  HpdsConfig other = mapConfig();
+  other.hierarchy.cell_size = 2.0;
+  Pipeline q(other);
+  q.addFrame(lidar_->frame(0).frame);
+  const std::size_t before = q.hierarchy().sampleCount();
+  try {
+    loadMap(p.string(), q);
+    FAIL() << "loaded a map with another cell size";
+  } catch (const std::runtime_error &e) {
+    EXPECT_NE(std::string(e.what()).find(p.string()), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("cell_size"), std::string::npos) << e.what();
+  }
+  EXPECT_EQ(q.hierarchy().sampleCount(), before);
+  EXPECT_EQ(q.framesProcessed(), 1u);
+  HpdsConfig deeper = mapConfig();
+  deeper.hierarchy.max_depth = 7;
+  Pipeline d(deeper);
+  EXPECT_THROW(loadMap(p.string(), d), std::runtime_error);
+  HpdsConfig scan = mapConfig();
+  scan.mode = Mode::Scan;
+  Pipeline s(scan);
+  EXPECT_THROW(loadMap(p.string(), s), std::invalid_argument);
+  EXPECT_THROW(s.replaceMap(Hierarchy(4.0, 6), 0), std::invalid_argument);
+  // A frame whose fields differ from the loaded map's is refused by the pipeline, as for a live map.
+  Pipeline m(mapConfig());
+  loadMap(p.string(), m);
+  Frame other_fields;
+  PointLayout xyz;
+  for (const char *n : {"x", "y", "z"}) xyz.append(n, FieldType::Float64);
+  other_fields.points = PointBuffer(xyz, 4);
+  EXPECT_THROW(m.addFrame(other_fields), std::invalid_argument);
+}
+
+void expectRefused(const fs::path &p, const std::string &what, const std::string &why) {
+  try {
+    (void)loadHierarchy(p.string());
+    ADD_FAILURE() << why << ": loaded";
+  } catch (const std::runtime_error &e) {
+    const std::string msg = e.what();
+    EXPECT_EQ(msg.rfind(p.string() + ": ", 0), 0u) << why << ": " << msg;
+    EXPECT_NE(msg.find(what), std::string::npos) << why << ": " << msg;
+  }
+}
+
+TEST_F(MapFile, EveryTruncationIsRefused) {
+  const auto dir = test::scratchDir("map_trunc");
+  const std::vector<std::uint8_t> good = readBytes(savedMap(dir));
+  const fs::path p = dir / "cut.hpdsmap";
+  const std::uint32_t header_size = u32At(good, 12);
+  std::vector<std::size_t> cuts;
+  for (std::size_t n = 0; n <= header_size + 8; ++n) cuts.push_back(n);
+  for (std::size_t n = header_size + 8; n < good.size(); n += good.size() / 50 + 1) cuts.push_back(n);
+  for (std::size_t n = good.size() - 8; n < good.size(); ++n) cuts.push_back(n);
+  for (std::size_t n : cuts) {
+    writeBytes(p, std::vector<std::uint8_t>(good.begin(), good.begin() + static_cast<std::ptrdiff_t>(n)));
+    const std::string what = n == 0 ? "empty" : n < 8 ? "truncated" : "";
+    expectRefused(p, what, "cut at " + std::to_string(n));
+  }
+  std::vector<std::uint8_t> longer = good;
+  longer.push_back(0);
+  writeBytes(p, longer);
+  expectRefused(p, "trailing", "one byte appended");
+}
+
+TEST_F(MapFile, EveryHeaderBitFlipAndBodyFlipsAreRefused) {
+  const auto dir = test::scratchDir("map_flip");
+  const std::vector<std::uint8_t> good = readBytes(savedMap(dir));
+  const fs::path p = dir / "flip.hpdsmap";
+  const std::uint32_t header_size = u32At(good, 12);
+  for (std::size_t byte = 0; byte < header_size; ++byte) {
+    std::vector<std::uint8_t> bad = good;
+    bad[byte] ^= static_cast<std::uint8_t>(1u << (byte % 8));
+    writeBytes(p, bad);
+    expectRefused(p, "", "header byte " + std::to_string(byte));
+  }
+  for (std::size_t byte = header_size; byte < good.size(); byte += good.size() / 40 + 1) {
+    std::vector<std::uint8_t> bad = good;
+    bad[byte] ^= 0x10;
+    writeBytes(p, bad);
+    expectRefused(p, "checksum", "body byte " + std::to_string(byte));
+  }
+}
+
+TEST_F(MapFile, ForgedFilesWithValidChecksumsAreRefusedByMeaning) {
+  const auto dir = test::scratchDir("map_forged");
+  const std::vector<std::uint8_t> good = readBytes(savedMap(dir));
+  const fs::path p = dir / "forged.hpdsmap";
+  const std::uint32_t header_size = u32At(good, 12);
+  const std::uint32_t step = u32At(good, 40);
+  const std::size_t entry = 41 + step;
+  auto forged = [&](auto &&edit, const std::string &what, const std::string &why) {
+    std::vector<std::uint8_t> b = good;
+    edit(b);
+    refreshCrcs(b);
+    writeBytes(p, b);
+    expectRefused(p, what, why);
+  };
+  forged([](auto &b) { b[8] = 2; }, "unsupported hpds map version 2", "version 2");
+  forged([](auto &b) { b[0] = 'X'; }, "bad magic", "magic");
+  forged([](auto &b) { b[24] = 22; }, "invalid hierarchy parameters", "max_depth 22");
+  forged([](auto &b) { std::memset(b.data() + 16, 0xFF, 8); }, "invalid hierarchy parameters", "NaN cell size");
+  forged([&](auto &b) { b[header_size + 24] = 7; }, "level 7", "level beyond max_depth");
+  forged([&](auto &b) { std::memset(b.data() + header_size, 0xFF, 8); }, "not finite", "NaN position");
+  forged([&](auto &b) { std::memcpy(b.data() + header_size + entry, b.data() + header_size, 25); }, "occupied",
+         "two samples in one cell");
+  forged([](auto &b) { b[40] += 1; }, "", "point_step changed without the body");
+  forged([](auto &b) { std::uint64_t n; std::memcpy(&n, b.data() + 32, 8); n += 1; std::memcpy(b.data() + 32, &n, 8); },
+         "truncated", "one sample more declared");
+  // The first field's datatype byte: after magic..field_count (48), name_len (4), name, offset (4).
+  forged([&](auto &b) { b[48 + 4 + u32At(good, 48) + 4] = 9; }, "datatype 9", "bad field datatype");
+  forged([&](auto &b) { std::memset(b.data() + 48 + 4 + u32At(good, 48), 0xFF, 4); }, "invalid record layout",
+         "field offset beyond the record");
+  const std::string foreign = "ply\nformat binary_little_endian 1.0\nend_header\n";
+  writeBytes(p, std::vector<std::uint8_t>(foreign.begin(), foreign.end()));
+  expectRefused(p, "bad magic", "a PLY file");
+  expectRefused(dir / "missing.hpdsmap", "file not found", "missing");
+  expectRefused(dir, "not a regular file", "directory");
+}
+
+TEST_F(MapFile, FailedSaveLeavesThePreviousFileAndNoTemporary) {
+  const auto dir = test::scratchDir("map_atomic");
+  const fs::path p = savedMap(dir);
+  const std::vector<std::uint8_t> before = readBytes(p);
+  // The target is a directory: the temporary is written, the rename fails, the temporary is removed.
+  fs::create_directory(dir / "occupied");
+  fs::create_directory(dir / "occupied" / "x");
+  EXPECT_THROW(saveMap((dir / "occupied").string(), *pipeline_), std::runtime_error);
+  EXPECT_THROW(saveMap((dir / "no_such_dir" / "m.hpdsmap").string(), *pipeline_), std::runtime_error);
+  std::size_t files = 0;
+  for (const auto &e : fs::directory_iterator(dir)) files += fs::is_regular_file(e.path()) ? 1 : 0;
+  EXPECT_EQ(files, 1u);
+  EXPECT_EQ(readBytes(p), before);
+  // A read-only directory cannot take the temporary; the old file stays (root ignores permissions, skip then).
+  fs::permissions(dir, fs::perms::owner_read | fs::perms::owner_exec);
+  if (::access(dir.c_str(), W_OK) != 0) {
+    EXPECT_THROW(saveMap(p.string(), *pipeline_), std::runtime_error);
+    EXPECT_EQ(readBytes(p), before);
+  }
+  fs::permissions(dir, fs::perms::owner_all);
+}
+
+TEST(MapFileBytes, InMemoryLoaderMatchesTheFileLoader) {
+  Hierarchy h(4.0, 3);
+  const double p[3] = {1, 2, 3};
+  const float v[3] = {0, 0, 1};
+  h.restoreSample(p, 1, 0, v, nullptr);
+  const auto dir = test::scratchDir("map_bytes");
+  saveHierarchy((dir / "m").string(), h);
+  const auto bytes = readBytes(dir / "m");
+  const LoadedHierarchy l = loadHierarchyBytes(bytes.data(), bytes.size(), "mem");
+  EXPECT_EQ(l.hierarchy.sampleCount(), 1u);
+  EXPECT_THROW((void)loadHierarchyBytes(bytes.data(), bytes.size() - 1, "mem"), std::runtime_error);
+  EXPECT_THROW((void)loadHierarchyBytes(nullptr, 0, "mem"), std::runtime_error);
+}
+
+TEST(MapFileBytes, Crc32MatchesTheStandardCheckValue) {
+  const char *s = "123456789";
+  EXPECT_EQ(crc32(s, 9), 0xCBF43926u);
+  EXPECT_EQ(crc32(s + 4, 5, crc32(s, 4)), 0xCBF43926u);
+}
+
+// ---------------------------------------------------------------- CLI
+
+std::string q(const fs::path &p) { return "'" + p.string() + "'"; }
+int hpds(const std::string &args, std::string *out = nullptr) {
+  return test::runCommand(test::cliPath() + " " + args, out);
+}
+
+TEST(MapFileCli, SaveThenLoadContinuesTheMap) {
+  const auto tmp = test::scratchDir("map_cli");
+  std::string log;
+  ASSERT_EQ(hpds("synth -o " + q(tmp / "s") + " --frames 4 --beams 8 --azimuth-steps 600", &log), 0) << log;
+  auto frame = [&](int i) { return q(tmp / "s" / ("frame_00000" + std::to_string(i) + ".pcd")); };
+  const auto poses = readKittiPoses((tmp / "s" / "poses.txt").string());
+  auto posesFile = [&](const fs::path &p, int from, int to) {
+    writeKittiPoses(p.string(), std::vector<Eigen::Isometry3d>(poses.begin() + from, poses.begin() + to));
+    return q(p);
+  };
+  const std::string common = " --mode map --max-depth 6 --seed 3";
+  ASSERT_EQ(hpds("sample " + frame(0) + " " + frame(1) + " " + frame(2) + " " + frame(3) + " --poses " +
+                     posesFile(tmp / "p03.txt", 0, 4) + common + " -o " + q(tmp / "whole.ply"),
+                 &log),
+            0)
+      << log;
+  ASSERT_EQ(hpds("sample " + frame(0) + " " + frame(1) + " --poses " + posesFile(tmp / "p01.txt", 0, 2) + common +
+                     " -o " + q(tmp / "half.ply") + " --save-map " + q(tmp / "m.hpdsmap"),
+                 &log),
+            0)
+      << log;
+  ASSERT_EQ(hpds("sample " + frame(2) + " " + frame(3) + " --poses " + posesFile(tmp / "p23.txt", 2, 4) + common +
+                     " -o " + q(tmp / "cont.ply") + " --load-map " + q(tmp / "m.hpdsmap") + " --save-map " +
+                     q(tmp / "m.hpdsmap"),
+                 &log),
+            0)
+      << log;
+  // Same samples, compared as (x, y, z, level) records.
+  const PointBuffer whole = readPointCloud((tmp / "whole.ply").string());
+  const PointBuffer cont = readPointCloud((tmp / "cont.ply").string());
+  ASSERT_GT(whole.size(), 100u);
+  std::multiset<std::vector<std::uint8_t>> a, b;
+  for (std::size_t i = 0; i < whole.size(); ++i) a.emplace(whole.record(i), whole.record(i) + 13);
+  for (std::size_t i = 0; i < cont.size(); ++i) b.emplace(cont.record(i), cont.record(i) + 13);
+  EXPECT_EQ(a, b);
+
+  struct Case {
+    std::string args;
+    std::string message;
+  };
+  writeBytes(tmp / "junk.hpdsmap", {1, 2, 3});
+  const std::vector<Case> cases = {
+      {frame(0) + " --mode scan --save-map " + q(tmp / "x.hpdsmap"), "--mode map"},
+      {frame(0) + " --mode scan --load-map " + q(tmp / "m.hpdsmap"), "--mode map"},
+      {frame(0) + common + " --load-map " + q(tmp / "nope.hpdsmap"), "nope.hpdsmap: file not found"},
+      {frame(0) + common + " --load-map " + q(tmp / "junk.hpdsmap"), "junk.hpdsmap: not an hpds map file"},
+      {frame(0) + " --mode map --max-depth 5 --load-map " + q(tmp / "m.hpdsmap"), "max_depth"},
+      {frame(0) + common + " --save-map " + q(tmp / "nodir" / "m.hpdsmap"), "m.hpdsmap"},
+  };
+  for (const Case &c : cases) {
+    EXPECT_EQ(hpds("sample " + c.args + " -o " + q(tmp / "o.ply"), &log), 1) << c.args << "\n" << log;
+    EXPECT_NE(log.find("hpds: error: "), std::string::npos) << log;
+    EXPECT_NE(log.find(c.message), std::string::npos) << c.args << "\n" << log;
+  }
+}
+
+}  // namespace
+}  // namespace hpds
