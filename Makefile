@@ -9,7 +9,7 @@ JOBS ?= 2
 DEMO_DIR ?= $(BUILD)/demo
 HPDS := $(BUILD)/hpds_core/hpds
 
-.PHONY: all deps configure build test demo clean
+.PHONY: all deps configure build test demo bench clean
 
 all: build
 
@@ -25,6 +25,10 @@ build: configure
 
 test: build
 	@cd $(BUILD) && ctest --output-on-failure -j$(JOBS) --timeout 900
+
+# Performance against PCL on the real frames and a 5 M point synthetic stream; prints a table, writes JSON.
+bench: build
+	@$(BUILD)/bench/perf_benchmark --data ../shared/data/lidar --json $(BUILD)/bench/perf.json
 
 demo: build
 	@scripts/demo.sh $(HPDS) $(DEMO_DIR)

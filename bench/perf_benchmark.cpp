@@ -1,0 +1,288 @@
+// Performance against the tools users would pick instead, measured in one process on the same data:
+// hierarchy build vs PCL VoxelGrid / UniformSampling, normals vs PCL NormalEstimation(OMP), the per-frame path,
+// map mode over a long synthetic stream, and 1 vs 2 threads. Prints a table of medians and ratios and writes JSON.
+// Never fails on timing: ratios are reported, not asserted (the machines here are shared and noisy).
+#include <pcl/features/normal_3d.h>
+#include <pcl/features/normal_3d_omp.h>
+#include <pcl/filters/uniform_sampling.h>
+#include <pcl/filters/voxel_grid.h>
+#include <pcl/point_types.h>
+#include <pcl/search/kdtree.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <functional>
+#include <iostream>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "hpds/NormalEstimator.hpp"
+#include "hpds/Pipeline.hpp"
+#include "hpds/SyntheticLidar.hpp"
+#include "hpds/io/PointCloudFile.hpp"
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+using namespace hpds;
+
+struct Options {
+  std::string data_dir = "../shared/data/lidar";
+  std::string json = "build/bench/perf.json";
+  int repeats = 5;
+  int level = 5;             // output level D
+  double cell_size = 4.0;    // level-0 edge, as the default config
+  std::size_t stream_points = 5'000'000;
+};
+
+/// Median wall time of `repeats` runs after one warm-up run.
+double medianSeconds(int repeats, const std::function<void()> &fn) {
+  fn();
+  std::vector<double> t;
+  for (int i = 0; i < repeats; ++i) {
+    const auto t0 = Clock::now();
+    fn();
+    t.push_back(std::chrono::duration<double>(Clock::now() - t0).count());
+  }
+  std::sort(t.begin(), t.end());
+  return t[t.size() / 2];
+}
+
+pcl::PointCloud<pcl::PointXYZ>::Ptr toPcl(const PointBuffer &b) {
+  pcl::PointCloud<pcl::PointXYZ>::Ptr c(new pcl::PointCloud<pcl::PointXYZ>);
+  const PointLayout &l = b.layout();
+  const PointField *fx = l.find("x"), *fy = l.find("y"), *fz = l.find("z");
+  c->reserve(b.size());
+  for (std::size_t i = 0; i < b.size(); ++i) {
+    const float x = static_cast<float>(readAsDouble(b.record(i), *fx)), y = static_cast<float>(readAsDouble(b.record(i), *fy)),
+                z = static_cast<float>(readAsDouble(b.record(i), *fz));
+    if (!std::isfinite(x) || !std::isfinite(y) || !std::isfinite(z) || (x == 0 && y == 0 && z == 0)) continue;
+    c->push_back(pcl::PointXYZ(x, y, z));
+  }
+  c->width = static_cast<std::uint32_t>(c->size());
+  c->height = 1;
+  return c;
+}
+
+struct Row {
+  std::string data, what;
+  double hpds_s, peer_s;
+  std::string peer;
+  std::string note;
+};
+
+std::vector<Row> rows;
+
+void report(const std::string &data, const std::string &what, double hpds_s, const std::string &peer, double peer_s,
+            const std::string &note = "") {
+  rows.push_back({data, what, hpds_s, peer_s, peer, note});
+  std::printf("%-22s %-34s hpds %9.2f ms | %-26s %9.2f ms | ratio %6.2f %s\n", data.c_str(), what.c_str(), hpds_s * 1e3,
+              peer.c_str(), peer_s * 1e3, peer_s > 0 ? hpds_s / peer_s : 0.0, note.c_str());
+  std::fflush(stdout);
+}
+
+HpdsConfig scanConfig(const Options &o, int threads) {
+  HpdsConfig c;
+  c.hierarchy.cell_size = o.cell_size;
+  c.hierarchy.max_depth = o.level;  // build up to the output level only, as a live downsampler would
+  c.output.level = o.level;
+  c.threads = threads;
+  return c;
+}
+
+/// One frame: build, normals, threads.
+void benchFrame(const Options &o, const std::string &name, const Frame &frame) {
+  const double leaf = cellEdge(o.cell_size, o.level), radius = poissonRadius(o.cell_size, o.level);
+  const auto cloud = toPcl(frame.points);
+
+  // Hierarchy build up to D vs VoxelGrid(c_D) and UniformSampling(r_D).
+  std::size_t hpds_count = 0;
+  const double t_build = medianSeconds(o.repeats, [&] {
+    Pipeline p(scanConfig(o, 1));
+    hpds_count = p.addFrame(frame).counters.accepted;
+  });
+  std::size_t vg_count = 0;
+  bool vg_overflow = false;
+  const double t_vg = medianSeconds(o.repeats, [&] {
+    pcl::VoxelGrid<pcl::PointXYZ> vg;
+    vg.setInputCloud(cloud);
+    vg.setLeafSize(static_cast<float>(leaf), static_cast<float>(leaf), static_cast<float>(leaf));
+    pcl::PointCloud<pcl::PointXYZ> out;
+    vg.filter(out);
+    vg_count = out.size();
+    vg_overflow = out.size() == cloud->size();  // PCL returns the input when its integer indices would overflow
+  });
+  report(name, "build to level " + std::to_string(o.level) + " (" + std::to_string(hpds_count) + ")", t_build,
+         "VoxelGrid c_D (" + std::to_string(vg_count) + ")", t_vg, vg_overflow ? "[VoxelGrid overflowed: no-op]" : "");
+  std::size_t us_count = 0;
+  const double t_us = medianSeconds(o.repeats, [&] {
+    pcl::UniformSampling<pcl::PointXYZ> us;
+    us.setInputCloud(cloud);
+    us.setRadiusSearch(radius);
+    pcl::PointCloud<pcl::PointXYZ> out;
+    us.filter(out);
+    us_count = out.size();
+  });
+  report(name, "build to level " + std::to_string(o.level), t_build, "UniformSampling r_D (" + std::to_string(us_count) + ")",
+         t_us);
+
+  // Normals on the same sample set and neighbourhood (radius 2.5 r_D).
+  Pipeline p(scanConfig(o, 1));
+  p.addFrame(frame);
+  const std::vector<SampleId> ids = p.outputSamples();
+  pcl::PointCloud<pcl::PointXYZ>::Ptr samples(new pcl::PointCloud<pcl::PointXYZ>);
+  for (SampleId id : ids) {
+    const double *q = p.hierarchy().position(id);
+    samples->push_back(pcl::PointXYZ(static_cast<float>(q[0]), static_cast<float>(q[1]), static_cast<float>(q[2])));
+  }
+  for (int threads : {1, 2}) {
+    NormalParams np = normalParamsFor(scanConfig(o, threads), o.level);
+    const double t_n = medianSeconds(o.repeats, [&] { (void)estimateNormals(p.hierarchy(), ids, np); });
+    const double t_pcl = medianSeconds(o.repeats, [&] {
+      pcl::PointCloud<pcl::Normal> normals;
+      pcl::search::KdTree<pcl::PointXYZ>::Ptr tree(new pcl::search::KdTree<pcl::PointXYZ>);
+      if (threads == 1) {
+        pcl::NormalEstimation<pcl::PointXYZ, pcl::Normal> ne;
+        ne.setInputCloud(samples);
+        ne.setSearchMethod(tree);
+        ne.setRadiusSearch(np.radius);
+        ne.compute(normals);
+      } else {
+        pcl::NormalEstimationOMP<pcl::PointXYZ, pcl::Normal> ne(threads);
+        ne.setInputCloud(samples);
+        ne.setSearchMethod(tree);
+        ne.setRadiusSearch(np.radius);
+        ne.compute(normals);
+      }
+    });
+    report(name, "normals, " + std::to_string(threads) + " thread(s) (" + std::to_string(ids.size()) + ")", t_n,
+           threads == 1 ? "NormalEstimation" : "NormalEstimationOMP(2)", t_pcl);
+  }
+
+  // Whole per-frame path (insert + normals + output cloud) vs VoxelGrid + NormalEstimation.
+  HpdsConfig full = scanConfig(o, 1);
+  full.normals.enabled = true;
+  const double t_path = medianSeconds(o.repeats, [&] {
+    Pipeline q(full);
+    q.addFrame(frame);
+    (void)q.makeCloud(q.outputSamples(), false);
+  });
+  const double t_path_pcl = medianSeconds(o.repeats, [&] {
+    pcl::VoxelGrid<pcl::PointXYZ> vg;
+    vg.setInputCloud(cloud);
+    vg.setLeafSize(static_cast<float>(leaf), static_cast<float>(leaf), static_cast<float>(leaf));
+    pcl::PointCloud<pcl::PointXYZ>::Ptr out(new pcl::PointCloud<pcl::PointXYZ>);
+    vg.filter(*out);
+    pcl::NormalEstimation<pcl::PointXYZ, pcl::Normal> ne;
+    pcl::search::KdTree<pcl::PointXYZ>::Ptr tree(new pcl::search::KdTree<pcl::PointXYZ>);
+    ne.setInputCloud(out);
+    ne.setSearchMethod(tree);
+    ne.setRadiusSearch(2.5 * radius);
+    pcl::PointCloud<pcl::Normal> normals;
+    ne.compute(normals);
+  });
+  report(name, "frame path: insert+normals+cloud", t_path, "VoxelGrid+NormalEstimation", t_path_pcl);
+}
+
+void benchStream(const Options &o) {
+  SyntheticLidarConfig lc;
+  lc.frames = static_cast<int>((o.stream_points + 57599) / 57600);
+  lc.speed = 1.5;
+  lc.yaw_rate = 0.01;
+  const SyntheticLidar lidar(lc);
+  std::vector<Frame> frames;
+  std::size_t total = 0;
+  for (int i = 0; i < lc.frames; ++i) {
+    frames.push_back(lidar.frame(i).frame);
+    total += frames.back().points.size();
+  }
+  const std::string name = "synthetic " + std::to_string(total / 1000) + "k pts";
+  std::vector<pcl::PointCloud<pcl::PointXYZ>::Ptr> clouds;
+  for (const auto &f : frames) clouds.push_back(toPcl(f.points));
+  const double leaf = cellEdge(o.cell_size, o.level);
+  const int reps = std::max(1, o.repeats / 2);
+  const double t_build = medianSeconds(reps, [&] {
+    Pipeline p(scanConfig(o, 1));
+    for (const auto &f : frames) p.addFrame(f);
+  });
+  const double t_vg = medianSeconds(reps, [&] {
+    for (const auto &c : clouds) {
+      pcl::VoxelGrid<pcl::PointXYZ> vg;
+      vg.setInputCloud(c);
+      vg.setLeafSize(static_cast<float>(leaf), static_cast<float>(leaf), static_cast<float>(leaf));
+      pcl::PointCloud<pcl::PointXYZ> out;
+      vg.filter(out);
+    }
+  });
+  report(name, "scan mode, every frame to level " + std::to_string(o.level), t_build, "VoxelGrid c_D per frame", t_vg);
+
+  // Map mode: frames per second and hierarchy bytes per stored sample.
+  HpdsConfig mc = scanConfig(o, 1);
+  mc.mode = Mode::Map;
+  mc.map.evict_distance = 60.0;
+  std::size_t samples = 0, bytes = 0;
+  const double t_map = medianSeconds(reps, [&] {
+    Pipeline p(mc);
+    for (const auto &f : frames) p.addFrame(f);
+    samples = p.hierarchy().sampleCount();
+    bytes = p.hierarchy().memUsage();
+  });
+  const double per_sample_point_data = static_cast<double>(frames[0].points.layout().point_step);
+  std::ostringstream note;
+  note.precision(3);
+  note << lc.frames / t_map << " frames/s, " << samples << " samples, " << static_cast<double>(bytes) / samples
+       << " B/sample incl. " << per_sample_point_data << " B record";
+  report(name, "map mode (evict 60 m)", t_map, "-", 0.0, note.str());
+}
+
+void writeJson(const std::string &path) {
+  std::filesystem::create_directories(std::filesystem::path(path).parent_path());
+  std::ofstream j(path);
+  j << "{\n  \"rows\": [\n";
+  for (std::size_t i = 0; i < rows.size(); ++i) {
+    const Row &r = rows[i];
+    j << "    {\"data\": \"" << r.data << "\", \"what\": \"" << r.what << "\", \"hpds_s\": " << r.hpds_s << ", \"peer\": \""
+      << r.peer << "\", \"peer_s\": " << r.peer_s << ", \"ratio\": " << (r.peer_s > 0 ? r.hpds_s / r.peer_s : 0.0)
+      << ", \"note\": \"" << r.note << "\"}" << (i + 1 < rows.size() ? "," : "") << "\n";
+  }
+  j << "  ]\n}\n";
+}
+
+}  // namespace
+
+int main(int argc, char **argv) {
+  Options o;
+  for (int i = 1; i + 1 < argc; i += 2) {
+    const std::string k = argv[i], v = argv[i + 1];
+    if (k == "--data") o.data_dir = v;
+    else if (k == "--json") o.json = v;
+    else if (k == "--repeats") o.repeats = std::stoi(v);
+    else if (k == "--level") o.level = std::stoi(v);
+    else if (k == "--stream-points") o.stream_points = std::stoull(v);
+    else {
+      std::cerr << "usage: perf_benchmark [--data DIR] [--json FILE] [--repeats N] [--level D] [--stream-points N]\n";
+      return 2;
+    }
+  }
+  std::printf("hpds performance vs PCL, level D = %d (c_D = %.4g m, r_D = %.4g m), median of %d runs after warm-up\n",
+              o.level, cellEdge(o.cell_size, o.level), poissonRadius(o.cell_size, o.level), o.repeats);
+  if (std::filesystem::is_directory(o.data_dir)) {
+    for (const char *name : {"hdl32_a.pcd", "velodyne_vlp16.pcd", "hesai_ot128.pcd", "velodyne_vls128.pcd"}) {
+      const auto path = std::filesystem::path(o.data_dir) / name;
+      if (!std::filesystem::exists(path)) continue;
+      Frame f;
+      f.points = readPointCloud(path.string());
+      benchFrame(o, name, f);
+    }
+  } else {
+    std::printf("(%s absent: real frames skipped)\n", o.data_dir.c_str());
+  }
+  benchStream(o);
+  writeJson(o.json);
+  std::printf("wrote %s\n", o.json.c_str());
+  return 0;
+}
