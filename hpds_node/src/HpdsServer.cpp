@@ -11,9 +11,6 @@ namespace hpds_node {
 
 namespace {
 
-// Private parameters that belong to other components sharing the namespace, not to the config.
-const std::vector<std::string> kForeignParams = {"config_file", "diagnostic_period"};
-
 void emitParam(YAML::Emitter &out, XmlRpc::XmlRpcValue &v) {
   switch (v.getType()) {
     case XmlRpc::XmlRpcValue::TypeStruct:
@@ -75,7 +72,7 @@ NodeConfig loadNodeConfigFromParams(const ros::NodeHandle &private_nh) {
     YAML::Emitter out;
     emitParam(out, params);
     try {
-      applyNodeConfigYaml(out.c_str(), config, "", kForeignParams);
+      applyNodeConfigYaml(out.c_str(), config, "");
     } catch (const std::invalid_argument &e) {
       // The loader names the dotted key ("hierarchy.max_depth: ..."); say which parameter that is.
       const std::string what = e.what();
@@ -112,9 +109,12 @@ HpdsServer::HpdsServer(ros::NodeHandle nh, ros::NodeHandle private_nh, const std
   updater_.setHardwareID("none");
   updater_.add("processing", this, &HpdsServer::diagnose);
   window_start_ = ros::WallTime::now();
-  // The updater rate-limits itself to ~diagnostic_period; a fast timer just gives it the chance.
-  diagnostics_timer_ = nh_.createWallTimer(ros::WallDuration(0.1), [this](const ros::WallTimerEvent &) {
-    updater_.update();
+  // Reported on a wall-clock timer: the updater's own rate limit runs on ROS time, which stops with a bag under
+  // use_sim_time, and the final counts of a replay would never be published.
+  double period = pnh_.param("diagnostic_period", 1.0);
+  if (!(period > 0.0)) period = 1.0;
+  diagnostics_timer_ = nh_.createWallTimer(ros::WallDuration(period), [this](const ros::WallTimerEvent &) {
+    updater_.force_update();
   });
   takeSnapshot(0.0);
 

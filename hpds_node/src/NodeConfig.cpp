@@ -179,8 +179,13 @@ void validateRosConfig(const RosConfig &ros, const hpds::HpdsConfig &config) {
     fail("ros.fixed_frame", "must be set in map mode (the frame the map is built in)");
 }
 
-void applyNodeConfigYaml(const std::string &yaml_text, NodeConfig &config, const std::string &source,
-                         const std::vector<std::string> &ignored_keys) {
+const std::vector<std::string> &nodeOnlyKeys() {
+  static const std::vector<std::string> keys = {"config_file", "diagnostic_period"};
+  return keys;
+}
+
+void applyNodeConfigYaml(const std::string &yaml_text, NodeConfig &config, const std::string &source) {
+  const std::vector<std::string> &ignored_keys = nodeOnlyKeys();
   const std::string suffix = source.empty() ? "" : " (in " + source + ")";
   YAML::Node root;
   try {

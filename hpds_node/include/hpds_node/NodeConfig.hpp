@@ -34,11 +34,14 @@ struct NodeConfig {
   RosConfig ros;
 };
 
+/// Top-level keys that belong to the node's namespace but not to the config, skipped by applyNodeConfigYaml:
+/// `config_file` (read by the node itself) and `diagnostic_period` (diagnostic_updater's), so that one YAML file
+/// serves `<rosparam load>`, ~config_file and `hpds replay --config` alike.
+[[nodiscard]] const std::vector<std::string> &nodeOnlyKeys();
+
 /// Overlays the YAML `yaml_text` (top-level config keys and an optional `ros:` map) onto `config` and validates
-/// the result (validateConfig + validateRosConfig). Top-level keys listed in `ignored_keys` are skipped (e.g.
-/// parameters of other components living in the same rosparam namespace).
-void applyNodeConfigYaml(const std::string &yaml_text, NodeConfig &config, const std::string &source,
-                         const std::vector<std::string> &ignored_keys = {});
+/// the result (validateConfig + validateRosConfig).
+void applyNodeConfigYaml(const std::string &yaml_text, NodeConfig &config, const std::string &source);
 
 /// Reads a YAML file (same shape) over the defaults; errors name the path.
 [[nodiscard]] NodeConfig loadNodeConfigFile(const std::string &path);
