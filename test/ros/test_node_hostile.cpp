@@ -1,0 +1,221 @@
+// rostest node: malformed and hostile PointCloud2 messages keep hpds alive, each counted where it belongs.
+// Runs without the shared data (clouds are generated here).
+//
+// Parameters: ~target (hpds with a deep queue), ~overload_target (hpds with queue_size 1).
+#include <gtest/gtest.h>
+
+#include <cstring>
+#include <limits>
+#include <random>
+
+#include "RosTestUtil.hpp"
+
+namespace {
+
+using hpds_test::Collector;
+using sensor_msgs::PointCloud2;
+using sensor_msgs::PointCloud2Ptr;
+using sensor_msgs::PointField;
+
+PointField field(const std::string &name, std::uint32_t offset, std::uint8_t type, std::uint32_t count = 1) {
+  PointField f;
+  f.name = name;
+  f.offset = offset;
+  f.datatype = type;
+  f.count = count;
+  return f;
+}
+
+// n points on a wavy 20 m x 20 m patch: x y z float32, intensity float32, ring uint16 (point_step 16 with padding).
+PointCloud2Ptr validCloud(std::size_t n, std::uint32_t seed, const ros::Time &stamp) {
+  auto msg = boost::make_shared<PointCloud2>();
+  msg->header.frame_id = "lidar";
+  msg->header.stamp = stamp;
+  msg->fields = {field("x", 0, PointField::FLOAT32), field("y", 4, PointField::FLOAT32),
+                 field("z", 8, PointField::FLOAT32), field("intensity", 12, PointField::FLOAT32),
+                 field("ring", 16, PointField::UINT16)};
+  msg->point_step = 20;
+  msg->width = static_cast<std::uint32_t>(n);
+  msg->height = 1;
+  msg->row_step = msg->width * msg->point_step;
+  msg->is_dense = true;
+  msg->data.resize(std::size_t(msg->row_step));
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> u(-10.f, 10.f);
+  for (std::size_t i = 0; i < n; ++i) {
+    const float x = u(rng), y = u(rng), z = 0.3f * std::sin(x) + 0.01f * u(rng), in = 100.f;
+    const std::uint16_t ring = std::uint16_t(i % 32);
+    std::uint8_t *r = msg->data.data() + i * msg->point_step;
+    std::memcpy(r, &x, 4);
+    std::memcpy(r + 4, &y, 4);
+    std::memcpy(r + 8, &z, 4);
+    std::memcpy(r + 12, &in, 4);
+    std::memcpy(r + 16, &ring, 2);
+  }
+  return msg;
+}
+
+class HostileTest : public testing::Test {
+ protected:
+  void SetUp() override {
+    ros::NodeHandle pnh("~");
+    target_ = pnh.param<std::string>("target", "/hpds_hostile");
+    overload_target_ = pnh.param<std::string>("overload_target", "/hpds_overload");
+  }
+  std::string target_, overload_target_;
+  ros::NodeHandle nh_;
+};
+
+TEST_F(HostileTest, MalformedAndFuzzedMessagesAreCountedAndTheNodeSurvives) {
+  ros::Publisher pub = nh_.advertise<PointCloud2>(target_ + "/input", 2000);
+  Collector<PointCloud2> output(nh_, target_ + "/output");
+  hpds_test::DiagnosticsReader diag(nh_, target_.substr(1));
+  ASSERT_TRUE(hpds_test::waitFor([&] { return pub.getNumSubscribers() > 0 && output.connected(); }, 30.0));
+  ASSERT_TRUE(hpds_test::waitFor([&] { return diag.updates() > 0; }, 30.0)) << "no diagnostics from " << target_;
+
+  std::uint64_t sent = 0;
+  auto send = [&](const PointCloud2Ptr &m) {
+    pub.publish(m);
+    ++sent;
+    ros::WallDuration(0.002).sleep();  // keeps the transport's queues from dropping: every message must be counted
+  };
+  ros::Time stamp(50, 0);
+  auto next = [&] { return stamp += ros::Duration(0.1); };
+
+  // 1. One message per malformed case, each counted under its own reason.
+  const std::vector<std::pair<std::string, std::function<void(PointCloud2 &)>>> malformed = {
+      {"big_endian", [](PointCloud2 &m) { m.is_bigendian = true; }},
+      {"bad_datatype", [](PointCloud2 &m) { m.fields[3].datatype = 13; }},
+      {"bad_count", [](PointCloud2 &m) { m.fields[4].count = 0; }},
+      {"field_outside_point", [](PointCloud2 &m) { m.fields[4].offset = 19; }},
+      {"duplicate_field", [](PointCloud2 &m) { m.fields[3].name = "y"; }},
+      {"missing_xyz", [](PointCloud2 &m) { m.fields.erase(m.fields.begin() + 2); }},
+      {"bad_xyz", [](PointCloud2 &m) { m.fields[0].count = 3; }},
+      {"bad_row_step", [](PointCloud2 &m) { m.row_step = 7; }},
+      {"data_size", [](PointCloud2 &m) { m.data.resize(m.data.size() - 3); }},
+  };
+  for (const auto &[reason, mutate] : malformed) {
+    auto m = validCloud(500, 1, next());
+    mutate(*m);
+    send(m);
+  }
+  // 2. Valid but hostile: NaN-only (unorganised and organised), zero-size, float64 xyz with Inf, integer extras.
+  auto nan_cloud = validCloud(1000, 2, next());
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  for (std::size_t i = 0; i < 1000; ++i)
+    for (int a = 0; a < 3; ++a) std::memcpy(nan_cloud->data.data() + i * 20 + 4 * a, &nan, 4);
+  nan_cloud->is_dense = false;
+  send(nan_cloud);
+  auto nan_organized = boost::make_shared<PointCloud2>(*nan_cloud);
+  nan_organized->header.stamp = next();
+  nan_organized->width = 50;
+  nan_organized->height = 20;
+  nan_organized->row_step = 50 * 20;
+  send(nan_organized);
+  auto empty = validCloud(0, 3, next());
+  send(empty);
+  auto empty_organized = validCloud(0, 3, next());
+  empty_organized->width = 16;
+  empty_organized->height = 0;
+  empty_organized->row_step = 16 * 20;
+  send(empty_organized);
+  auto wide = boost::make_shared<PointCloud2>();
+  wide->header.stamp = next();
+  wide->header.frame_id = "lidar";
+  wide->fields = {field("x", 0, PointField::FLOAT64), field("y", 8, PointField::FLOAT64),
+                  field("z", 16, PointField::FLOAT64), field("t", 24, PointField::INT8, 3)};
+  wide->point_step = 27;
+  wide->width = 300;
+  wide->height = 1;
+  wide->row_step = 300 * 27;
+  wide->data.resize(300 * 27);
+  for (int i = 0; i < 300; ++i) {
+    const double p[3] = {i % 2 ? std::numeric_limits<double>::infinity() : 0.01 * i, 1e300 * (i % 3 == 0), 0.5};
+    std::memcpy(wide->data.data() + i * 27, p, 24);
+  }
+  send(wide);
+  const std::uint64_t hostile_valid = 5;
+
+  // 3. Fuzzed layouts and bytes: any outcome but a crash; each message processed or dropped as malformed.
+  std::mt19937 rng(7);
+  for (int i = 0; i < 300; ++i) {
+    auto m = validCloud(64, 100 + i, next());
+    const int edits = 1 + int(rng() % 4);
+    for (int e = 0; e < edits; ++e) {
+      PointField &f = m->fields[rng() % m->fields.size()];
+      switch (rng() % 8) {
+        case 0: f.datatype = std::uint8_t(rng() % 10); break;
+        case 1: f.offset = rng() % 2 ? rng() : rng() % 24; break;
+        case 2: f.count = rng() % 3; break;
+        case 3: m->point_step = rng() % 32; m->row_step = m->width * m->point_step; break;
+        case 4: m->height = rng() % 3; break;
+        case 5: m->data.resize(rng() % (m->data.size() + 40)); break;
+        case 6: for (auto &b : m->data) b = std::uint8_t(rng()); break;  // NaN, Inf, huge values, garbage
+        case 7: f.name = std::string(1 + rng() % 3, char('a' + rng() % 26)); break;
+      }
+    }
+    send(m);
+  }
+
+  // 4. Still alive: a valid frame gives output.
+  output.clear();
+  const ros::Time last = next();
+  send(validCloud(5000, 9, last));
+  ASSERT_TRUE(hpds_test::waitFor(
+      [&] {
+        for (const auto &m : output.messages())
+          if (m->header.stamp == last) return true;
+        return false;
+      },
+      60.0))
+      << "no output after the hostile messages";
+  ASSERT_TRUE(hpds_test::waitFor([&] { return diag.value("frames received") == double(sent); }, 30.0))
+      << "received " << diag.value("frames received") << " of " << sent;
+  ASSERT_TRUE(hpds_test::waitFor(
+      [&] { return diag.value("frames processed") + diag.value("dropped malformed") == double(sent); }, 30.0))
+      << "processed " << diag.value("frames processed") << " + malformed " << diag.value("dropped malformed")
+      << " != " << sent;
+  for (const auto &[reason, mutate] : malformed)
+    EXPECT_GE(diag.value("dropped malformed " + reason), 1.0) << reason;
+  EXPECT_GE(diag.value("frames processed"), double(hostile_valid + 1));
+  EXPECT_GE(diag.value("frames empty"), 2.0);
+  EXPECT_GE(diag.value("points skipped invalid"), 2000.0 + 150.0);
+  EXPECT_EQ(diag.value("dropped overload"), 0.0);
+}
+
+TEST_F(HostileTest, OverloadDropsTheOldestAndCountsIt) {
+  ros::Publisher pub = nh_.advertise<PointCloud2>(overload_target_ + "/input", 100);
+  Collector<PointCloud2> output(nh_, overload_target_ + "/output");
+  hpds_test::DiagnosticsReader diag(nh_, overload_target_.substr(1));
+  ASSERT_TRUE(hpds_test::waitFor([&] { return pub.getNumSubscribers() > 0 && output.connected(); }, 30.0));
+  const int n = 30;
+  ros::Time last;
+  for (int i = 0; i < n; ++i) {
+    last = ros::Time(80 + i, 0);
+    pub.publish(validCloud(60000, 200 + i, last));
+    ros::WallDuration(0.005).sleep();
+  }
+  // The newest frame wins: the last one published is always processed.
+  ASSERT_TRUE(hpds_test::waitFor(
+      [&] {
+        for (const auto &m : output.messages())
+          if (m->header.stamp == last) return true;
+        return false;
+      },
+      120.0));
+  ASSERT_TRUE(hpds_test::waitFor(
+      [&] { return diag.value("frames processed") + diag.value("dropped overload") == double(n); }, 30.0))
+      << "processed " << diag.value("frames processed") << " overload " << diag.value("dropped overload");
+  EXPECT_GT(diag.value("dropped overload"), 0.0);
+  EXPECT_LT(diag.value("frames processed"), double(n));
+}
+
+}  // namespace
+
+int main(int argc, char **argv) {
+  testing::InitGoogleTest(&argc, argv);
+  ros::init(argc, argv, "test_node_hostile");
+  ros::AsyncSpinner spinner(2);
+  spinner.start();
+  return RUN_ALL_TESTS();
+}
