@@ -1,0 +1,211 @@
+// FrameProcessor (the per-message code of the node and `hpds replay`), without a master: scan output equals the
+// core pipeline's, map-mode ~output is the set of samples hit by the frame, local-map timing, drops.
+#include <gtest/gtest.h>
+
+#include <cstring>
+#include <limits>
+
+#include "hpds/SyntheticLidar.hpp"
+#include "hpds_node/FrameProcessor.hpp"
+
+namespace {
+
+using hpds_node::FrameProcessor;
+using hpds_node::NodeConfig;
+using hpds_node::OutputRequest;
+using sensor_msgs::PointCloud2;
+
+hpds::SyntheticLidarConfig smallLidar() {
+  hpds::SyntheticLidarConfig c;
+  c.beams = 16;
+  c.azimuth_steps = 600;
+  c.frames = 4;
+  c.speed = 2.0;
+  return c;
+}
+
+PointCloud2 toMsg(const hpds::PointBuffer &points, double stamp, const std::string &frame = "lidar") {
+  std_msgs::Header h;
+  h.frame_id = frame;
+  h.stamp.fromSec(stamp);
+  PointCloud2 m;
+  hpds_node::toRosCloud(points, h, m);
+  return m;
+}
+
+std::vector<Eigen::Vector3d> xyzOf(const PointCloud2 &msg) {
+  hpds::PointBuffer b;
+  EXPECT_EQ(hpds_node::fromRosCloud(msg, b), hpds_node::CloudError::None);
+  std::vector<Eigen::Vector3d> out;
+  const auto *fx = b.layout().find("x"), *fy = b.layout().find("y"), *fz = b.layout().find("z");
+  for (std::size_t i = 0; i < b.size(); ++i)
+    out.emplace_back(hpds::readAsDouble(b.record(i), *fx), hpds::readAsDouble(b.record(i), *fy),
+                     hpds::readAsDouble(b.record(i), *fz));
+  return out;
+}
+
+double nearest(const Eigen::Vector3d &q, const std::vector<Eigen::Vector3d> &set) {
+  double best = std::numeric_limits<double>::infinity();
+  for (const auto &p : set) best = std::min(best, (p - q).norm());
+  return best;
+}
+
+TEST(FrameProcessor, ScanOutputEqualsTheCorePipeline) {
+  const hpds::SyntheticLidar lidar(smallLidar());
+  const hpds::SyntheticFrame f = lidar.frame(1);
+  NodeConfig config;
+  config.hpds.output.level = 4;
+  config.hpds.normals.enabled = true;
+  config.ros.publish_levels = {2};
+  FrameProcessor processor(config);
+  const PointCloud2 msg = toMsg(f.frame.points, 3.5);
+  ASSERT_EQ(processor.check(msg), hpds_node::CloudError::None);
+  const auto r = processor.process(msg, Eigen::Isometry3d::Identity(), OutputRequest::all());
+  ASSERT_TRUE(r.processed);
+  ASSERT_TRUE(r.has_output);
+  EXPECT_FALSE(r.has_new_samples) << "scan mode has no ~new_samples";
+  EXPECT_FALSE(r.has_local_map);
+  EXPECT_EQ(r.output.header.frame_id, "lidar");
+  EXPECT_EQ(r.output.header.stamp, msg.header.stamp);
+
+  hpds::Pipeline pipeline(config.hpds);
+  hpds::Frame frame;
+  frame.points = f.frame.points;
+  pipeline.addFrame(frame);
+  PointCloud2 expected;
+  hpds_node::toRosCloud(pipeline.makeCloud(pipeline.outputSamples(), false), msg.header, expected);
+  EXPECT_EQ(r.output.fields, expected.fields);
+  EXPECT_TRUE(r.output.data == expected.data);
+
+  ASSERT_EQ(r.levels.size(), 1u);
+  hpds::PointBuffer level2;
+  ASSERT_EQ(hpds_node::fromRosCloud(r.levels[0].second, level2), hpds_node::CloudError::None);
+  EXPECT_EQ(level2.size(), pipeline.hierarchy().countAtLevel(2));
+}
+
+TEST(FrameProcessor, Float64AndOrganizedNanInput) {
+  hpds::PointLayout layout;
+  layout.append("x", hpds::FieldType::Float64);
+  layout.append("y", hpds::FieldType::Float64);
+  layout.append("z", hpds::FieldType::Float64);
+  layout.append("tag", hpds::FieldType::UInt16);
+  hpds::PointBuffer cloud(layout, 40 * 25);
+  cloud.setOrganization(40, 25);
+  for (std::size_t i = 0; i < cloud.size(); ++i) {
+    const double nan = std::numeric_limits<double>::quiet_NaN();
+    const double p[3] = {i % 7 == 0 ? nan : double(i % 40) * 0.25, double(i / 40) * 0.25, 1.0};
+    std::memcpy(cloud.record(i), p, 24);
+    const std::uint16_t tag = std::uint16_t(i);
+    std::memcpy(cloud.record(i) + 24, &tag, 2);
+  }
+  NodeConfig config;
+  config.hpds.output.level = 5;
+  FrameProcessor processor(config);
+  const auto r = processor.process(toMsg(cloud, 1.0), Eigen::Isometry3d::Identity(), OutputRequest::all());
+  ASSERT_TRUE(r.processed);
+  EXPECT_EQ(r.counters.skipped_invalid, (cloud.size() + 6) / 7);
+  EXPECT_EQ(r.output.fields[0].datatype, sensor_msgs::PointField::FLOAT32);
+  EXPECT_EQ(r.output.fields.back().name, "tag");
+  EXPECT_GT(r.output.width, 0u);
+  EXPECT_TRUE(r.output.is_dense);
+}
+
+TEST(FrameProcessor, MapOutputIsTheSampleSetHitByTheFrame) {
+  const hpds::SyntheticLidar lidar(smallLidar());
+  NodeConfig config;
+  config.hpds.mode = hpds::Mode::Map;
+  config.hpds.output.level = 4;
+  config.hpds.hierarchy.max_depth = 6;
+  config.ros.fixed_frame = "odom";
+  config.ros.local_map_rate = 4.0;  // frames are 0.1 s apart: a local map every third frame
+  config.ros.publish_levels = {3};
+  FrameProcessor processor(config);
+  EXPECT_EQ(processor.targetFrame(), "odom");
+  const double r2L = 2.0 * hpds::poissonRadius(config.hpds.hierarchy.cell_size, 4);
+  int local_maps = 0;
+  for (int i = 0; i < 4; ++i) {
+    const hpds::SyntheticFrame f = lidar.frame(i);
+    const auto r = processor.process(toMsg(f.frame.points, 10.0 + 0.1 * i), f.frame.sensor_to_fixed,
+                                     OutputRequest::all());
+    ASSERT_TRUE(r.processed);
+    EXPECT_EQ(r.output.header.frame_id, "odom");
+    local_maps += r.has_local_map;
+
+    std::vector<Eigen::Vector3d> points;
+    for (std::size_t k = 0; k < f.frame.points.size(); k += 1) {
+      const auto *rec = f.frame.points.record(k);
+      const auto &l = f.frame.points.layout();
+      const Eigen::Vector3d p(hpds::readAsDouble(rec, *l.find("x")), hpds::readAsDouble(rec, *l.find("y")),
+                              hpds::readAsDouble(rec, *l.find("z")));
+      if (p.isZero(0.0)) continue;
+      points.push_back(f.frame.sensor_to_fixed * p);
+    }
+    const auto out = xyzOf(r.output);
+    const auto fresh = xyzOf(r.new_samples);
+    ASSERT_FALSE(out.empty());
+    // Hit: each ~output sample has a frame point within 2 r_L (float32 slack); spot-checked for speed.
+    for (std::size_t k = 0; k < out.size(); k += 17) EXPECT_LT(nearest(out[k], points), r2L + 1e-4);
+    // Covered: each frame point has an ~output sample within 2 r_L.
+    for (std::size_t k = 0; k < points.size(); k += 97) EXPECT_LT(nearest(points[k], out), r2L + 1e-4);
+    // New samples are frame points, hence hit: all of them are in ~output.
+    for (std::size_t k = 0; k < fresh.size(); k += 13) EXPECT_LT(nearest(fresh[k], out), 1e-9);
+    if (i > 0) {
+      EXPECT_LT(fresh.size(), out.size()) << "later frames also see earlier samples";
+    }
+    ASSERT_EQ(r.levels.size(), 1u);
+  }
+  EXPECT_EQ(local_maps, 2);  // frames 0 and 3
+
+  // A stamp going back (a looped bag) restarts the local-map clock.
+  const auto again = processor.process(toMsg(lidar.frame(0).frame.points, 9.0), lidar.pose(0), OutputRequest::all());
+  EXPECT_TRUE(again.has_local_map);
+}
+
+TEST(FrameProcessor, DropsAreCountedByReason) {
+  NodeConfig config;
+  config.hpds.mode = hpds::Mode::Map;
+  config.ros.fixed_frame = "odom";
+  FrameProcessor processor(config);
+  const hpds::SyntheticLidar lidar(smallLidar());
+  PointCloud2 good = toMsg(lidar.frame(0).frame.points, 1.0);
+  PointCloud2 bad = good;
+  bad.data.pop_back();
+  EXPECT_EQ(processor.check(bad), hpds_node::CloudError::DataSize);
+  EXPECT_EQ(processor.stats().malformed[int(hpds_node::CloudError::DataSize)], 1u);
+  ASSERT_TRUE(processor.process(good, lidar.pose(0), OutputRequest::none(0)).processed);
+
+  // Other fields than the map's: refused before anything changes.
+  hpds::PointLayout other;
+  other.append("x", hpds::FieldType::Float32);
+  other.append("y", hpds::FieldType::Float32);
+  other.append("z", hpds::FieldType::Float32);
+  hpds::PointBuffer plain(other, 10);
+  const std::size_t before = processor.pipeline().hierarchy().sampleCount();
+  const auto r = processor.process(toMsg(plain, 2.0), lidar.pose(1), OutputRequest::all());
+  EXPECT_FALSE(r.processed);
+  EXPECT_EQ(r.drop, hpds_node::DropReason::LayoutChanged);
+  EXPECT_EQ(processor.pipeline().hierarchy().sampleCount(), before);
+  processor.countDrop(hpds_node::DropReason::NoTransform);
+  EXPECT_EQ(processor.stats().dropped[int(hpds_node::DropReason::NoTransform)], 1u);
+  EXPECT_EQ(processor.stats().droppedTotal(), 3u);
+  EXPECT_EQ(processor.stats().processed, 1u);
+}
+
+TEST(FrameProcessor, LookupSensorPoseFromABufferCore) {
+  tf2::BufferCore buffer;
+  geometry_msgs::TransformStamped t;
+  t.header.frame_id = "odom";
+  t.child_frame_id = "lidar";
+  t.header.stamp = ros::Time(5, 0);
+  t.transform.translation.x = 2.0;
+  t.transform.rotation.w = 1.0;
+  ASSERT_TRUE(buffer.setTransform(t, "test"));
+  Eigen::Isometry3d pose;
+  std::string why;
+  ASSERT_TRUE(hpds_node::lookupSensorPose(buffer, "odom", "lidar", ros::Time(5, 0), pose, &why)) << why;
+  EXPECT_DOUBLE_EQ(pose.translation().x(), 2.0);
+  EXPECT_FALSE(hpds_node::lookupSensorPose(buffer, "odom", "nowhere", ros::Time(5, 0), pose, &why));
+  EXPECT_FALSE(why.empty());
+}
+
+}  // namespace

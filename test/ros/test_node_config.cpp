@@ -1,0 +1,124 @@
+// Node settings: the node YAML (config keys + ros:) goes through the shared loader; ros.* keys are as strict.
+#include <gtest/gtest.h>
+
+#include <fstream>
+
+#include "hpds/ConfigYaml.hpp"
+#include "hpds_node/NodeConfig.hpp"
+
+namespace {
+
+using hpds_node::NodeConfig;
+
+std::string errorOf(const std::string &yaml) {
+  NodeConfig c;
+  try {
+    hpds_node::applyNodeConfigYaml(yaml, c, "test");
+  } catch (const std::invalid_argument &e) {
+    return e.what();
+  }
+  return "";
+}
+
+TEST(NodeConfig, DefaultsAreValid) {
+  NodeConfig c;
+  EXPECT_NO_THROW(hpds_node::validateRosConfig(c.ros, c.hpds));
+  EXPECT_NO_THROW(hpds_node::applyNodeConfigYaml("", c, "empty"));
+  EXPECT_EQ(c.ros.fixed_frame, "map");
+  EXPECT_EQ(c.ros.queue_size, 1);
+}
+
+TEST(NodeConfig, ConfigKeysAndRosSectionTogether) {
+  NodeConfig c;
+  hpds_node::applyNodeConfigYaml(R"(
+mode: map
+hierarchy: {cell_size: 2, max_depth: 6}
+normals:
+  enabled: true
+ros:
+  fixed_frame: /odom
+  output_frame: ""
+  tf_timeout: 0.25
+  local_map_radius: 30
+  local_map_rate: 2.5
+  publish_levels: [1, 3]
+  queue_size: 3
+diagnostic_period: 0.5
+config_file: ignored.yaml
+)",
+                                 c, "test");
+  EXPECT_EQ(c.hpds.mode, hpds::Mode::Map);
+  EXPECT_EQ(c.hpds.hierarchy.cell_size, 2.0);
+  EXPECT_EQ(c.hpds.hierarchy.max_depth, 6);
+  EXPECT_TRUE(c.hpds.normals.enabled);
+  EXPECT_EQ(c.ros.fixed_frame, "odom") << "leading slash dropped for tf2";
+  EXPECT_EQ(c.ros.tf_timeout, 0.25);
+  EXPECT_EQ(c.ros.local_map_radius, 30.0);
+  EXPECT_EQ(c.ros.local_map_rate, 2.5);
+  EXPECT_EQ(c.ros.publish_levels, (std::vector<int>{1, 3}));
+  EXPECT_EQ(c.ros.queue_size, 3);
+}
+
+TEST(NodeConfig, PublishLevelsFromALaunchString) {
+  NodeConfig c;
+  hpds_node::applyNodeConfigYaml("ros: {publish_levels: \"[2, 4]\"}", c, "launch");
+  EXPECT_EQ(c.ros.publish_levels, (std::vector<int>{2, 4}));
+}
+
+TEST(NodeConfig, ErrorsNameTheKeyAndLeaveTheConfigUnchanged) {
+  const std::vector<std::pair<std::string, std::string>> cases = {
+      {"hierarchy: {max_depth: 30}", "hierarchy.max_depth:"},
+      {"hierarchy: {cell_size: \"4.0\"}", "hierarchy.cell_size:"},
+      {"cell_size: 4.0", "cell_size:"},
+      {"ros: {tf_timeout: -1}", "ros.tf_timeout:"},
+      {"ros: {tf_timeout: \"0.1\"}", "ros.tf_timeout:"},
+      {"ros: {queue_size: 0}", "ros.queue_size:"},
+      {"ros: {queue_size: 1.5}", "ros.queue_size:"},
+      {"ros: {local_map_radius: 0}", "ros.local_map_radius:"},
+      {"ros: {local_map_rate: .nan}", "ros.local_map_rate:"},
+      {"ros: {publish_levels: [9]}", "ros.publish_levels:"},
+      {"ros: {publish_levels: [2, 2]}", "ros.publish_levels:"},
+      {"ros: {publish_levels: 3}", "ros.publish_levels:"},
+      {"ros: {fixed_frame: \"a b\"}", "ros.fixed_frame:"},
+      {"mode: map\nros: {fixed_frame: \"\"}", "ros.fixed_frame:"},
+      {"ros: {fixd_frame: odom}", "ros.fixd_frame:"},
+      {"ros: [1]", "ros:"},
+      {"mode: [", "(document)"},
+  };
+  for (const auto &[yaml, prefix] : cases) {
+    const std::string e = errorOf(yaml);
+    EXPECT_EQ(e.rfind(prefix, 0), 0u) << yaml << " -> '" << e << "'";
+    EXPECT_NE(e.find("(in test)"), std::string::npos) << e;
+  }
+  NodeConfig c;
+  c.ros.queue_size = 7;
+  EXPECT_THROW(hpds_node::applyNodeConfigYaml("ros: {queue_size: 2}\nhierarchy: {max_depth: 99}", c, ""),
+               std::invalid_argument);
+  EXPECT_EQ(c.ros.queue_size, 7) << "strong guarantee";
+}
+
+TEST(NodeConfig, RosDumpLoadsBack) {
+  NodeConfig c;
+  c.ros.fixed_frame = "odom";
+  c.ros.output_frame = "base_link";
+  c.ros.tf_timeout = 0.3;
+  c.ros.publish_levels = {0, 5};
+  c.ros.queue_size = 4;
+  NodeConfig d;
+  hpds_node::applyNodeConfigYaml(hpds::dumpConfigYaml(c.hpds) + hpds_node::dumpRosConfigYaml(c.ros), d, "dump");
+  EXPECT_EQ(d.ros.fixed_frame, c.ros.fixed_frame);
+  EXPECT_EQ(d.ros.output_frame, c.ros.output_frame);
+  EXPECT_EQ(d.ros.tf_timeout, c.ros.tf_timeout);
+  EXPECT_EQ(d.ros.publish_levels, c.ros.publish_levels);
+  EXPECT_EQ(d.ros.queue_size, c.ros.queue_size);
+}
+
+// The project's documented config file loads as node settings (the node reads it through <rosparam load>).
+TEST(NodeConfig, ProjectConfigFileLoads) {
+  const std::string path = std::string(HPDS_SOURCE_DIR) + "/config/hpds.yaml";
+  NodeConfig c;
+  ASSERT_NO_THROW(c = hpds_node::loadNodeConfigFile(path));
+  EXPECT_EQ(hpds::dumpConfigYaml(c.hpds), hpds::dumpConfigYaml(hpds::loadConfigFile(path)));
+}
+
+}  // namespace
