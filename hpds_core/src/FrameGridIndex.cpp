@@ -8,6 +8,14 @@ namespace hpds {
 namespace {
 constexpr std::int64_t kAxisBits = 21;
 constexpr std::int64_t kAxisMax = (std::int64_t(1) << kAxisBits) - 2;  // keeps k+1 inside 21 bits
+// Packed keys use 63 bits, so the all-ones word never names a cell.
+constexpr std::uint64_t kEmptyKey = ~std::uint64_t(0);
+std::uint64_t mix(std::uint64_t k) {
+  k ^= k >> 33;
+  k *= 0xFF51AFD7ED558CCDull;
+  k ^= k >> 33;
+  return k;
+}
 }  // namespace
 
 FrameGridIndex::FrameGridIndex(const double *xyz, const std::vector<std::uint32_t> &subset, double radius)
@@ -34,6 +42,17 @@ FrameGridIndex::FrameGridIndex(const double *xyz, const std::vector<std::uint32_
     points_.push_back(keyed[i].second);
   }
   starts_.push_back(static_cast<std::uint32_t>(keyed.size()));
+  std::size_t cap = 16;
+  while (cap < 2 * keys_.size()) cap *= 2;
+  table_mask_ = cap - 1;
+  table_keys_.assign(cap, kEmptyKey);
+  table_index_.assign(cap, 0);
+  for (std::size_t i = 0; i < keys_.size(); ++i) {
+    std::size_t slot = mix(keys_[i]) & table_mask_;
+    while (table_keys_[slot] != kEmptyKey) slot = (slot + 1) & table_mask_;
+    table_keys_[slot] = keys_[i];
+    table_index_[slot] = static_cast<std::uint32_t>(i);
+  }
 }
 
 bool FrameGridIndex::cellOf(const double *p, std::int64_t k[3]) const {
@@ -53,12 +72,16 @@ std::uint64_t FrameGridIndex::pack(std::int64_t x, std::int64_t y, std::int64_t 
 }
 
 bool FrameGridIndex::range(std::uint64_t key, std::size_t &begin, std::size_t &end) const {
-  const auto it = std::lower_bound(keys_.begin(), keys_.end(), key);
-  if (it == keys_.end() || *it != key) return false;
-  const std::size_t i = static_cast<std::size_t>(it - keys_.begin());
-  begin = starts_[i];
-  end = starts_[i + 1];
-  return true;
+  for (std::size_t slot = mix(key) & table_mask_;; slot = (slot + 1) & table_mask_) {
+    const std::uint64_t k = table_keys_[slot];
+    if (k == kEmptyKey) return false;
+    if (k == key) {
+      const std::uint32_t i = table_index_[slot];
+      begin = starts_[i];
+      end = starts_[i + 1];
+      return true;
+    }
+  }
 }
 
 }  // namespace hpds

@@ -1,7 +1,7 @@
 // FrameGridIndex: fixed-radius neighbour search over one frame's points, for the feature-sensitive orders.
 //
 // Contract: built once per frame from a subset of point indices; cells of edge = radius, points bucketed by
-// sorting their packed cell keys (one allocation per build, none per query). The hierarchy is not built yet when
+// sorting their packed cell keys, then hashing the distinct keys (a few allocations per build, none per query). The hierarchy is not built yet when
 // the order is computed, so this is the one search structure outside it. Const queries are thread-safe.
 #pragma once
 
@@ -47,6 +47,11 @@ class FrameGridIndex {
   std::vector<std::uint32_t> points_;  // sorted by cell key
   std::vector<std::uint64_t> keys_;    // distinct cell keys, ascending
   std::vector<std::uint32_t> starts_;  // keys_[i]'s points are points_[starts_[i] .. starts_[i+1])
+  // Open-addressing table key -> i (linear probing, half load): a lookup is a hash and a probe or two, where a
+  // binary search over keys_ cost a dozen unpredictable branches per cell.
+  std::vector<std::uint64_t> table_keys_;
+  std::vector<std::uint32_t> table_index_;
+  std::size_t table_mask_ = 0;
 };
 
 }  // namespace hpds
