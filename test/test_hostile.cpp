@@ -1,0 +1,566 @@
+// Hostile input, row by row of docs/BAD_INPUT.md: what the `hpds` CLI (exit code, message) and the core Pipeline do
+// with truncated and garbage files, unusual field types, NaN/Inf, degenerate and huge coordinates, empty and
+// 10-million-point frames, stamps, and invalid configs; plus every crash input the fuzzers found
+// (test/regressions/<target>/), replayed through the same entry point the fuzzer used.
+// Complements test_cli (basic bad files and flags), test_pipeline (skip counters) and test_io (reader details).
+#include <gtest/gtest.h>
+
+#include <chrono>
+#include <cmath>
+#include <cstring>
+#include <fstream>
+#include <random>
+#include <set>
+
+#include "TestData.hpp"
+#include "hpds/ConfigYaml.hpp"
+#include "hpds/HierarchyFile.hpp"
+#include "hpds/Pipeline.hpp"
+#include "hpds/SamplingVerifier.hpp"
+#include "hpds/SyntheticLidar.hpp"
+#include "hpds/io/KittiBin.hpp"
+#include "hpds/io/PlyWriter.hpp"
+#include "hpds/io/PointCloudFile.hpp"
+#include "hpds/io/PoseFile.hpp"
+
+namespace hpds {
+namespace {
+
+namespace fs = std::filesystem;
+
+std::string q(const fs::path &p) { return "'" + p.string() + "'"; }
+int hpds(const std::string &args, std::string *out = nullptr) {
+  return test::runCommand(test::cliPath() + " " + args, out);
+}
+
+void writeText(const fs::path &p, const std::string &s) {
+  std::ofstream f(p, std::ios::binary);
+  f << s;
+}
+
+std::string readText(const fs::path &p) {
+  std::ifstream f(p, std::ios::binary);
+  return std::string(std::istreambuf_iterator<char>(f), {});
+}
+
+// A cloud with x y z of `type` and a float32 intensity; values are cast through writeFromDouble.
+PointBuffer typedCloud(FieldType type, const std::vector<std::array<double, 3>> &pts) {
+  PointLayout l;
+  for (const char *a : {"x", "y", "z"}) l.append(a, type);
+  l.append("intensity", FieldType::Float32);
+  PointBuffer b(l, pts.size());
+  for (std::size_t i = 0; i < pts.size(); ++i) {
+    for (int a = 0; a < 3; ++a) writeFromDouble(b.record(i), l.fields[a], pts[i][a]);
+    writeFromDouble(b.record(i), l.fields[3], double(i));
+  }
+  return b;
+}
+
+std::vector<std::array<double, 3>> gridPoints(int n, double step, double offset = 0.0) {
+  std::vector<std::array<double, 3>> pts;
+  for (int i = 0; i < n; ++i)
+    for (int j = 0; j < n; ++j) pts.push_back({offset + i * step, offset + j * step, 1.0 + (i + j) % 3});
+  return pts;
+}
+
+Frame frameOf(PointBuffer b) {
+  Frame f;
+  f.points = std::move(b);
+  return f;
+}
+
+struct CliCase {
+  std::string args;
+  int code;
+  std::string message;  ///< must appear in stdout+stderr
+};
+
+void runCases(const std::vector<CliCase> &cases) {
+  for (const CliCase &c : cases) {
+    std::string log;
+    EXPECT_EQ(hpds(c.args, &log), c.code) << c.args << "\n" << log;
+    EXPECT_NE(log.find(c.message), std::string::npos) << c.args << "\n" << log;
+    if (c.code == 1) {
+      EXPECT_NE(log.find("hpds: error: "), std::string::npos) << log;
+    }
+  }
+}
+
+// ---------------------------------------------------------------- files (CLI)
+
+TEST(HostileCli, TruncatedAndGarbageFilesOfEveryFormat) {
+  const auto tmp = test::scratchDir("hostile_files");
+  const PointBuffer cloud = typedCloud(FieldType::Float32, gridPoints(10, 0.5));
+  writePly((tmp / "good.ply").string(), cloud);
+  writePcd((tmp / "good.pcd").string(), cloud);
+  const std::string ply = readText(tmp / "good.ply"), pcd = readText(tmp / "good.pcd");
+  writeText(tmp / "cut.ply", ply.substr(0, ply.size() - 7));
+  writeText(tmp / "cut_header.ply", ply.substr(0, ply.find("end_header")));
+  writeText(tmp / "cut.pcd", pcd.substr(0, pcd.size() - 1));
+  std::mt19937 rng(7);
+  std::string noise(4096, '\0');
+  for (char &c : noise) c = static_cast<char>(rng());
+  writeText(tmp / "garbage.ply", noise);
+  writeText(tmp / "garbage_after_magic.ply", "ply\n" + noise);
+  writeText(tmp / "garbage_after_header.pcd", pcd.substr(0, pcd.find("DATA")) + "DATA ascii\n" + noise);
+  writeText(tmp / "odd.bin", noise.substr(0, 4095));
+  writeText(tmp / "poses_garbage.txt", noise);
+  writeText(tmp / "poses_cut.txt", "1 0 0 0 0 1 0 0 0 0 1\n");
+  writeText(tmp / "poses_inf.txt", "1 0 0 inf 0 1 0 0 0 0 1 0\n");
+  writeText(tmp / "poses_scaled.txt", "2 0 0 0 0 2 0 0 0 0 2 0\n");
+  fs::create_directory(tmp / "adir.pcd");
+  const std::string out = " -o " + q(tmp / "out.ply");
+  const std::string good = q(tmp / "good.pcd");
+  runCases({
+      {"sample " + q(tmp / "cut.ply") + out, 1, "truncated"},
+      {"sample " + q(tmp / "cut_header.ply") + out, 1, "cut_header.ply: truncated PLY header"},
+      {"sample " + q(tmp / "cut.pcd") + out, 1, "cut.pcd: truncated"},
+      {"sample " + q(tmp / "garbage.ply") + out, 1, "garbage.ply: not a PLY file"},
+      {"sample " + q(tmp / "garbage_after_magic.ply") + out, 1, "garbage_after_magic.ply: "},
+      {"sample " + q(tmp / "garbage_after_header.pcd") + out, 1, "garbage_after_header.pcd: "},
+      {"sample " + q(tmp / "odd.bin") + out, 1, "multiple of 16"},
+      {"sample " + q(tmp / "adir.pcd") + out, 1, "not a regular file"},
+      {"sample " + good + " --poses " + q(tmp / "poses_garbage.txt") + out, 1, "poses_garbage.txt:1: "},
+      {"sample " + good + " --poses " + q(tmp / "poses_cut.txt") + out, 1, "expected 12 numbers, found 11"},
+      {"sample " + good + " --poses " + q(tmp / "poses_inf.txt") + out, 1, "non-finite"},
+      {"sample " + good + " --poses " + q(tmp / "poses_scaled.txt") + out, 1, "not a rotation"},
+      {"verify " + q(tmp / "cut.ply") + " --cell-size 4", 1, "truncated"},
+  });
+  // A failed run leaves no partial output behind.
+  EXPECT_FALSE(fs::exists(tmp / "out.ply"));
+  runCases({
+      {"sample " + good + " -o " + q(tmp / "no_dir" / "out.ply"), 1, "out.ply"},
+      {"sample " + good + out + " --stats " + q(tmp / "no_dir" / "s.json"), 1, "s.json"},
+  });
+}
+
+TEST(HostileCli, RandomBytesInABinFileAreJustPoints) {
+  // A .bin has no header: any 16-byte multiple is a valid cloud, so noise is sampled, its NaN/Inf counted.
+  const auto tmp = test::scratchDir("hostile_bin_noise");
+  std::mt19937 rng(3);
+  std::string noise(16 * 5000, '\0');
+  for (char &c : noise) c = static_cast<char>(rng());
+  writeText(tmp / "noise.bin", noise);
+  std::string log;
+  ASSERT_EQ(hpds("sample " + q(tmp / "noise.bin") + " -o " + q(tmp / "o.ply") + " --stats " + q(tmp / "s.json"), &log),
+            0)
+      << log;
+  const std::string stats = readText(tmp / "s.json");
+  EXPECT_NE(stats.find("\"skipped_invalid\""), std::string::npos);
+  EXPECT_NE(stats.find("\"out_of_range\""), std::string::npos);
+}
+
+TEST(HostileCli, AnyNumericFieldTypeForXyzIsSampledWithItsValues) {
+  const auto tmp = test::scratchDir("hostile_types");
+  const auto pts = gridPoints(12, 1.0, 2.0);  // integers 2..13: exact in every type
+  for (FieldType t : {FieldType::UInt8, FieldType::Int8, FieldType::UInt16, FieldType::Int16, FieldType::Int32,
+                      FieldType::UInt32, FieldType::Float32, FieldType::Float64}) {
+    SCOPED_TRACE(fieldTypeName(t));
+    const fs::path in = tmp / (std::string("xyz_") + fieldTypeName(t) + ".pcd");
+    writePcd(in.string(), typedCloud(t, pts));
+    std::string log;
+    ASSERT_EQ(hpds("sample " + q(in) + " -o " + q(tmp / "o.ply") + " --cell-size 2 --max-depth 3", &log), 0) << log;
+    const PointBuffer s = readPointCloud((tmp / "o.ply").string());
+    ASSERT_GT(s.size(), 10u);
+    EXPECT_EQ(s.layout().find("x")->type, FieldType::Float32);
+    std::set<std::array<double, 3>> input(pts.begin(), pts.end());
+    for (std::size_t i = 0; i < s.size(); ++i) {
+      std::array<double, 3> p;
+      for (int a = 0; a < 3; ++a) p[a] = readAsDouble(s.record(i), s.layout().fields[a]);
+      ASSERT_TRUE(input.count(p)) << p[0] << " " << p[1] << " " << p[2];
+    }
+    ASSERT_EQ(hpds("verify " + q(tmp / "o.ply") + " --cell-size 2 --input " + q(in), &log), 0) << log;
+  }
+  // Negative values in a signed 8-bit field stay negative (no unsigned reinterpretation).
+  writePcd((tmp / "neg.pcd").string(), typedCloud(FieldType::Int8, {{-100, -5, -1}, {100, 5, 1}}));
+  ASSERT_EQ(hpds("sample " + q(tmp / "neg.pcd") + " -o " + q(tmp / "neg.ply")), 0);
+  const PointBuffer neg = readPointCloud((tmp / "neg.ply").string());
+  ASSERT_EQ(neg.size(), 2u);
+  std::set<double> xs = {readAsDouble(neg.record(0), neg.layout().fields[0]),
+                         readAsDouble(neg.record(1), neg.layout().fields[0])};
+  EXPECT_EQ(xs, (std::set<double>{-100.0, 100.0}));
+}
+
+TEST(HostileCli, MissingXyzAndUnrepresentableFieldsAreRefused) {
+  const auto tmp = test::scratchDir("hostile_fields");
+  writeText(tmp / "no_z.pcd",
+            "VERSION 0.7\nFIELDS x y\nSIZE 4 4\nTYPE F F\nCOUNT 1 1\nWIDTH 1\nHEIGHT 1\nPOINTS 1\nDATA ascii\n1 2\n");
+  writeText(tmp / "int64.pcd", "VERSION 0.7\nFIELDS x y z\nSIZE 8 4 4\nTYPE I F F\nCOUNT 1 1 1\nWIDTH 1\nHEIGHT 1\n"
+                               "POINTS 1\nDATA ascii\n1 2 3\n");
+  writeText(tmp / "list.ply", "ply\nformat ascii 1.0\nelement vertex 1\nproperty list uchar float x\nproperty float y\n"
+                              "property float z\nend_header\n1 0.5 2 3\n");
+  const std::string out = " -o " + q(tmp / "o.ply");
+  runCases({
+      {"sample " + q(tmp / "no_z.pcd") + out, 1, "no x/y/z fields"},
+      {"sample " + q(tmp / "int64.pcd") + out, 1, "64-bit"},
+      {"sample " + q(tmp / "list.ply") + out, 1, "list"},
+  });
+}
+
+TEST(HostileCli, NanInfEverywhereOriginOnlyAndEmptyFrames) {
+  const auto tmp = test::scratchDir("hostile_values");
+  // NaN and Inf in every field, including the non-coordinate ones.
+  PointBuffer all_bad = typedCloud(FieldType::Float32, gridPoints(5, 1.0));
+  for (std::size_t i = 0; i < all_bad.size(); ++i)
+    for (const auto &f : all_bad.layout().fields)
+      writeFromDouble(all_bad.record(i), f, i % 3 == 0 ? NAN : (i % 3 == 1 ? INFINITY : -INFINITY));
+  writePcd((tmp / "allbad.pcd").string(), all_bad);
+  // NaN only in intensity: the points are fine, the NaN is carried to the output as it was.
+  PointBuffer nan_attr = typedCloud(FieldType::Float32, gridPoints(5, 1.0));
+  for (std::size_t i = 0; i < nan_attr.size(); ++i) writeFromDouble(nan_attr.record(i), nan_attr.layout().fields[3], NAN);
+  writePcd((tmp / "nan_attr.pcd").string(), nan_attr);
+  writePcd((tmp / "origin.pcd").string(), typedCloud(FieldType::Float32, std::vector<std::array<double, 3>>(1000, {0, 0, 0})));
+  writePcd((tmp / "empty.pcd").string(), typedCloud(FieldType::Float32, {}));
+  writePly((tmp / "empty.ply").string(), typedCloud(FieldType::Float32, {}));
+  writeText(tmp / "keep_zero.yaml", "input: {skip_zero_points: false}\n");
+
+  std::string log;
+  ASSERT_EQ(hpds("sample " + q(tmp / "allbad.pcd") + " -o " + q(tmp / "a.ply") + " --stats " + q(tmp / "a.json"), &log), 0)
+      << log;
+  EXPECT_NE(readText(tmp / "a.json").find("\"skipped_invalid\": 25"), std::string::npos) << readText(tmp / "a.json");
+  EXPECT_EQ(readPointCloud((tmp / "a.ply").string()).size(), 0u);
+
+  ASSERT_EQ(hpds("sample " + q(tmp / "nan_attr.pcd") + " -o " + q(tmp / "n.ply") + " --normals", &log), 0) << log;
+  const PointBuffer n = readPointCloud((tmp / "n.ply").string());
+  ASSERT_EQ(n.size(), 25u);
+  for (std::size_t i = 0; i < n.size(); ++i) EXPECT_TRUE(std::isnan(readAsDouble(n.record(i), *n.layout().find("intensity"))));
+
+  ASSERT_EQ(hpds("sample " + q(tmp / "origin.pcd") + " -o " + q(tmp / "z.ply") + " --stats " + q(tmp / "z.json"), &log), 0)
+      << log;
+  EXPECT_NE(readText(tmp / "z.json").find("\"skipped_zero\": 1000"), std::string::npos);
+  EXPECT_EQ(readPointCloud((tmp / "z.ply").string()).size(), 0u);
+  ASSERT_EQ(hpds("sample " + q(tmp / "origin.pcd") + " -o " + q(tmp / "z1.ply") + " --config " + q(tmp / "keep_zero.yaml"),
+                 &log),
+            0)
+      << log;
+  EXPECT_EQ(readPointCloud((tmp / "z1.ply").string()).size(), 1u);  // 1000 identical points: one sample
+
+  for (const char *e : {"empty.pcd", "empty.ply"}) {
+    ASSERT_EQ(hpds("sample " + q(tmp / e) + " -o " + q(tmp / "e.ply") + " --normals", &log), 0) << e << log;
+    EXPECT_EQ(readPointCloud((tmp / "e.ply").string()).size(), 0u);
+  }
+  // Empty frames in the middle of a map-mode stream change nothing.
+  writePcd((tmp / "a.pcd").string(), typedCloud(FieldType::Float32, gridPoints(8, 0.7)));
+  ASSERT_EQ(hpds("sample " + q(tmp / "a.pcd") + " -o " + q(tmp / "m1.ply") + " --mode map", &log), 0) << log;
+  ASSERT_EQ(hpds("sample " + q(tmp / "empty.pcd") + " " + q(tmp / "a.pcd") + " " + q(tmp / "empty.pcd") + " -o " +
+                     q(tmp / "m2.ply") + " --mode map",
+                 &log),
+            0)
+      << log;
+  EXPECT_EQ(readPointCloud((tmp / "m1.ply").string()).size(), readPointCloud((tmp / "m2.ply").string()).size());
+}
+
+TEST(HostileCli, TheSameFrameTwiceAddsNothingInMapMode) {
+  const auto tmp = test::scratchDir("hostile_dup");
+  const SyntheticLidar lidar([] {
+    SyntheticLidarConfig c;
+    c.beams = 8;
+    c.azimuth_steps = 400;
+    return c;
+  }());
+  writePcd((tmp / "f.pcd").string(), lidar.frame(0).frame.points);
+  std::string log;
+  ASSERT_EQ(hpds("sample " + q(tmp / "f.pcd") + " -o " + q(tmp / "once.ply") + " --mode map --seed 1", &log), 0) << log;
+  ASSERT_EQ(hpds("sample " + q(tmp / "f.pcd") + " " + q(tmp / "f.pcd") + " -o " + q(tmp / "twice.ply") +
+                     " --mode map --seed 1 --stats " + q(tmp / "s.json"),
+                 &log),
+            0)
+      << log;
+  const PointBuffer once = readPointCloud((tmp / "once.ply").string());
+  const PointBuffer twice = readPointCloud((tmp / "twice.ply").string());
+  // Only the finest levels can take a few of the repeated points (a different random order meets other gaps).
+  EXPECT_GE(twice.size(), once.size());
+  EXPECT_LE(twice.size(), once.size() + once.size() / 5);
+  ASSERT_EQ(hpds("verify " + q(tmp / "twice.ply") + " --cell-size 4 --input " + q(tmp / "f.pcd"), &log), 0) << log;
+}
+
+TEST(HostileCli, InvalidConfigsNameTheKeyAndExitOne) {
+  const auto tmp = test::scratchDir("hostile_config");
+  writePcd((tmp / "f.pcd").string(), typedCloud(FieldType::Float32, gridPoints(3, 1.0)));
+  const std::string base = "sample " + q(tmp / "f.pcd") + " -o " + q(tmp / "o.ply") + " --config ";
+  std::mt19937 rng(5);
+  std::string noise(2000, '\0');
+  for (char &c : noise) c = static_cast<char>(rng());
+  writeText(tmp / "noise.yaml", noise);
+  writeText(tmp / "deep.yaml", std::string(50000, '[') + "\n");
+  writeText(tmp / "quoted.yaml", "hierarchy: {cell_size: '4'}\n");
+  writeText(tmp / "yes.yaml", "normals: {enabled: yes}\n");
+  writeText(tmp / "nan_range.yaml", "input: {max_range: .nan}\n");
+  writeText(tmp / "neg_evict.yaml", "map: {evict_distance: -1}\n");
+  writeText(tmp / "inf_radius.yaml", "normals: {radius: .inf}\n");
+  writeText(tmp / "empty.yaml", "");
+  fs::create_directory(tmp / "dir.yaml");
+  runCases({
+      {base + q(tmp / "noise.yaml"), 1, "noise.yaml"},
+      {base + q(tmp / "deep.yaml"), 1, "(document)"},
+      {base + q(tmp / "quoted.yaml"), 1, "hierarchy.cell_size"},
+      {base + q(tmp / "yes.yaml"), 1, "normals.enabled"},
+      {base + q(tmp / "nan_range.yaml"), 1, "input.max_range"},
+      {base + q(tmp / "neg_evict.yaml"), 1, "map.evict_distance"},
+      {base + q(tmp / "inf_radius.yaml"), 1, "normals.radius"},
+      {base + q(tmp / "missing.yaml"), 1, "missing.yaml"},
+      {base + q(tmp / "dir.yaml"), 1, "dir.yaml"},
+      {base + q(tmp / "empty.yaml"), 0, "wrote"},
+      {"sample " + q(tmp / "f.pcd") + " -o " + q(tmp / "o.ply") + " --threads -3", 1, "threads"},
+      {"sample " + q(tmp / "f.pcd") + " -o " + q(tmp / "o.ply") + " --mode both", 1, "both"},
+      {"sample " + q(tmp / "f.pcd") + " -o " + q(tmp / "o.ply") + " --cell-size abc", 2, "cell-size"},
+      {"sample " + q(tmp / "f.pcd") + " -o " + q(tmp / "o.ply") + " --frobnicate", 2, "frobnicate"},
+  });
+}
+
+// ---------------------------------------------------------------- core Pipeline
+
+TEST(HostilePipeline, EveryNumericXyzTypeIsReadByValue) {
+  const auto pts = gridPoints(6, 1.0, 1.0);
+  for (FieldType t : {FieldType::UInt8, FieldType::Int8, FieldType::UInt16, FieldType::Int16, FieldType::Int32,
+                      FieldType::UInt32, FieldType::Float32, FieldType::Float64}) {
+    SCOPED_TRACE(fieldTypeName(t));
+    HpdsConfig c;
+    c.hierarchy.cell_size = 1.0;
+    c.hierarchy.max_depth = 2;
+    Pipeline p(c);
+    const FrameResult r = p.addFrame(frameOf(typedCloud(t, pts)));
+    EXPECT_EQ(r.counters.accepted, pts.size());  // unit grid at 1 m cells: every point its own level-0 sample
+    std::set<std::array<double, 3>> got;
+    for (SampleId id : r.new_samples) got.insert({p.hierarchy().position(id)[0], p.hierarchy().position(id)[1],
+                                                  p.hierarchy().position(id)[2]});
+    const std::set<std::array<double, 3>> expected(pts.begin(), pts.end());
+    EXPECT_EQ(got, expected);
+  }
+}
+
+TEST(HostilePipeline, BrokenLayoutsThrowBeforeAnythingChanges) {
+  HpdsConfig c;
+  c.mode = Mode::Map;
+  Pipeline p(c);
+  p.addFrame(frameOf(typedCloud(FieldType::Float32, gridPoints(4, 1.0))));
+  const std::size_t before = p.hierarchy().sampleCount();
+  const std::uint32_t frames = p.framesProcessed();
+  PointLayout beyond;
+  beyond.append("x", FieldType::Float32);
+  beyond.append("y", FieldType::Float32);
+  beyond.append("z", FieldType::Float32);
+  beyond.fields[2].offset = 10;  // z reaches past point_step 12
+  PointLayout dup = beyond;
+  dup.fields[2].offset = 8;
+  dup.fields[1].name = "x";
+  PointLayout bad_type = dup;
+  bad_type.fields[1].name = "y";
+  bad_type.fields[1].type = static_cast<FieldType>(11);
+  for (const PointLayout &l : {beyond, dup, bad_type}) {
+    Frame f;
+    f.points = PointBuffer(l, 0);
+    f.points.bytes().assign(3 * l.point_step, 0);
+    EXPECT_THROW(p.addFrame(f), std::invalid_argument);
+  }
+  EXPECT_EQ(p.hierarchy().sampleCount(), before);
+  EXPECT_EQ(p.framesProcessed(), frames);
+}
+
+TEST(HostilePipeline, NanInfInEveryFieldAndPose) {
+  PointBuffer b = typedCloud(FieldType::Float64, gridPoints(6, 1.0));
+  for (std::size_t i = 0; i < b.size(); ++i)
+    for (const auto &f : b.layout().fields)
+      writeFromDouble(b.record(i), f, (i % 2) ? NAN : -INFINITY);
+  HpdsConfig c;
+  c.normals.enabled = true;
+  c.order.type = InsertionOrder::Sphericity;  // the feature orders see no invalid point either
+  Pipeline p(c);
+  const FrameResult r = p.addFrame(frameOf(b));
+  EXPECT_EQ(r.counters.skipped_invalid, b.size());
+  EXPECT_EQ(p.makeCloud(p.outputSamples(), false).size(), 0u);
+  // A finite pose that sends finite points to infinity: skipped as invalid, not inserted at inf.
+  Frame huge = frameOf(typedCloud(FieldType::Float64, {{1e300, 0, 0}, {1, 1, 1}}));
+  huge.sensor_to_fixed.linear() *= 1e10;
+  HpdsConfig m;
+  m.mode = Mode::Map;
+  Pipeline pm(m);
+  const FrameResult rh = pm.addFrame(huge);
+  EXPECT_EQ(rh.counters.skipped_invalid, 1u);  // 1e310 overflows to inf
+  EXPECT_EQ(rh.counters.out_of_range, 1u);     // 1e10 m is beyond the exact keys of 1.6 cm cells
+  EXPECT_EQ(rh.counters.accepted, 0u);
+  for (SampleId id : pm.outputSamples()) EXPECT_TRUE(std::isfinite(pm.hierarchy().position(id)[0]));
+}
+
+TEST(HostilePipeline, AllPointsAtOneSpotAndAtTheOrigin) {
+  for (bool skip_zero : {true, false}) {
+    HpdsConfig c;
+    c.input.skip_zero_points = skip_zero;
+    c.normals.enabled = true;
+    c.order.type = InsertionOrder::SurfaceVariation;
+    Pipeline p(c);
+    const FrameResult r = p.addFrame(frameOf(typedCloud(FieldType::Float32, std::vector<std::array<double, 3>>(5000, {0, 0, 0}))));
+    EXPECT_EQ(r.counters.accepted, skip_zero ? 0u : 1u);
+    EXPECT_EQ(r.counters.skipped_zero, skip_zero ? 5000u : 0u);
+    EXPECT_EQ(r.counters.dropped_depth, skip_zero ? 0u : 4999u);
+    // Normals of a degenerate neighbourhood are invalid (NaN), not garbage.
+    const PointBuffer out = p.makeCloud(p.outputSamples(), false);
+    for (std::size_t i = 0; i < out.size(); ++i) EXPECT_TRUE(std::isnan(readAsDouble(out.record(i), *out.layout().find("normal_x"))));
+  }
+  Pipeline p(HpdsConfig{});
+  const FrameResult r = p.addFrame(frameOf(typedCloud(FieldType::Float32, std::vector<std::array<double, 3>>(5000, {3, -2, 1}))));
+  EXPECT_EQ(r.counters.accepted, 1u);
+  EXPECT_EQ(r.counters.dropped_depth, 4999u);
+}
+
+TEST(HostilePipeline, CoordinatesAt1e7MetresAreExactOrCounted) {
+  // Default config (4 m, depth 8): 1e7 m is well inside the exact key range; with 2^-21 m cells it is not.
+  const std::vector<std::array<double, 3>> far = {{1e7, 0, 0}, {-1e7, 1e7, 5}, {1e7 + 2.0, 0, 0}, {0, 0, -1e7}};
+  for (FieldType t : {FieldType::Float32, FieldType::Float64}) {
+    Pipeline p(HpdsConfig{});
+    const FrameResult r = p.addFrame(frameOf(typedCloud(t, far)));
+    EXPECT_EQ(r.counters.accepted, 4u) << fieldTypeName(t);
+    EXPECT_EQ(r.counters.out_of_range, 0u);
+    const PointBuffer out = p.makeCloud(p.outputSamples(), false);
+    EXPECT_EQ(verifySampling(out, 4.0, nullptr).total_violations(), 0u);
+  }
+  HpdsConfig fine;
+  fine.hierarchy.cell_size = 1.0;
+  fine.hierarchy.max_depth = 21;
+  Pipeline p(fine);
+  const FrameResult r = p.addFrame(frameOf(typedCloud(FieldType::Float64, far)));
+  EXPECT_EQ(r.counters.out_of_range, 4u);
+  EXPECT_EQ(r.counters.accepted, 0u);
+  // Beyond any hierarchy: 1e30 m is counted as out of range even at the coarsest settings.
+  HpdsConfig coarse;
+  coarse.hierarchy.cell_size = 1e6;
+  coarse.hierarchy.max_depth = 0;
+  Pipeline pc(coarse);
+  EXPECT_EQ(pc.addFrame(frameOf(typedCloud(FieldType::Float64, {{1e30, 0, 0}}))).counters.out_of_range, 1u);
+}
+
+TEST(HostilePipeline, TenMillionPointFrameInBoundedTimeAndMemory) {
+  // 10 M records of 16 bytes (160 MB) plus the pipeline's per-point scratch; max_depth 2 keeps the hierarchy tiny.
+  constexpr std::size_t kPoints = 10'000'000;
+  PointLayout l;
+  for (const char *a : {"x", "y", "z", "intensity"}) l.append(a, FieldType::Float32);
+  Frame f;
+  f.points = PointBuffer(l, kPoints);
+  std::mt19937 rng(1);
+  std::uniform_real_distribution<float> u(-50.0f, 50.0f);
+  for (std::size_t i = 0; i < kPoints; ++i) {
+    float rec[4] = {u(rng), u(rng), u(rng) * 0.1f, float(i % 100)};
+    std::memcpy(f.points.record(i), rec, 16);
+  }
+  HpdsConfig c;
+  c.hierarchy.max_depth = 2;
+  const auto t0 = std::chrono::steady_clock::now();
+  Pipeline p(c);
+  const FrameResult r = p.addFrame(f);
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  EXPECT_EQ(r.counters.input, kPoints);
+  EXPECT_EQ(r.counters.accepted + r.counters.dropped_depth, kPoints);
+  // 100 x 100 x 10 m at 1 m finest cells: about 10^5 cells, far fewer samples than points.
+  EXPECT_LT(r.counters.accepted, 150000u);
+  EXPECT_EQ(p.hierarchy().sampleCount(), r.counters.accepted);
+  EXPECT_LT(seconds, 240.0);
+  const PointBuffer out = p.makeCloud(p.outputSamples(), false);
+  EXPECT_EQ(verifySampling(out, c.hierarchy.cell_size, nullptr).total_violations(), 0u);
+}
+
+TEST(HostilePipeline, StampsAreCarriedNotInterpreted) {
+  const SyntheticLidar lidar([] {
+    SyntheticLidarConfig c;
+    c.beams = 8;
+    c.azimuth_steps = 300;
+    c.frames = 3;
+    return c;
+  }());
+  const std::vector<std::vector<double>> stamp_sets = {
+      {0.0, 0.1, 0.2}, {5.0, 5.0, 5.0}, {3.0, -1.0, 2.0}, {NAN, INFINITY, -0.0}, {1e300, 0.0, 1e300}};
+  std::vector<std::uint8_t> reference;
+  for (const auto &stamps : stamp_sets) {
+    HpdsConfig c;
+    c.mode = Mode::Map;
+    c.order.seed = 9;
+    Pipeline p(c);
+    for (int i = 0; i < 3; ++i) {
+      Frame f = lidar.frame(i).frame;
+      f.stamp = stamps[i];
+      p.addFrame(f);
+    }
+    const std::vector<std::uint8_t> bytes = p.makeCloud(p.outputSamples(), false).bytes();
+    if (reference.empty()) reference = bytes;
+    EXPECT_EQ(bytes, reference);
+  }
+}
+
+TEST(HostilePipeline, InvalidConfigsAreRefusedByTheConstructor) {
+  auto refused = [](auto &&edit, const std::string &key) {
+    HpdsConfig c;
+    edit(c);
+    try {
+      Pipeline p(c);
+      ADD_FAILURE() << key << " accepted";
+    } catch (const std::invalid_argument &e) {
+      EXPECT_EQ(std::string(e.what()).rfind(key, 0), 0u) << e.what();
+    }
+  };
+  refused([](HpdsConfig &c) { c.hierarchy.cell_size = NAN; }, "hierarchy.cell_size");
+  refused([](HpdsConfig &c) { c.hierarchy.cell_size = -INFINITY; }, "hierarchy.cell_size");
+  refused([](HpdsConfig &c) { c.hierarchy.max_depth = 99; }, "hierarchy.max_depth");
+  refused([](HpdsConfig &c) { c.output.spacing = NAN; }, "output.spacing");
+  refused([](HpdsConfig &c) { c.order.feature_radius = INFINITY; }, "order.feature_radius");
+  refused([](HpdsConfig &c) { c.normals.radius = -1.0; }, "normals.radius");
+  refused([](HpdsConfig &c) { c.map.evict_distance = NAN; }, "map.evict_distance");
+  refused([](HpdsConfig &c) { c.input.min_range = INFINITY; }, "input.min_range");
+  refused([](HpdsConfig &c) { c.threads = 100000; }, "threads");
+}
+
+// ---------------------------------------------------------------- fuzzer crash inputs
+
+// Each file under test/regressions/<target>/ once crashed fuzz_<target>; it must now be refused cleanly or
+// accepted (whichever the fix decided), through the same entry point.
+TEST(Regressions, EveryFuzzerCrashInputIsHandled) {
+  const fs::path root = fs::path(HPDS_SOURCE_DIR) / "test" / "regressions";
+  if (!fs::is_directory(root)) GTEST_SKIP() << "no regression inputs";
+  const auto tmp = test::scratchDir("regressions");
+  std::size_t replayed = 0;
+  for (const auto &dir : fs::directory_iterator(root)) {
+    if (!dir.is_directory()) continue;
+    const std::string target = dir.path().filename().string();
+    for (const auto &entry : fs::directory_iterator(dir.path())) {
+      if (!entry.is_regular_file() || entry.path().filename().string().front() == '.' ||
+          entry.path().extension() == ".md")
+        continue;
+      SCOPED_TRACE(entry.path().string());
+      const std::string bytes = readText(entry.path());
+      ++replayed;
+      auto through = [&](const std::string &ext) {
+        const fs::path copy = tmp / ("input" + ext);
+        writeText(copy, bytes);
+        return copy.string();
+      };
+      try {
+        if (target == "pcd" || target == "ply" || target == "kitti_bin") {
+          const PointBuffer cloud = readPointCloud(through(target == "kitti_bin" ? ".bin" : "." + target));
+          HpdsConfig c;
+          c.mode = Mode::Map;
+          c.hierarchy.max_depth = 5;
+          c.normals.enabled = true;
+          Pipeline p(c);
+          p.addFrame(frameOf(cloud));
+          (void)p.makeCloud(p.outputSamples(), false);
+        } else if (target == "poses") {
+          (void)readKittiPoses(through(".txt"));
+        } else if (target == "config_yaml") {
+          try {
+            const HpdsConfig c = loadConfigString(bytes);
+            Pipeline p(c);
+          } catch (const std::invalid_argument &) {
+          }
+        } else if (target == "map") {
+          (void)loadHierarchyBytes(reinterpret_cast<const std::uint8_t *>(bytes.data()), bytes.size(), "regression");
+        } else {
+          ADD_FAILURE() << "unknown regression target " << target;
+        }
+      } catch (const std::runtime_error &) {
+        // refused with a message: fine
+      }
+    }
+  }
+  if (replayed == 0) GTEST_SKIP() << "no regression inputs";
+}
+
+}  // namespace
+}  // namespace hpds
