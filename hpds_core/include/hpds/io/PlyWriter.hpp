@@ -1,0 +1,26 @@
+// Binary PLY writer for PointBuffer (no PCL).
+//
+// Contract
+// - Writes `format binary_little_endian 1.0` with one `element vertex N` and one property per field, in layout order,
+//   typed char uchar short ushort int uint float double after the field's datatype. A field with count > 1 becomes
+//   properties name_0 ... name_{count-1}. Only the fields' bytes are written: padding inside a record is skipped.
+// - An organised cloud (height > 1) also gets `obj_info num_cols W` / `obj_info num_rows H`, which PCL's reader uses to
+//   restore width/height.
+// - Read back through readPointCloud the values are identical, with PCL's naming conventions applied by its reader:
+//   uchar red/green/blue(/alpha) are packed into one `rgb`/`rgba` field (so such fields are only readable back as a
+//   complete red, green, blue set) and nx/ny/nz are renamed normal_x/y/z.
+// - Errors: std::runtime_error whose message starts with the path: I/O failure, or a field name that cannot be a PLY
+//   property name (empty, whitespace) or that collides once count > 1 fields are expanded. A failed write removes the
+//   partial file.
+// - Thread-safety: reentrant; concurrent calls on different paths are safe.
+#pragma once
+
+#include <string>
+
+#include "hpds/PointBuffer.hpp"
+
+namespace hpds {
+
+void writePly(const std::string &path, const PointBuffer &cloud);
+
+}  // namespace hpds

@@ -1,0 +1,108 @@
+#include "hpds/io/KittiBin.hpp"
+
+#include <algorithm>
+#include <cerrno>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <memory>
+#include <stdexcept>
+#include <system_error>
+#include <vector>
+
+namespace hpds {
+namespace {
+
+constexpr std::size_t kRecordBytes = 16;
+
+[[noreturn]] void fail(const std::string &path, const std::string &what) {
+  throw std::runtime_error(path + ": " + what);
+}
+
+struct FileCloser {
+  void operator()(std::FILE *f) const {
+    if (f) std::fclose(f);
+  }
+};
+using FilePtr = std::unique_ptr<std::FILE, FileCloser>;
+
+PointLayout kittiLayout() {
+  PointLayout layout;
+  layout.append("x", FieldType::Float32);
+  layout.append("y", FieldType::Float32);
+  layout.append("z", FieldType::Float32);
+  layout.append("intensity", FieldType::Float32);
+  return layout;
+}
+
+}  // namespace
+
+PointBuffer readKittiBin(const std::string &path) {
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  const auto status = fs::status(path, ec);
+  if (status.type() == fs::file_type::not_found) fail(path, "file not found");
+  if (status.type() == fs::file_type::none) fail(path, "cannot access: " + ec.message());
+  if (!fs::is_regular_file(status)) fail(path, "not a regular file");
+  const std::uintmax_t size = fs::file_size(path, ec);
+  if (ec) fail(path, "cannot determine file size: " + ec.message());
+  if (size == 0) fail(path, "empty file (0 bytes)");
+  if (size % kRecordBytes != 0)
+    fail(path, "not a KITTI .bin file: size " + std::to_string(size) + " bytes is not a multiple of " +
+                   std::to_string(kRecordBytes) + " (float32 x y z intensity records)");
+
+  FilePtr file(std::fopen(path.c_str(), "rb"));
+  if (!file) fail(path, std::string("cannot open: ") + std::strerror(errno));
+  const std::size_t n = static_cast<std::size_t>(size / kRecordBytes);
+  PointBuffer cloud(kittiLayout(), n);
+  // The record layout is exactly the file's, so the bytes go straight into the buffer.
+  if (std::fread(cloud.bytes().data(), 1, cloud.bytes().size(), file.get()) != cloud.bytes().size())
+    fail(path, std::string("read failed (file changed while reading?): ") +
+                   (std::ferror(file.get()) ? std::strerror(errno) : "unexpected end of file"));
+  return cloud;
+}
+
+void writeKittiBin(const std::string &path, const PointBuffer &cloud) {
+  const PointLayout &layout = cloud.layout();
+  const PointField *fx = layout.find("x");
+  const PointField *fy = layout.find("y");
+  const PointField *fz = layout.find("z");
+  const PointField *fi = layout.find("intensity");
+  if (!fx || !fy || !fz) fail(path, "cannot write KITTI .bin: the cloud has no x/y/z fields");
+
+  FilePtr file(std::fopen(path.c_str(), "wb"));
+  if (!file) fail(path, std::string("cannot open for writing: ") + std::strerror(errno));
+
+  auto abandon = [&](const std::string &what) {
+    const int err = errno;
+    file.reset();
+    std::remove(path.c_str());
+    fail(path, what + ": " + std::strerror(err));
+  };
+
+  // Converted in chunks so that memory stays bounded for huge clouds while fwrite calls stay few.
+  constexpr std::size_t kChunkPoints = 1 << 16;
+  std::vector<float> chunk;
+  chunk.reserve(kChunkPoints * 4);
+  const std::size_t n = cloud.size();
+  for (std::size_t begin = 0; begin < n; begin += kChunkPoints) {
+    const std::size_t end = std::min(n, begin + kChunkPoints);
+    chunk.clear();
+    for (std::size_t i = begin; i < end; ++i) {
+      const std::uint8_t *rec = cloud.record(i);
+      chunk.push_back(static_cast<float>(readAsDouble(rec, *fx)));
+      chunk.push_back(static_cast<float>(readAsDouble(rec, *fy)));
+      chunk.push_back(static_cast<float>(readAsDouble(rec, *fz)));
+      chunk.push_back(fi ? static_cast<float>(readAsDouble(rec, *fi)) : 0.0f);
+    }
+    if (std::fwrite(chunk.data(), sizeof(float), chunk.size(), file.get()) != chunk.size()) abandon("write failed");
+  }
+  if (std::fflush(file.get()) != 0) abandon("write failed");
+  if (std::fclose(file.release()) != 0) {
+    const int err = errno;
+    std::remove(path.c_str());
+    fail(path, std::string("write failed: ") + std::strerror(err));
+  }
+}
+
+}  // namespace hpds

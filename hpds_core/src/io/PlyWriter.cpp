@@ -1,0 +1,142 @@
+#include "hpds/io/PlyWriter.hpp"
+
+#include <algorithm>
+#include <cerrno>
+#include <cstdio>
+#include <cstring>
+#include <memory>
+#include <set>
+#include <stdexcept>
+#include <vector>
+
+namespace hpds {
+namespace {
+
+[[noreturn]] void fail(const std::string &path, const std::string &what) {
+  throw std::runtime_error(path + ": " + what);
+}
+
+struct FileCloser {
+  void operator()(std::FILE *f) const {
+    if (f) std::fclose(f);
+  }
+};
+using FilePtr = std::unique_ptr<std::FILE, FileCloser>;
+
+// The original PLY type names: every PLY reader knows them, while the sized aliases (int8, float32...) are an
+// extension some readers lack.
+const char *plyTypeName(FieldType type) {
+  switch (type) {
+    case FieldType::Int8:
+      return "char";
+    case FieldType::UInt8:
+      return "uchar";
+    case FieldType::Int16:
+      return "short";
+    case FieldType::UInt16:
+      return "ushort";
+    case FieldType::Int32:
+      return "int";
+    case FieldType::UInt32:
+      return "uint";
+    case FieldType::Float32:
+      return "float";
+    case FieldType::Float64:
+      return "double";
+  }
+  return nullptr;
+}
+
+bool isValidPropertyName(const std::string &name) {
+  if (name.empty()) return false;
+  for (unsigned char c : name)
+    if (c <= ' ' || c == 0x7f) return false;
+  return true;
+}
+
+// One contiguous byte range of a record that goes to the file unchanged.
+struct Span {
+  std::uint32_t offset;
+  std::uint32_t bytes;
+};
+
+}  // namespace
+
+void writePly(const std::string &path, const PointBuffer &cloud) {
+  const PointLayout &layout = cloud.layout();
+  try {
+    layout.validate();
+  } catch (const std::invalid_argument &e) {
+    fail(path, std::string("cannot write PLY: invalid layout: ") + e.what());
+  }
+
+  std::string header = "ply\nformat binary_little_endian 1.0\ncomment written by hpds\n";
+  if (cloud.height() > 1) {
+    header += "obj_info num_cols " + std::to_string(cloud.width()) + "\n";
+    header += "obj_info num_rows " + std::to_string(cloud.height()) + "\n";
+  }
+  header += "element vertex " + std::to_string(cloud.size()) + "\n";
+
+  std::set<std::string> names;
+  std::vector<Span> spans;
+  std::size_t out_step = 0;
+  for (const PointField &f : layout.fields) {
+    if (!isValidPropertyName(f.name))
+      fail(path, "cannot write PLY: field name '" + f.name + "' is not a valid PLY property name");
+    const char *type = plyTypeName(f.type);
+    const std::size_t elem = fieldTypeSize(f.type);
+    for (std::uint32_t c = 0; c < f.count; ++c) {
+      const std::string name = f.count == 1 ? f.name : f.name + "_" + std::to_string(c);
+      if (!names.insert(name).second) fail(path, "cannot write PLY: property name '" + name + "' would appear twice");
+      header += std::string("property ") + type + " " + name + "\n";
+    }
+    // Adjacent fields merge into one span so that the copy loop below stays short for typical layouts.
+    const auto bytes = static_cast<std::uint32_t>(elem * f.count);
+    if (!spans.empty() && spans.back().offset + spans.back().bytes == f.offset)
+      spans.back().bytes += bytes;
+    else
+      spans.push_back({f.offset, bytes});
+    out_step += bytes;
+  }
+  header += "end_header\n";
+
+  FilePtr file(std::fopen(path.c_str(), "wb"));
+  if (!file) fail(path, std::string("cannot open for writing: ") + std::strerror(errno));
+  auto abandon = [&](const char *what) {
+    const int err = errno;
+    file.reset();
+    std::remove(path.c_str());
+    fail(path, std::string(what) + ": " + std::strerror(err));
+  };
+
+  if (std::fwrite(header.data(), 1, header.size(), file.get()) != header.size()) abandon("write failed");
+
+  const std::size_t n = cloud.size();
+  if (spans.size() == 1 && spans[0].offset == 0 && spans[0].bytes == layout.point_step) {
+    // Records without padding are already the PLY rows.
+    if (n && std::fwrite(cloud.bytes().data(), 1, cloud.bytes().size(), file.get()) != cloud.bytes().size())
+      abandon("write failed");
+  } else if (out_step > 0) {
+    constexpr std::size_t kChunkBytes = 1 << 20;
+    const std::size_t points_per_chunk = std::max<std::size_t>(1, kChunkBytes / out_step);
+    std::vector<std::uint8_t> chunk;
+    chunk.reserve(points_per_chunk * out_step);
+    for (std::size_t begin = 0; begin < n; begin += points_per_chunk) {
+      const std::size_t end = std::min(n, begin + points_per_chunk);
+      chunk.clear();
+      for (std::size_t i = begin; i < end; ++i) {
+        const std::uint8_t *rec = cloud.record(i);
+        for (const Span &s : spans) chunk.insert(chunk.end(), rec + s.offset, rec + s.offset + s.bytes);
+      }
+      if (std::fwrite(chunk.data(), 1, chunk.size(), file.get()) != chunk.size()) abandon("write failed");
+    }
+  }
+  if (std::fflush(file.get()) != 0) abandon("write failed");
+  if (std::fclose(file.release()) != 0) {
+    const int err = errno;
+    std::remove(path.c_str());
+    fail(path, std::string("write failed: ") + std::strerror(err));
+  }
+}
+
+}  // namespace hpds

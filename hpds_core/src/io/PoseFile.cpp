@@ -1,0 +1,139 @@
+#include "hpds/io/PoseFile.hpp"
+
+#include <Eigen/SVD>
+#include <array>
+#include <cerrno>
+#include <charconv>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <memory>
+#include <stdexcept>
+#include <string>
+#include <system_error>
+
+namespace hpds {
+namespace {
+
+[[noreturn]] void fail(const std::string &path, const std::string &what) {
+  throw std::runtime_error(path + ": " + what);
+}
+
+[[noreturn]] void failLine(const std::string &path, std::size_t line, const std::string &what) {
+  throw std::runtime_error(path + ":" + std::to_string(line) + ": " + what);
+}
+
+bool isSpace(char c) { return c == ' ' || c == '\t' || c == '\r' || c == '\n' || c == '\v' || c == '\f'; }
+
+// Deviation below which a rotation is already as orthonormal as doubles allow; re-projecting it would only move bits
+// and break the exact write/read round trip.
+constexpr double kExactTolerance = 1e-12;
+constexpr double kAcceptTolerance = 1e-3;
+
+double orthonormalityError(const Eigen::Matrix3d &r) {
+  return (r.transpose() * r - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff();
+}
+
+}  // namespace
+
+std::vector<Eigen::Isometry3d> readKittiPoses(const std::string &path) {
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  const auto status = fs::status(path, ec);
+  if (status.type() == fs::file_type::not_found) fail(path, "file not found");
+  if (status.type() == fs::file_type::none) fail(path, "cannot access: " + ec.message());
+  if (!fs::is_regular_file(status)) fail(path, "not a regular file");
+  std::ifstream in(path, std::ios::binary);
+  if (!in) fail(path, std::string("cannot open: ") + std::strerror(errno));
+
+  std::vector<Eigen::Isometry3d> poses;
+  std::string line;
+  std::size_t line_no = 0;
+  while (std::getline(in, line)) {
+    ++line_no;
+    std::array<double, 12> v{};
+    std::size_t count = 0;
+    const char *p = line.data();
+    const char *end = p + line.size();
+    while (true) {
+      while (p < end && isSpace(*p)) ++p;
+      if (p == end) break;
+      const char *tok_end = p;
+      while (tok_end < end && !isSpace(*tok_end)) ++tok_end;
+      const std::string token(p, tok_end);
+      // from_chars is locale-independent (a German locale must not turn "1.5" into an error) but rejects '+'.
+      const char *num = (*p == '+' && tok_end - p > 1) ? p + 1 : p;
+      double value = 0.0;
+      const auto res = std::from_chars(num, tok_end, value);
+      if (res.ec == std::errc::result_out_of_range) failLine(path, line_no, "number '" + token + "' is out of range");
+      if (res.ec != std::errc() || res.ptr != tok_end) failLine(path, line_no, "'" + token + "' is not a number");
+      if (!std::isfinite(value)) failLine(path, line_no, "non-finite value '" + token + "'");
+      if (count < v.size()) v[count] = value;
+      ++count;
+      p = tok_end;
+    }
+    if (count == 0) continue;
+    if (count != 12)
+      failLine(path, line_no, "expected 12 numbers, found " + std::to_string(count) + " (row-major 3x4 [R|t])");
+
+    Eigen::Matrix3d r;
+    Eigen::Vector3d t;
+    for (int row = 0; row < 3; ++row) {
+      for (int col = 0; col < 3; ++col) r(row, col) = v[row * 4 + col];
+      t(row) = v[row * 4 + 3];
+    }
+    const double err = orthonormalityError(r);
+    const double det = r.determinant();
+    if (!(err <= kAcceptTolerance) || !(std::abs(det - 1.0) <= kAcceptTolerance)) {
+      char buf[160];
+      std::snprintf(buf, sizeof buf,
+                    "rotation part is not a rotation (max |R^T R - I| = %.3g, det = %.6g; tolerance 1e-3)", err, det);
+      failLine(path, line_no, buf);
+    }
+    if (err > kExactTolerance) {
+      // Nearest rotation in the Frobenius sense; det stays +1 because R was already within 1e-3 of a rotation.
+      const Eigen::JacobiSVD<Eigen::Matrix3d> svd(r, Eigen::ComputeFullU | Eigen::ComputeFullV);
+      r = svd.matrixU() * svd.matrixV().transpose();
+    }
+    Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
+    pose.linear() = r;
+    pose.translation() = t;
+    poses.push_back(pose);
+  }
+  if (in.bad()) fail(path, std::string("read failed: ") + std::strerror(errno));
+  return poses;
+}
+
+void writeKittiPoses(const std::string &path, const std::vector<Eigen::Isometry3d> &poses) {
+  std::string text;
+  text.reserve(poses.size() * 12 * 25);
+  for (std::size_t i = 0; i < poses.size(); ++i) {
+    const Eigen::Matrix4d m = poses[i].matrix();
+    for (int row = 0; row < 3; ++row) {
+      for (int col = 0; col < 4; ++col) {
+        const double value = m(row, col);
+        if (!std::isfinite(value)) fail(path, "pose " + std::to_string(i) + " has a non-finite element");
+        // Shortest representation that parses back to the same double; locale-independent.
+        char buf[32];
+        const auto res = std::to_chars(buf, buf + sizeof buf, value);
+        text.append(buf, res.ptr);
+        text += (row == 2 && col == 3) ? '\n' : ' ';
+      }
+    }
+  }
+
+  std::FILE *file = std::fopen(path.c_str(), "wb");
+  if (!file) fail(path, std::string("cannot open for writing: ") + std::strerror(errno));
+  const bool wrote = std::fwrite(text.data(), 1, text.size(), file) == text.size();
+  int err = errno;
+  const bool closed = std::fclose(file) == 0;
+  if (!closed && wrote) err = errno;
+  if (!wrote || !closed) {
+    std::remove(path.c_str());
+    fail(path, std::string("write failed: ") + std::strerror(err));
+  }
+}
+
+}  // namespace hpds
