@@ -243,6 +243,57 @@ TEST(Pipeline, MapModeNeverMovesOrRelevelsEarlierSamples) {
   }
 }
 
+TEST(Pipeline, SamplesHitByTheLastFrameMatchBruteForce) {
+  SyntheticLidarConfig lc = smallLidar(SceneKind::Urban, 3);
+  lc.beams = 8;
+  lc.azimuth_steps = 360;
+  const SyntheticLidar lidar(lc);
+  HpdsConfig c;
+  c.mode = Mode::Map;
+  c.output.level = 4;
+  Pipeline p(c);
+  p.addFrame(lidar.frame(0).frame);
+  p.addFrame(lidar.frame(1).frame);
+  const Frame last = lidar.frame(2).frame;
+  p.addFrame(last);
+  const Hierarchy &h = p.hierarchy();
+  const double radius = 2.0 * h.radius(4);
+  // The frame's valid points in the map frame, by the pipeline's own rules (no NaN here; zeros are no-returns).
+  std::vector<Eigen::Vector3d> pts;
+  const PointLayout &l = last.points.layout();
+  for (std::size_t i = 0; i < last.points.size(); ++i) {
+    const Eigen::Vector3d v(readAsDouble(last.points.record(i), *l.find("x")), readAsDouble(last.points.record(i), *l.find("y")),
+                            readAsDouble(last.points.record(i), *l.find("z")));
+    if (v.isZero(0.0)) continue;
+    pts.push_back(last.sensor_to_fixed.linear() * v + last.sensor_to_fixed.translation());
+  }
+  const std::vector<SampleId> hit = p.samplesHitByLastFrame(1, 4, radius);
+  std::vector<SampleId> want;
+  for (SampleId id : h.samplesUpTo(4)) {
+    if (h.level(id) < 1) continue;
+    const Eigen::Vector3d s(h.position(id)[0], h.position(id)[1], h.position(id)[2]);
+    for (const auto &q : pts)
+      if ((q - s).squaredNorm() < radius * radius) {
+        want.push_back(id);
+        break;
+      }
+  }
+  std::vector<SampleId> only_hit, only_want;
+  std::set_difference(hit.begin(), hit.end(), want.begin(), want.end(), std::back_inserter(only_hit));
+  std::set_difference(want.begin(), want.end(), hit.begin(), hit.end(), std::back_inserter(only_want));
+  for (SampleId id : only_hit) ADD_FAILURE() << "extra " << id << " level " << h.level(id);
+  for (SampleId id : only_want) ADD_FAILURE() << "missing " << id << " level " << h.level(id);
+  EXPECT_EQ(hit, want);
+  // Coverage: with radius 2 r_L every point of the sweep has a hit sample of levels 0..L.
+  const std::vector<SampleId> all = p.samplesHitByLastFrame(0, 4, radius * (1 + 1e-9));
+  for (std::size_t i = 0; i < pts.size(); i += 13) {
+    bool covered = false;
+    for (SampleId id : all)
+      covered = covered || (pts[i] - Eigen::Vector3d(h.position(id)[0], h.position(id)[1], h.position(id)[2])).norm() <= radius * (1 + 1e-9);
+    ASSERT_TRUE(covered) << "point " << i;
+  }
+}
+
 TEST(Pipeline, EvictionBoundsMemoryOnALongDrive) {
   SyntheticLidarConfig lc = smallLidar(SceneKind::Urban, 40);
   lc.speed = 4.0;

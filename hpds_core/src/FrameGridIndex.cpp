@@ -20,11 +20,13 @@ std::uint64_t mix(std::uint64_t k) {
 
 FrameGridIndex::FrameGridIndex(const double *xyz, const std::vector<std::uint32_t> &subset, double radius)
     : xyz_(xyz), radius_(radius), inv_(1.0 / radius) {
-  // Cells are counted from the frame's minimum corner so that 21 bits per axis cover 2M cells of `radius`.
+  // Cells are counted from one radius below the points' minimum corner, so that 21 bits per axis cover 2M cells
+  // of `radius` and any query within `radius` of an indexed point has non-negative cells.
   if (!subset.empty()) {
     for (int a = 0; a < 3; ++a) origin_[a] = xyz[3 * std::size_t(subset[0]) + a];
     for (std::uint32_t i : subset)
       for (int a = 0; a < 3; ++a) origin_[a] = std::min(origin_[a], xyz[3 * std::size_t(i) + a]);
+    for (double &o : origin_) o -= radius;
   }
   std::vector<std::pair<std::uint64_t, std::uint32_t>> keyed;
   keyed.reserve(subset.size());

@@ -5,6 +5,7 @@
 #include <cmath>
 #include <stdexcept>
 
+#include "hpds/FrameGridIndex.hpp"
 #include "hpds/InsertionOrderer.hpp"
 #include "hpds/OutputCloud.hpp"
 
@@ -153,6 +154,29 @@ std::vector<SampleId> Pipeline::outputSamplesNear(const double center[3], double
   hierarchy_.forEachInBall(center, radius, output_level_, [&](SampleId id, double) { out.push_back(id); });
   std::sort(out.begin(), out.end());
   return out;
+}
+
+std::vector<SampleId> Pipeline::samplesHitByLastFrame(int min_level, int max_level, double radius) const {
+  std::vector<SampleId> hit;
+  if (candidates_.empty() || !(radius > 0.0)) return hit;
+  // The last frame's candidates are still in xyz_ (fixed frame): bucket them once, then test each sample near
+  // them against its 27 buckets.
+  const FrameGridIndex index(xyz_.data(), candidates_, radius);
+  double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+  for (std::uint32_t i : candidates_)
+    for (int a = 0; a < 3; ++a) {
+      lo[a] = std::min(lo[a], xyz_[3 * std::size_t(i) + a] - radius);
+      hi[a] = std::max(hi[a], xyz_[3 * std::size_t(i) + a] + radius);
+    }
+  for (SampleId id = 0; id < hierarchy_.idBound(); ++id) {
+    if (!hierarchy_.isLive(id)) continue;
+    const int l = hierarchy_.level(id);
+    if (l < min_level || l > max_level) continue;
+    const double *p = hierarchy_.position(id);
+    if (p[0] < lo[0] || p[0] > hi[0] || p[1] < lo[1] || p[1] > hi[1] || p[2] < lo[2] || p[2] > hi[2]) continue;
+    if (index.anyWithin(p)) hit.push_back(id);
+  }
+  return hit;
 }
 
 PointBuffer Pipeline::makeCloud(const std::vector<SampleId> &ids, bool with_frame_field, double *seconds_normals) const {

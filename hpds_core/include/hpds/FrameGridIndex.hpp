@@ -19,7 +19,19 @@ class FrameGridIndex {
   /// Calls fn(point_index) for every indexed point strictly within `radius` of point `center` (itself included).
   template <typename Fn>
   void forEachNeighbor(std::uint32_t center, Fn &&fn) const {
-    const double *q = xyz_ + 3 * std::size_t(center);
+    forEachWithin(xyz_ + 3 * std::size_t(center), fn);
+  }
+
+  /// True when some indexed point lies strictly within `radius` of `q` (any position, indexed or not).
+  [[nodiscard]] bool anyWithin(const double q[3]) const {
+    bool found = false;
+    forEachWithin(q, [&](std::uint32_t) { found = true; });
+    return found;
+  }
+
+  /// Calls fn(point_index) for every indexed point strictly within `radius` of `q`.
+  template <typename Fn>
+  void forEachWithin(const double q[3], Fn &&fn) const {
     std::int64_t k[3];
     if (!cellOf(q, k)) return;
     const double r2 = radius_ * radius_;

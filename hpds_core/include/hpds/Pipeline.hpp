@@ -60,6 +60,10 @@ class Pipeline {
   [[nodiscard]] std::vector<SampleId> atOutputLevels(const std::vector<SampleId> &ids) const;
   /// Output-level samples strictly within `radius` of `center` (fixed frame).
   [[nodiscard]] std::vector<SampleId> outputSamplesNear(const double center[3], double radius) const;
+  /// Samples of levels min_level..max_level that the last frame "hit": at least one of its inserted candidates
+  /// (the points that passed the skip rules, in the fixed frame) lies strictly within `radius`. With radius 2 r_L
+  /// every candidate has a hit sample (coverage), so this is the map as that sweep saw it. Increasing id order.
+  [[nodiscard]] std::vector<SampleId> samplesHitByLastFrame(int min_level, int max_level, double radius) const;
   /// Output cloud of `ids` (normals estimated when normals.enabled), layout of OutputCloud.hpp.
   [[nodiscard]] PointBuffer makeCloud(const std::vector<SampleId> &ids, bool with_frame_field,
                                       double *seconds_normals = nullptr) const;
