@@ -534,6 +534,10 @@ TEST(PointRender, NearestPointWinsAndViewsMapAxes) {
   EXPECT_GT(red, 0);
   EXPECT_GT(blue, 0);
   EXPECT_THROW((void)renderPoints(pts, {}, o), std::invalid_argument);
+  // A priority overrides depth: the lower point (red) now covers the higher one from the top.
+  o.view = ViewDirection::Top;
+  const std::vector<double> prio = {2.0, 1.0, 0.0};
+  EXPECT_EQ(renderPoints(pts, col, o, &prio).at(10, 110)[0], 255);
 }
 
 TEST(PointRender, ColourMaps) {

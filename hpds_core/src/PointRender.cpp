@@ -25,8 +25,10 @@ Eigen::Vector3d viewCoords(const Eigen::Vector3d &p, ViewDirection v) {
 }  // namespace
 
 RgbImage renderPoints(const std::vector<Eigen::Vector3d> &points, const std::vector<Rgb> &colors,
-                      const RenderOptions &o) {
+                      const RenderOptions &o, const std::vector<double> *priority) {
   if (colors.size() != points.size()) throw std::invalid_argument("renderPoints: one colour per point is required");
+  if (priority && priority->size() != points.size())
+    throw std::invalid_argument("renderPoints: one priority per point is required");
   if (o.max_width <= 2 * o.margin_px + 1 || o.max_height <= 2 * o.margin_px + 1)
     throw std::invalid_argument("renderPoints: image too small for its margin");
   const bool cropped = !o.crop.isEmpty();
@@ -65,8 +67,9 @@ RgbImage renderPoints(const std::vector<Eigen::Vector3d> &points, const std::vec
         const double ex = x + 0.5 - px, ey = y + 0.5 - py;
         if (ex * ex + ey * ey > rp * rp && !(dx == 0 && dy == 0)) continue;
         double &d = depth[static_cast<std::size_t>(y) * w + x];
-        if (v.z() <= d) continue;
-        d = v.z();
+        const double z = priority ? (*priority)[i] : v.z();
+        if (z <= d) continue;
+        d = z;
         img.set(x, y, colors[i][0], colors[i][1], colors[i][2]);
       }
   }

@@ -9,5 +9,7 @@ namespace hpds::cli {
 void addSampleCommand(CLI::App &app);
 void addVerifyCommand(CLI::App &app);
 void addSynthCommand(CLI::App &app);
+void addAnalyzeCommand(CLI::App &app);
+void addRenderCommand(CLI::App &app);
 
 }  // namespace hpds::cli

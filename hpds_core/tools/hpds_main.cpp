@@ -14,6 +14,8 @@ int main(int argc, char **argv) {
   hpds::cli::addSampleCommand(app);
   hpds::cli::addVerifyCommand(app);
   hpds::cli::addSynthCommand(app);
+  hpds::cli::addAnalyzeCommand(app);
+  hpds::cli::addRenderCommand(app);
 #ifdef HPDS_WITH_ROS
   hpds::cli::addReplayCommand(app);
 #endif

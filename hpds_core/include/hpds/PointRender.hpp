@@ -5,7 +5,8 @@
 //   looks along -x (right = +y, up = +z). The scale fits the points' (or the crop box's) extent into
 //   max_width x max_height pixels, keeping the aspect ratio, with a `margin_px` border.
 // - Each point is a filled disc of `splat_radius` metres (at least 1 pixel across); the point nearest the viewer wins
-//   a pixel (a depth buffer), so front surfaces hide what lies behind them.
+//   a pixel (a depth buffer), so front surfaces hide what lies behind them. With `priority` (one value per point) the
+//   largest priority wins instead, whatever the depth: e.g. coarse levels drawn over the dense fine ones.
 // - Colour helpers: levelColor is a fixed palette of 12 distinct hues cycling with the level; normalColor maps a unit
 //   normal n to ((n + 1) / 2) * 255 per axis (x red, y green, z blue), the paper's normal images; scalarColor maps
 //   t in [0, 1] (clamped; NaN -> grey) through a dark-blue -> teal -> yellow ramp with increasing lightness, so
@@ -37,7 +38,7 @@ struct RenderOptions {
 };
 
 [[nodiscard]] RgbImage renderPoints(const std::vector<Eigen::Vector3d> &points, const std::vector<Rgb> &colors,
-                                    const RenderOptions &options);
+                                    const RenderOptions &options, const std::vector<double> *priority = nullptr);
 
 [[nodiscard]] Rgb levelColor(int level);
 [[nodiscard]] Rgb normalColor(const Eigen::Vector3d &normal);

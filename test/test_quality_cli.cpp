@@ -1,0 +1,137 @@
+// `hpds analyze` and `hpds render` end to end on a small synthetic drive: the files they promise, the blue-noise
+// properties the analysis must find in an hpds sampling (and not in the grid baselines), and clear errors.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstring>
+#include <fstream>
+#include <regex>
+#include <sstream>
+#include <string>
+
+#include "TestData.hpp"
+
+namespace hpds {
+namespace {
+
+using test::cliPath;
+using test::runCommand;
+
+std::string q(const std::filesystem::path &p) { return "'" + p.string() + "'"; }
+int hpds(const std::string &args, std::string *out = nullptr) { return runCommand(cliPath() + " " + args, out); }
+
+std::string readText(const std::filesystem::path &p) {
+  std::ifstream f(p);
+  return std::string(std::istreambuf_iterator<char>(f), {});
+}
+
+bool isPng(const std::filesystem::path &p) {
+  std::ifstream f(p, std::ios::binary);
+  char sig[8] = {};
+  f.read(sig, 8);
+  return f && std::memcmp(sig, "\x89PNG\r\n\x1a\n", 8) == 0;
+}
+
+/// The value of `key` in the comparison set of `method` in analysis.json (written one set per line).
+double comparisonValue(const std::string &json, const std::string &method, const std::string &key) {
+  const std::regex line("\\{\"method\": \"" + method + "\", \"level\": [0-9]+,[^\\n]*\"" + key + "\": ([-0-9.e]+)");
+  std::smatch m;
+  // The per-level entries also hold an hpds set; the comparison block comes last.
+  std::string::const_iterator from = json.begin() + static_cast<long>(json.find("\"comparison\""));
+  if (!std::regex_search(from, json.end(), m, line)) return NAN;
+  return std::stod(m[1]);
+}
+
+class QualityCli : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    dir_ = new std::filesystem::path(test::scratchDir("quality_cli"));
+    std::string log;
+    ASSERT_EQ(hpds("synth -o " + q(*dir_ / "stream") + " --frames 4 --scene planar_urban --seed 3", &log), 0) << log;
+    ASSERT_EQ(hpds("sample " + q(*dir_ / "stream") + "/frame_*.pcd --poses " + q(*dir_ / "stream/poses.txt") +
+                       " --mode map --normals --cell-size 4 --max-depth 7 --spacing 0.15 -o " + q(*dir_ / "map.ply"),
+                   &log),
+              0)
+        << log;
+  }
+  static void TearDownTestSuite() { delete dir_; }
+  static std::filesystem::path *dir_;
+};
+std::filesystem::path *QualityCli::dir_ = nullptr;
+
+TEST_F(QualityCli, AnalyzeWritesDataAndFindsBlueNoiseOnlyInHpds) {
+  const auto out = *dir_ / "analysis";
+  std::string log;
+  ASSERT_EQ(hpds("analyze " + q(*dir_ / "map.ply") + " --cell-size 4 -o " + q(out) + " --input " + q(*dir_ / "stream") +
+                     "/frame_*.pcd --poses " + q(*dir_ / "stream/poses.txt") + " --plane-band 0.04 --no-plots",
+                 &log),
+            0)
+      << log;
+  for (const char *f : {"analysis.json", "levels.csv", "rdf.csv", "spectrum.csv"})
+    EXPECT_TRUE(std::filesystem::exists(out / f)) << f;
+  for (const char *m : {"hpds", "grid_random", "grid_closest", "voxel_centroid", "random"}) {
+    EXPECT_TRUE(isPng(out / ("periodogram_" + std::string(m) + "_L5.png"))) << m;
+    EXPECT_TRUE(isPng(out / ("points_" + std::string(m) + "_L5.png"))) << m;
+  }
+  const std::string json = readText(out / "analysis.json");
+  // Equal count by construction (bisection may miss by a few points for the grids).
+  const double n = comparisonValue(json, "hpds", "count");
+  ASSERT_GT(n, 300.0) << json;
+  EXPECT_EQ(comparisonValue(json, "random", "count"), n);
+  for (const char *m : {"grid_random", "grid_closest", "voxel_centroid"})
+    EXPECT_NEAR(comparisonValue(json, m, "count"), n, 0.02 * n) << m;
+  // hpds: no pair closer than r_D in 3D. Projected onto the plane, two samples within the +-4 cm band can come
+  // closer: at worst sqrt(r^2 - (8 cm)^2) = 0.67 r at level 5. The baselines have pairs far closer.
+  EXPECT_GT(comparisonValue(json, "hpds", "min_nn_over_r"), 0.67);
+  EXPECT_LT(comparisonValue(json, "grid_random", "min_nn_over_r"), 0.5);
+  EXPECT_LT(comparisonValue(json, "random", "min_nn_over_r"), 0.5);
+  // Structural aliasing: the closest-to-centre grid concentrates energy in spikes that blue noise does not have.
+  EXPECT_GT(comparisonValue(json, "grid_closest", "power_max"), 5.0 * comparisonValue(json, "hpds", "power_max"));
+  // Per level, the whole union keeps its spacing in 3D: min NN / r_D >= 1 up to float rounding.
+  const std::string levels = readText(out / "levels.csv");
+  std::istringstream rows(levels);
+  std::string row;
+  std::getline(rows, row);
+  EXPECT_EQ(row, "level,r,count,union_count,min_nn_over_r,mean_nn_over_r,patch_points");
+  int nrows = 0;
+  while (std::getline(rows, row)) {
+    ++nrows;
+    std::vector<std::string> cols;
+    std::stringstream ss(row);
+    for (std::string c; std::getline(ss, c, ',');) cols.push_back(c);
+    ASSERT_EQ(cols.size(), 7u) << row;
+    if (cols[4] != "null") {
+      EXPECT_GT(std::stod(cols[4]), 0.999) << row;
+    }
+  }
+  EXPECT_EQ(nrows, 6);  // levels 0..5
+}
+
+TEST_F(QualityCli, RenderWritesEveryColourAndView) {
+  const auto out = *dir_ / "render";
+  std::string log;
+  ASSERT_EQ(hpds("render " + q(*dir_ / "map.ply") + " -o " + q(out) + " --width 400 --height 300", &log), 0) << log;
+  for (const char *c : {"level", "normal", "feature"})
+    for (const char *v : {"top", "front", "side"})
+      EXPECT_TRUE(isPng(out / ("render_" + std::string(c) + "_" + v + ".png"))) << c << " " << v;
+  // A crop with nothing inside is an error, not an empty picture.
+  EXPECT_EQ(hpds("render " + q(*dir_ / "map.ply") + " -o " + q(out) + " --crop 900,900,900,901,901,901", &log), 1);
+  EXPECT_NE(log.find("no points to render"), std::string::npos) << log;
+}
+
+TEST_F(QualityCli, BadInputGivesClearErrors) {
+  std::string log;
+  // A plain cloud has no level field.
+  EXPECT_EQ(hpds("analyze " + q(*dir_ / "stream/frame_000000.pcd") + " --cell-size 4 -o " + q(*dir_ / "bad"), &log), 1);
+  EXPECT_NE(log.find("no `level` field"), std::string::npos) << log;
+  EXPECT_NE(hpds("analyze " + q(*dir_ / "map.ply") + " --cell-size 4 -o " + q(*dir_ / "bad") + " --patch 1,2", &log), 0);
+  EXPECT_EQ(hpds("analyze " + q(*dir_ / "map.ply") + " --cell-size 0 -o " + q(*dir_ / "bad"), &log), 1);
+  EXPECT_NE(log.find("--cell-size"), std::string::npos) << log;
+  // A patch in empty space.
+  EXPECT_EQ(hpds("analyze " + q(*dir_ / "map.ply") + " --cell-size 4 -o " + q(*dir_ / "bad") + " --patch 500,500,4 "
+                 "--no-plots", &log), 1);
+  EXPECT_NE(log.find("--patch"), std::string::npos) << log;
+}
+
+}  // namespace
+}  // namespace hpds
