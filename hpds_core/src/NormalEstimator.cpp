@@ -10,6 +10,7 @@
 #include "hpds/FrameGridIndex.hpp"
 #include "hpds/LocalPca.hpp"
 #include "hpds/ParallelFor.hpp"
+#include "RefinedNormals.hpp"
 
 namespace hpds {
 
@@ -39,6 +40,7 @@ void gather(const Hierarchy &h, const double *q, double radius, int level,
 
 std::vector<SampleNormal> estimateNormals(const Hierarchy &h, const std::vector<SampleId> &ids,
                                           const NormalParams &params) {
+  if (params.neighborhood_level_offset > 0 || params.max_growth > 1.0) return estimateNormalsRefined(h, ids, params);
   std::vector<SampleNormal> result(ids.size(), invalidNormal());
   if (ids.empty()) return result;
   const int level = std::min(params.level, h.maxDepth());

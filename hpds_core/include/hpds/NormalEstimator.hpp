@@ -8,6 +8,16 @@
 // - Fewer than `min_neighbors` neighbours (the sample included) or a degenerate neighbourhood gives valid = false
 //   and NaN normal/curvature (PCL's convention for "not estimated"); never a garbage direction marked valid.
 // - curvature = l0 / (l0 + l1 + l2). Results are per id, independent of the thread count.
+// - Refinements (both off by default; see RefinedNormals.cpp):
+//   - neighborhood_level_offset o > 0: the footprint is chosen as above at `level` (the radius, or the distance of
+//     the k-th nearest sample of levels 0..level), then every sample of levels 0..level+o inside it is used. Finer
+//     levels average the range noise, which a single Poisson-disk level cannot.
+//   - max_growth g > 1: a neighbourhood that is line-like (l1 < line_ratio * l2: one scan line) or has fewer than
+//     min_neighbors samples doubles its footprint, up to g times the first one (and twice the level-0 cell edge).
+//     A grown neighbourhood replaces the previous one only if it is flat (RMS distance to its plane <=
+//     max_plane_rms * its radius); the first non-flat one stops the growth. The line test needs a footprint long
+//     against the range noise (~20 sigma), as at the usual output levels.
+//   Measured gains and costs: bench/README_QUALITY.md.
 #pragma once
 
 #include <cstdint>
@@ -24,6 +34,10 @@ struct NormalParams {
   int k = 0;                ///< 0: every neighbour within radius
   int min_neighbors = 5;
   int threads = 1;
+  int neighborhood_level_offset = 0;  ///< also take neighbours from levels level+1..level+offset (0 = off)
+  double max_growth = 1.0;            ///< grow line-like/too small neighbourhoods up to this factor (1 = off)
+  double line_ratio = 0.05;           ///< l1 / l2 below this counts as line-like
+  double max_plane_rms = 0.02;        ///< a grown neighbourhood must fit its plane within this * its radius (RMS)
 };
 
 struct SampleNormal {
