@@ -268,8 +268,19 @@ std::size_t Hierarchy::evictToCap(const double center[3], std::size_t max_sample
   return excess;
 }
 
+void Hierarchy::shrink() {
+  for (auto &g : grids_)
+    if (g.size() == 0) g.clear();
+  xyz_.shrink_to_fit();
+  level_.shrink_to_fit();
+  frame_.shrink_to_fit();
+  to_view_.shrink_to_fit();
+  records_.shrink_to_fit();
+  free_ids_.shrink_to_fit();
+}
+
 void Hierarchy::clear() {
-  for (auto &g : grids_) g.clear();
+  for (auto &g : grids_) g.reset();
   xyz_.clear();
   level_.clear();
   frame_.clear();

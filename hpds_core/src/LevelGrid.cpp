@@ -51,6 +51,11 @@ void LevelGrid::clear() {
   mask_ = 0;
 }
 
+void LevelGrid::reset() {
+  for (Slot &s : slots_) s.id = kNoSample;
+  size_ = 0;
+}
+
 void LevelGrid::rehash(std::size_t new_capacity) {
   std::vector<Slot> old;
   old.swap(slots_);

@@ -77,7 +77,9 @@ class Hierarchy {
   std::size_t evictOutside(const double center[3], double distance);
   /// Removes the samples farthest from `center` until at most `max_samples` remain; returns how many.
   std::size_t evictToCap(const double center[3], std::size_t max_samples);
+  /// Removes every sample. Memory is kept for the next batch (scan mode); call shrink() to give it back.
   void clear();
+  void shrink();
 
   [[nodiscard]] int maxDepth() const { return max_depth_; }
   [[nodiscard]] double cellSize() const { return cell_size_; }

@@ -39,7 +39,10 @@ class LevelGrid {
   bool insert(const CellKey &key, SampleId id);
   /// Frees `key`'s cell; returns false when it was free.
   bool erase(const CellKey &key);
+  /// Frees memory too.
   void clear();
+  /// Empties the grid but keeps its capacity (scan mode refills a similar amount every frame).
+  void reset();
 
   [[nodiscard]] std::size_t size() const { return size_; }
   [[nodiscard]] std::size_t capacity() const { return slots_.size(); }
