@@ -1,7 +1,6 @@
 #include "hpds_node/FrameProcessor.hpp"
 
 #include <tf2/exceptions.h>
-#include <tf2_eigen/tf2_eigen.h>
 
 #include <algorithm>
 #include <chrono>
@@ -72,13 +71,28 @@ std::uint64_t ProcessorStats::droppedTotal() const {
 
 bool lookupSensorPose(const tf2::BufferCore &buffer, const std::string &target, const std::string &source,
                       const ros::Time &stamp, Eigen::Isometry3d &pose, std::string *why) {
+  geometry_msgs::TransformStamped t;
   try {
-    pose = tf2::transformToEigen(buffer.lookupTransform(target, source, stamp));
+    t = buffer.lookupTransform(target, source, stamp);
   } catch (const tf2::TransformException &e) {
     if (why) *why = e.what();
     return false;
   }
-  if (!pose.matrix().allFinite()) {
+  // tf2 hands back a stored transform bit for bit only while it is the newest sample; once a later one is in the
+  // buffer it slerps with t = 0, which changes the last bits. Whether the node's buffer already holds the next
+  // transform is a matter of timing (the replay's always does), so the pose is rounded to a grid far below lidar
+  // precision (quaternion to float32, ~1e-7 rad; translation to 2^-20 m, ~1 um): the samples then depend on the
+  // recorded transforms only, and the node and `hpds replay` agree.
+  const auto &r = t.transform.rotation;
+  Eigen::Quaterniond q(double(float(r.w)), double(float(r.x)), double(float(r.y)), double(float(r.z)));
+  q.normalize();
+  constexpr double kGrid = 1048576.0;  // 2^20 per metre
+  const auto &p = t.transform.translation;
+  pose = Eigen::Isometry3d::Identity();
+  pose.linear() = q.toRotationMatrix();
+  pose.translation() = Eigen::Vector3d(std::nearbyint(p.x * kGrid), std::nearbyint(p.y * kGrid),
+                                       std::nearbyint(p.z * kGrid)) / kGrid;
+  if (!pose.matrix().allFinite() || !std::isfinite(q.norm())) {
     if (why) *why = "transform " + source + " -> " + target + " is not finite";
     return false;
   }

@@ -113,12 +113,14 @@ TEST(NodeConfig, RosDumpLoadsBack) {
   EXPECT_EQ(d.ros.queue_size, c.ros.queue_size);
 }
 
-// The project's documented config file loads as node settings (the node reads it through <rosparam load>).
-TEST(NodeConfig, ProjectConfigFileLoads) {
+// The project's documented config file loads as node settings (the node reads it through <rosparam load>) and,
+// when it documents the ros: section, with exactly the RosConfig defaults.
+TEST(NodeConfig, ProjectConfigFileLoadsWithTheDefaults) {
   const std::string path = std::string(HPDS_SOURCE_DIR) + "/config/hpds.yaml";
   NodeConfig c;
   ASSERT_NO_THROW(c = hpds_node::loadNodeConfigFile(path));
-  EXPECT_EQ(hpds::dumpConfigYaml(c.hpds), hpds::dumpConfigYaml(hpds::loadConfigFile(path)));
+  EXPECT_EQ(hpds::dumpConfigYaml(c.hpds), hpds::dumpConfigYaml(hpds::HpdsConfig{}));
+  EXPECT_EQ(hpds_node::dumpRosConfigYaml(c.ros), hpds_node::dumpRosConfigYaml(hpds_node::RosConfig{}));
 }
 
 }  // namespace

@@ -94,8 +94,14 @@ TEST(HpdsNodeScan, RealFramesGiveValidOutput) {
     std::vector<std::unique_ptr<Collector<PointCloud2>>> levels;
     for (int d : config.ros.publish_levels)
       levels.push_back(std::make_unique<Collector<PointCloud2>>(nh, target + "/level_" + std::to_string(d)));
-    ASSERT_TRUE(hpds_test::waitFor([&] { return output.connected() && pub.getNumSubscribers() >= targets.size(); },
-                                   30.0))
+    // Outputs are built only for connected subscribers: every collector must be connected before publishing.
+    ASSERT_TRUE(hpds_test::waitFor(
+        [&] {
+          bool all = output.connected() && pub.getNumSubscribers() >= targets.size();
+          for (const auto &l : levels) all = all && l->connected();
+          return all;
+        },
+        30.0))
         << "no connection to " << target;
 
     for (std::size_t i = 0; i < files.size(); ++i) {

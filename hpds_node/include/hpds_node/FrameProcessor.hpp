@@ -118,7 +118,9 @@ class FrameProcessor {
 };
 
 /// Pose of frame `source` (the sensor) in `target` at `stamp` from any tf2 buffer (the node's listener buffer or
-/// the replay's, filled from the bag); false with `why` set when the buffer cannot answer.
+/// the replay's, filled from the bag); false with `why` set when the buffer cannot answer. The pose is rounded
+/// (rotation to float32 quaternion precision, translation to 2^-20 m) so that it does not depend on whether the
+/// buffer already holds later transforms, which changes the last bits of tf2's result.
 bool lookupSensorPose(const tf2::BufferCore &buffer, const std::string &target, const std::string &source,
                       const ros::Time &stamp, Eigen::Isometry3d &pose, std::string *why = nullptr);
 
