@@ -1,5 +1,7 @@
 #include "hpds/io/KittiBin.hpp"
 
+#include "FileAccess.hpp"
+
 #include <algorithm>
 #include <cerrno>
 #include <cstdio>
@@ -13,18 +15,13 @@
 namespace hpds {
 namespace {
 
+using io_detail::fail;
+using io_detail::FilePtr;
+using io_detail::requireRegularFile;
+
 constexpr std::size_t kRecordBytes = 16;
 
-[[noreturn]] void fail(const std::string &path, const std::string &what) {
-  throw std::runtime_error(path + ": " + what);
-}
 
-struct FileCloser {
-  void operator()(std::FILE *f) const {
-    if (f) std::fclose(f);
-  }
-};
-using FilePtr = std::unique_ptr<std::FILE, FileCloser>;
 
 PointLayout kittiLayout() {
   PointLayout layout;
@@ -40,10 +37,7 @@ PointLayout kittiLayout() {
 PointBuffer readKittiBin(const std::string &path) {
   namespace fs = std::filesystem;
   std::error_code ec;
-  const auto status = fs::status(path, ec);
-  if (status.type() == fs::file_type::not_found) fail(path, "file not found");
-  if (status.type() == fs::file_type::none) fail(path, "cannot access: " + ec.message());
-  if (!fs::is_regular_file(status)) fail(path, "not a regular file");
+  requireRegularFile(path);
   const std::uintmax_t size = fs::file_size(path, ec);
   if (ec) fail(path, "cannot determine file size: " + ec.message());
   if (size == 0) fail(path, "empty file (0 bytes)");

@@ -1,5 +1,7 @@
 #include "hpds/io/PlyWriter.hpp"
 
+#include "FileAccess.hpp"
+
 #include <algorithm>
 #include <cerrno>
 #include <cstdio>
@@ -12,16 +14,11 @@
 namespace hpds {
 namespace {
 
-[[noreturn]] void fail(const std::string &path, const std::string &what) {
-  throw std::runtime_error(path + ": " + what);
-}
+using io_detail::fail;
+using io_detail::FilePtr;
+using io_detail::requireRegularFile;
 
-struct FileCloser {
-  void operator()(std::FILE *f) const {
-    if (f) std::fclose(f);
-  }
-};
-using FilePtr = std::unique_ptr<std::FILE, FileCloser>;
+
 
 // The original PLY type names: every PLY reader knows them, while the sized aliases (int8, float32...) are an
 // extension some readers lack.

@@ -1,5 +1,7 @@
 #include "hpds/io/PoseFile.hpp"
 
+#include "FileAccess.hpp"
+
 #include <Eigen/SVD>
 #include <array>
 #include <cerrno>
@@ -17,9 +19,10 @@
 namespace hpds {
 namespace {
 
-[[noreturn]] void fail(const std::string &path, const std::string &what) {
-  throw std::runtime_error(path + ": " + what);
-}
+using io_detail::fail;
+using io_detail::FilePtr;
+using io_detail::requireRegularFile;
+
 
 [[noreturn]] void failLine(const std::string &path, std::size_t line, const std::string &what) {
   throw std::runtime_error(path + ":" + std::to_string(line) + ": " + what);
@@ -39,12 +42,7 @@ double orthonormalityError(const Eigen::Matrix3d &r) {
 }  // namespace
 
 std::vector<Eigen::Isometry3d> readKittiPoses(const std::string &path) {
-  namespace fs = std::filesystem;
-  std::error_code ec;
-  const auto status = fs::status(path, ec);
-  if (status.type() == fs::file_type::not_found) fail(path, "file not found");
-  if (status.type() == fs::file_type::none) fail(path, "cannot access: " + ec.message());
-  if (!fs::is_regular_file(status)) fail(path, "not a regular file");
+  requireRegularFile(path);
   std::ifstream in(path, std::ios::binary);
   if (!in) fail(path, std::string("cannot open: ") + std::strerror(errno));
 

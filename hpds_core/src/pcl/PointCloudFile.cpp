@@ -8,6 +8,8 @@
 
 #include "hpds/io/PointCloudFile.hpp"
 
+#include "../io/FileAccess.hpp"
+
 #include <pcl/PCLPointCloud2.h>
 #include <pcl/console/print.h>
 #include <pcl/io/pcd_io.h>
@@ -40,9 +42,7 @@ namespace {
 
 namespace fs = std::filesystem;
 
-[[noreturn]] void fail(const std::string &path, const std::string &what) {
-  throw std::runtime_error(path + ": " + what);
-}
+using io_detail::fail;
 
 // Headers are small (a few hundred bytes); a file with no end of header in this many bytes is not a point cloud.
 constexpr std::size_t kMaxHeaderBytes = 1 << 20;
@@ -120,12 +120,9 @@ struct FileBytes {
 };
 
 FileBytes openForReading(const std::string &path) {
-  std::error_code ec;
-  const auto status = fs::status(path, ec);
-  if (status.type() == fs::file_type::not_found) fail(path, "file not found");
-  if (status.type() == fs::file_type::none) fail(path, "cannot access: " + ec.message());
   // Also keeps FIFOs and devices out: reading them could block forever.
-  if (!fs::is_regular_file(status)) fail(path, "not a regular file");
+  io_detail::requireRegularFile(path);
+  std::error_code ec;
   FileBytes file;
   file.size = fs::file_size(path, ec);
   if (ec) fail(path, "cannot determine file size: " + ec.message());
