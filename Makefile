@@ -1,15 +1,20 @@
 # Entry points a fresh Debian bookworm clone needs: every target installs what is missing, configures and builds.
 #   make demo   synthetic lidar stream -> map-mode sampling with normals -> PLY -> verify -> per-level summary
 #   make test   every test (GoogleTest suites and ROS tests) through ctest
+#   make test-sanitize   the same tests built with AddressSanitizer + UndefinedBehaviorSanitizer (in build-asan/)
+#   make fuzz   libFuzzer targets for every parser of outside data, FUZZ_SECONDS each (in build-fuzz/)
 # catkin and rostest need Debian's python3, not a pyenv one that may come first on PATH.
 export PATH := /usr/bin:/bin:$(PATH)
 
 BUILD ?= build
 JOBS ?= 2
 DEMO_DIR ?= $(BUILD)/demo
+ASAN_BUILD ?= build-asan
+FUZZ_BUILD ?= build-fuzz
+FUZZ_SECONDS ?= 60
 HPDS := $(BUILD)/hpds_core/hpds
 
-.PHONY: all deps configure build test demo bench clean
+.PHONY: all deps configure build test test-sanitize fuzz demo bench clean
 
 all: build
 
@@ -25,6 +30,17 @@ build: configure
 
 test: build
 	@cd $(BUILD) && ctest --output-on-failure -j$(JOBS) --timeout 900
+
+# Any ASan/UBSan report aborts its test (UB is non-recoverable in that build), so "no failures" means "no reports".
+test-sanitize: deps
+	@mkdir -p $(ASAN_BUILD)
+	@cmake -S . -B $(ASAN_BUILD) -DCMAKE_BUILD_TYPE=RelWithDebInfo -DHPDS_SANITIZE=ON > $(ASAN_BUILD)/configure.log 2>&1 || { cat $(ASAN_BUILD)/configure.log; exit 1; }
+	@cmake --build $(ASAN_BUILD) -j$(JOBS)
+	@cd $(ASAN_BUILD) && ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=halt_on_error=1:print_stacktrace=1 \
+	  ctest --output-on-failure -j$(JOBS) --timeout 1800
+
+fuzz: deps
+	@FUZZ_BUILD=$(FUZZ_BUILD) FUZZ_SECONDS=$(FUZZ_SECONDS) JOBS=$(JOBS) scripts/fuzz.sh
 
 # Performance against PCL on the real frames and a 5 M point synthetic stream; prints a table, writes JSON.
 bench: build

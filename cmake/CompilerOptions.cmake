@@ -5,3 +5,12 @@ function(hpds_set_options target)
     target_compile_options(${target} PRIVATE -Wall -Wextra -Wpedantic -Wshadow=local -Wno-unused-parameter)
   endif()
 endfunction()
+
+# AddressSanitizer + UndefinedBehaviorSanitizer for every target of the build (`make test-sanitize`). Global rather
+# than per target because static libraries and the executables linking them must agree. UB is made fatal here so a
+# report fails its test even when UBSAN_OPTIONS is not set.
+option(HPDS_SANITIZE "Build with -fsanitize=address,undefined (own build directory)" OFF)
+if(HPDS_SANITIZE)
+  add_compile_options(-fsanitize=address,undefined -fno-sanitize-recover=all -fno-omit-frame-pointer)
+  add_link_options(-fsanitize=address,undefined)
+endif()

@@ -336,6 +336,25 @@ TEST(MapFileBytes, InMemoryLoaderMatchesTheFileLoader) {
   EXPECT_THROW((void)loadHierarchyBytes(nullptr, 0, "mem"), std::runtime_error);
 }
 
+TEST(MapFileBytes, HugeRecordsAreSavedInBoundedChunks) {
+  // Found by fuzz_map: saving reserved 4096 entries whatever the record size (2.7 GB for 655 kB records).
+  Hierarchy h(4.0, 2);
+  PointLayout l;
+  l.append("x", FieldType::Float32);
+  l.append("blob", FieldType::UInt8, (1u << 24) - 4);  // the largest record the format allows
+  h.setRecordLayout(l);
+  std::vector<std::uint8_t> record(l.point_step, 0x5A);
+  const float v[3] = {0, 0, 0};
+  for (int i = 0; i < 3; ++i) {
+    const double p[3] = {10.0 * i, 0, 0};
+    h.restoreSample(p, 0, 0, v, record.data());
+  }
+  const auto dir = test::scratchDir("map_huge");
+  saveHierarchy((dir / "m").string(), h);
+  const LoadedHierarchy back = loadHierarchy((dir / "m").string());
+  expectIdentical(h, back.hierarchy);
+}
+
 TEST(MapFileBytes, Crc32MatchesTheStandardCheckValue) {
   const char *s = "123456789";
   EXPECT_EQ(crc32(s, 9), 0xCBF43926u);

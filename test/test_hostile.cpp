@@ -189,8 +189,12 @@ TEST(HostileCli, MissingXyzAndUnrepresentableFieldsAreRefused) {
                                "POINTS 1\nDATA ascii\n1 2 3\n");
   writeText(tmp / "list.ply", "ply\nformat ascii 1.0\nelement vertex 1\nproperty list uchar float x\nproperty float y\n"
                               "property float z\nend_header\n1 0.5 2 3\n");
+  // Found by fuzz_pcd: a multi-element x was sampled by its first element, and the output then had no x at all.
+  writeText(tmp / "x_count_2.pcd", "VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 2 1 1\nWIDTH 1\nHEIGHT 1\n"
+                                   "POINTS 1\nDATA ascii\n1 2 3 4\n");
   const std::string out = " -o " + q(tmp / "o.ply");
   runCases({
+      {"sample " + q(tmp / "x_count_2.pcd") + out, 1, "x/y/z fields must have count 1"},
       {"sample " + q(tmp / "no_z.pcd") + out, 1, "no x/y/z fields"},
       {"sample " + q(tmp / "int64.pcd") + out, 1, "64-bit"},
       {"sample " + q(tmp / "list.ply") + out, 1, "list"},
@@ -308,6 +312,20 @@ TEST(HostileCli, InvalidConfigsNameTheKeyAndExitOne) {
   });
 }
 
+// Found by fuzz_config_yaml: yaml-cpp 0.7's LoadAll never returns on a lone ',' (yaml-cpp issue 1040), so
+// `--config` with such a file hangs while memory grows. Enable once ConfigYaml.cpp bounds the document count.
+TEST(HostileCli, DISABLED_ConfigOfALoneCommaIsRefusedNotHung) {
+  const auto tmp = test::scratchDir("hostile_comma");
+  writePcd((tmp / "f.pcd").string(), typedCloud(FieldType::Float32, gridPoints(3, 1.0)));
+  writeText(tmp / "comma.yaml", ",\n");
+  std::string log;
+  EXPECT_EQ(test::runCommand("timeout 20 " + test::cliPath() + " sample " + q(tmp / "f.pcd") + " -o " +
+                                 q(tmp / "o.ply") + " --config " + q(tmp / "comma.yaml"),
+                             &log),
+            1)
+      << log;
+}
+
 // ---------------------------------------------------------------- core Pipeline
 
 TEST(HostilePipeline, EveryNumericXyzTypeIsReadByValue) {
@@ -347,7 +365,11 @@ TEST(HostilePipeline, BrokenLayoutsThrowBeforeAnythingChanges) {
   PointLayout bad_type = dup;
   bad_type.fields[1].name = "y";
   bad_type.fields[1].type = static_cast<FieldType>(11);
-  for (const PointLayout &l : {beyond, dup, bad_type}) {
+  PointLayout vector_x;
+  vector_x.append("x", FieldType::Float32, 2);
+  vector_x.append("y", FieldType::Float32);
+  vector_x.append("z", FieldType::Float32);
+  for (const PointLayout &l : {beyond, dup, bad_type, vector_x}) {
     Frame f;
     f.points = PointBuffer(l, 0);
     f.points.bytes().assign(3 * l.point_step, 0);
@@ -539,7 +561,11 @@ TEST(Regressions, EveryFuzzerCrashInputIsHandled) {
           c.hierarchy.max_depth = 5;
           c.normals.enabled = true;
           Pipeline p(c);
-          p.addFrame(frameOf(cloud));
+          try {
+            p.addFrame(frameOf(cloud));
+          } catch (const std::invalid_argument &) {
+            continue;  // the pipeline's documented refusal (e.g. x/y/z with count > 1)
+          }
           (void)p.makeCloud(p.outputSamples(), false);
         } else if (target == "poses") {
           (void)readKittiPoses(through(".txt"));
@@ -550,7 +576,10 @@ TEST(Regressions, EveryFuzzerCrashInputIsHandled) {
           } catch (const std::invalid_argument &) {
           }
         } else if (target == "map") {
-          (void)loadHierarchyBytes(reinterpret_cast<const std::uint8_t *>(bytes.data()), bytes.size(), "regression");
+          const LoadedHierarchy l =
+              loadHierarchyBytes(reinterpret_cast<const std::uint8_t *>(bytes.data()), bytes.size(), "regression");
+          saveHierarchy((tmp / "again.hpdsmap").string(), l.hierarchy, l.next_frame);
+          EXPECT_EQ(loadHierarchy((tmp / "again.hpdsmap").string()).hierarchy.sampleCount(), l.hierarchy.sampleCount());
         } else {
           ADD_FAILURE() << "unknown regression target " << target;
         }

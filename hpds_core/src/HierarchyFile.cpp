@@ -4,6 +4,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <array>
 #include <atomic>
 #include <cerrno>
@@ -37,8 +38,10 @@ constexpr std::size_t kEntryFixedBytes = 3 * 8 + 1 + 4 + 3 * 4;
 constexpr std::uint32_t kMaxHeaderBytes = 1u << 24;
 constexpr std::uint32_t kMaxPointStep = 1u << 24;
 constexpr std::uint32_t kMaxFieldNameBytes = 1u << 12;
-// Entries per read/write chunk: large enough for few system calls, small enough to keep the buffer at a few MiB.
-constexpr std::size_t kChunkEntries = 4096;
+// Bytes per read/write chunk: few system calls, a small buffer whatever the record size (records may be 16 MiB).
+constexpr std::size_t kChunkBytes = 1u << 20;
+
+std::size_t entriesPerChunk(std::size_t entry_bytes) { return std::max<std::size_t>(1, kChunkBytes / entry_bytes); }
 
 static_assert(std::numeric_limits<double>::is_iec559 && sizeof(double) == 8 && sizeof(float) == 4,
               "the file stores IEEE-754 doubles and floats by their bytes");
@@ -263,7 +266,8 @@ LoadedHierarchy parse(Source &src, std::uint64_t total_size, const std::string &
   // damaged, not blamed on whichever sample the damage happened to hit first.
   std::string refused;
   for (std::uint64_t done = 0; done < sample_count;) {
-    const std::size_t n = static_cast<std::size_t>(std::min<std::uint64_t>(kChunkEntries, sample_count - done));
+    const std::size_t n =
+        static_cast<std::size_t>(std::min<std::uint64_t>(entriesPerChunk(entry_bytes), sample_count - done));
     chunk.resize(n * entry_bytes);
     if (!src.read(chunk.data(), chunk.size())) fail(name, "read failed in the samples (file changed while reading?)");
     crc = crc32(chunk.data(), chunk.size(), crc);
@@ -363,7 +367,8 @@ void saveHierarchy(const std::string &path, const Hierarchy &hierarchy, std::uin
     const std::size_t step = layout.point_step;
     const std::size_t entry_bytes = kEntryFixedBytes + step;
     std::vector<std::uint8_t> chunk;
-    chunk.reserve(kChunkEntries * entry_bytes);
+    const std::size_t chunk_entries = entriesPerChunk(entry_bytes);
+    chunk.reserve(chunk_entries * entry_bytes);
     std::uint32_t crc = 0;
     auto flush = [&] {
       crc = crc32(chunk.data(), chunk.size(), crc);
@@ -381,7 +386,7 @@ void saveHierarchy(const std::string &path, const Hierarchy &hierarchy, std::uin
       std::memcpy(e + 25, &frame, 4);
       std::memcpy(e + 29, hierarchy.toViewpoint(id), 12);
       if (step) std::memcpy(e + kEntryFixedBytes, hierarchy.record(id), step);
-      if (chunk.size() >= kChunkEntries * entry_bytes) flush();
+      if (chunk.size() >= chunk_entries * entry_bytes) flush();
     }
     flush();
     std::uint8_t c[4];

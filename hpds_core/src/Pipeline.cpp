@@ -42,6 +42,7 @@ FrameResult Pipeline::addFrame(const Frame &frame) {
   const PointLayout &layout = pts.layout();
   const PointField *fx = layout.find("x"), *fy = layout.find("y"), *fz = layout.find("z");
   if (!fx || !fy || !fz) throw std::invalid_argument("frame has no x/y/z fields");
+  if (fx->count != 1 || fy->count != 1 || fz->count != 1) throw std::invalid_argument("x/y/z fields must have count 1");
   layout.validate();
   if (!frame.sensor_to_fixed.matrix().allFinite()) throw std::invalid_argument("frame pose is not finite");
   const bool map_mode = config_.mode == Mode::Map;
