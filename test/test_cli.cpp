@@ -142,6 +142,10 @@ TEST(Cli, SyntheticStreamScanModeTagsFramesAndSeedsAreDeterministic) {
   ASSERT_EQ(hpds("sample " + inputs + " --mode scan --seed 5 -o " + q(tmp / "b.ply")), 0);
   ASSERT_EQ(hpds("sample " + inputs + " --mode scan --seed 6 -o " + q(tmp / "c.ply")), 0);
   EXPECT_EQ(readText(tmp / "a.ply"), readText(tmp / "b.ply"));
+  // Scan-mode frames sampled by parallel workers: the same bytes as one thread.
+  ASSERT_EQ(hpds("sample " + inputs + " --mode scan --seed 5 --threads 2 --normals -o " + q(tmp / "p2.ply"), &log), 0) << log;
+  ASSERT_EQ(hpds("sample " + inputs + " --mode scan --seed 5 --threads 1 --normals -o " + q(tmp / "p1.ply"), &log), 0) << log;
+  EXPECT_EQ(readText(tmp / "p1.ply"), readText(tmp / "p2.ply"));
   EXPECT_NE(readText(tmp / "a.ply"), readText(tmp / "c.ply"));
   const PointBuffer a = readPointCloud((tmp / "a.ply").string());
   const PointField *frame = a.layout().find("frame");

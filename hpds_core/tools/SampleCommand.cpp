@@ -2,12 +2,14 @@
 #include <chrono>
 #include <cmath>
 #include <iostream>
+#include <mutex>
 #include <stdexcept>
 
 #include "CliOptions.hpp"
 #include "Commands.hpp"
 #include "RunReport.hpp"
 #include "hpds/HierarchyFile.hpp"
+#include "hpds/ParallelFor.hpp"
 #include "hpds/Pipeline.hpp"
 #include "hpds/io/PlyWriter.hpp"
 #include "hpds/io/PointCloudFile.hpp"
@@ -74,41 +76,82 @@ int runSample(const SampleArgs &a) {
 
   const bool scan = config.mode == Mode::Scan;
   const bool frame_field = scan && a.inputs.size() > 1;
-  PointBuffer output;
-  Progress progress(a.inputs.size());
-  for (std::size_t i = 0; i < a.inputs.size(); ++i) {
-    progress.step(i + 1, a.inputs[i]);
+  // One frame through a pipeline: read, insert, and in scan mode its output cloud.
+  auto runFrame = [&](Pipeline &p, std::size_t i, StageSeconds &seconds, PointBuffer *cloud) {
     auto t0 = std::chrono::steady_clock::now();
     Frame frame;
     frame.points = readPointCloud(a.inputs[i]);
     frame.stamp = static_cast<double>(i);
     if (!poses.empty()) frame.sensor_to_fixed = poses[i];
-    report.seconds.read += since(t0);
-
+    seconds.read += since(t0);
     t0 = std::chrono::steady_clock::now();
     FrameResult r;
     try {
-      r = pipeline.addFrame(frame);
+      r = p.addFrame(frame);
     } catch (const std::invalid_argument &e) {
       throw std::invalid_argument("'" + a.inputs[i] + "': " + e.what());
     }
-    report.seconds.insert += since(t0);
-    if (scan) {
-      for (std::size_t d = 0; d < report.samples_per_level.size(); ++d)
-        report.samples_per_level[d] += r.counters.accepted_per_level[d];
+    seconds.insert += since(t0);
+    if (cloud) {
       double normals_s = 0.0;
-      appendCloud(output, pipeline.makeCloud(pipeline.outputSamples(), frame_field, &normals_s), a.inputs[i]);
-      report.seconds.normals += normals_s;
+      *cloud = p.makeCloud(p.outputSamples(), frame_field, &normals_s);
+      seconds.normals += normals_s;
     }
+    return r.counters;
+  };
+
+  PointBuffer output;
+  Progress progress(a.inputs.size());
+  FrameCounters totals;
+  const int threads = resolveThreads(config.threads);
+  if (scan && threads > 1 && a.inputs.size() > 1) {
+    // Scan-mode frames are independent: each worker runs its own pipeline, numbering frames by input index, so
+    // the bytes written are those of a single-threaded run. Stage seconds are summed over workers.
+    std::vector<PointBuffer> clouds(a.inputs.size());
+    std::vector<FrameCounters> counters(a.inputs.size());
+    std::vector<StageSeconds> seconds(a.inputs.size());
+    std::mutex progress_mutex;
+    std::size_t done = 0;
+    HpdsConfig inner = config;
+    inner.threads = 1;
+    parallelFor(
+        a.inputs.size(), threads,
+        [&](std::size_t b, std::size_t e) {
+          Pipeline p(inner);
+          for (std::size_t i = b; i < e; ++i) {
+            p.setNextFrameIndex(static_cast<std::uint32_t>(i));
+            counters[i] = runFrame(p, i, seconds[i], &clouds[i]);
+            const std::lock_guard<std::mutex> lock(progress_mutex);
+            progress.step(++done, a.inputs[i]);
+          }
+        },
+        /*grain=*/1);
+    for (std::size_t i = 0; i < a.inputs.size(); ++i) {
+      appendCloud(output, clouds[i], a.inputs[i]);
+      totals += counters[i];
+      report.seconds.read += seconds[i].read;
+      report.seconds.insert += seconds[i].insert;
+      report.seconds.normals += seconds[i].normals;
+    }
+  } else {
+    for (std::size_t i = 0; i < a.inputs.size(); ++i) {
+      progress.step(i + 1, a.inputs[i]);
+      PointBuffer cloud;
+      runFrame(pipeline, i, report.seconds, scan ? &cloud : nullptr);
+      if (scan) appendCloud(output, cloud, a.inputs[i]);
+    }
+    totals = pipeline.totals();
   }
   progress.finish();
-  if (!scan) {
+  if (scan) {
+    for (std::size_t d = 0; d < report.samples_per_level.size(); ++d) report.samples_per_level[d] = totals.accepted_per_level[d];
+  } else {
     for (std::size_t d = 0; d < report.samples_per_level.size(); ++d)
       report.samples_per_level[d] = pipeline.hierarchy().countAtLevel(static_cast<int>(d));
     output = pipeline.makeCloud(pipeline.outputSamples(), false, &report.seconds.normals);
   }
   report.frames = a.inputs.size();
-  report.totals = pipeline.totals();
+  report.totals = totals;
   report.output_points = output.size();
   report.invalid_normals = countInvalidNormals(output);
   report.hierarchy_bytes = pipeline.hierarchy().memUsage();

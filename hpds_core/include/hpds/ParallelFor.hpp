@@ -17,10 +17,12 @@ namespace hpds {
   return hw ? static_cast<int>(hw) : 1;
 }
 
-/// Calls fn(begin, end) on disjoint ranges covering [0, n); the first exception thrown is rethrown.
+/// Calls fn(begin, end) on disjoint ranges covering [0, n); the first exception thrown is rethrown. A thread is
+/// started per `grain` items at most (fine-grained loops are not worth a thread below a few hundred items).
 template <typename Fn>
-void parallelFor(std::size_t n, int threads, Fn &&fn) {
-  const std::size_t t = std::min<std::size_t>(static_cast<std::size_t>(resolveThreads(threads)), std::max<std::size_t>(n / 256, 1));
+void parallelFor(std::size_t n, int threads, Fn &&fn, std::size_t grain = 256) {
+  const std::size_t t = std::min<std::size_t>(static_cast<std::size_t>(resolveThreads(threads)),
+                                              std::max<std::size_t>(n / std::max<std::size_t>(grain, 1), 1));
   if (t <= 1) {
     fn(std::size_t{0}, n);
     return;

@@ -73,6 +73,9 @@ class Pipeline {
   [[nodiscard]] int outputLevel() const { return output_level_; }
   [[nodiscard]] const FrameCounters &totals() const { return totals_; }
   [[nodiscard]] std::uint32_t framesProcessed() const { return frames_; }
+  /// Index the next frame gets (its `frame` tag and its random-order seed offset). Scan-mode workers that share a
+  /// stream set it to the input index, so the output does not depend on which worker took the frame.
+  void setNextFrameIndex(std::uint32_t index) { frames_ = index; }
 
   /// Map mode: replaces the map with `map` (e.g. read by loadMap in HierarchyFile.hpp) and numbers the next frame
   /// `next_frame`, as if the frames that built `map` had gone through this pipeline. Throws std::invalid_argument,
