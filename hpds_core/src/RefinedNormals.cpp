@@ -97,8 +97,9 @@ std::vector<SampleNormal> estimateNormalsRefined(const Hierarchy &h, const std::
       }
       const double limit = std::min(max_radius, rho * growth);
       // 2. Every sample of levels 0..finest inside the footprint. A line-like result grows the footprint; a grown
-      //    neighbourhood is only taken if it is flat (RMS distance to its plane <= max_plane_rms * radius): a ball
-      //    reaching from a scan line on the ground into a wall would average two surfaces.
+      //    neighbourhood is only taken if it resolves the line and is flat (RMS distance to its plane <=
+      //    max_plane_rms * radius): a ball reaching from a scan line on the ground into a wall would average two
+      //    surfaces, and a longer piece of the same line is no better than the first.
       LocalPca chosen;
       bool have = false;
       for (;;) {
@@ -113,10 +114,11 @@ std::vector<SampleNormal> estimateNormalsRefined(const Hierarchy &h, const std::
         const LocalPca pca = acc.solve(/*accurate=*/false);
         const bool enough = static_cast<int>(acc.count()) >= params.min_neighbors && pca.valid;
         const bool flat = pca.l0 <= params.max_plane_rms * params.max_plane_rms * r2;
-        if (enough && (!have || flat)) {
+        const bool not_line = pca.l1 >= params.line_ratio * pca.l2;
+        if (enough && (!have || (flat && not_line))) {
           chosen = pca;
           have = true;
-          if (pca.l1 >= params.line_ratio * pca.l2) break;
+          if (not_line) break;
         }
         if ((have && !flat) || rho * 2.0 > limit * (1.0 + 1e-12)) break;
         rho *= 2.0;

@@ -14,9 +14,10 @@
 //     levels average the range noise, which a single Poisson-disk level cannot.
 //   - max_growth g > 1: a neighbourhood that is line-like (l1 < line_ratio * l2: one scan line) or has fewer than
 //     min_neighbors samples doubles its footprint, up to g times the first one (and twice the level-0 cell edge).
-//     A grown neighbourhood replaces the previous one only if it is flat (RMS distance to its plane <=
-//     max_plane_rms * its radius); the first non-flat one stops the growth. The line test needs a footprint long
-//     against the range noise (~20 sigma), as at the usual output levels.
+//     A grown neighbourhood is used only if it is no longer line-like and flat (RMS distance to its plane <=
+//     max_plane_rms * its radius); the first non-flat one stops the growth, and if none qualifies the first
+//     neighbourhood is kept. The line test needs a footprint long against the range noise (~20 sigma), as at the
+//     usual output levels.
 //   Measured gains and costs: bench/README_QUALITY.md.
 #pragma once
 
