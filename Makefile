@@ -49,5 +49,12 @@ bench: build
 demo: build
 	@scripts/demo.sh $(HPDS) $(DEMO_DIR)
 
+# Sampling quality, measured (bench/README_QUALITY.md): normal accuracy against ground truth, feature-sensitive
+# levels, blue-noise analysis against grid baselines; tables, plots and pictures in $(BUILD)/quality/.
+.PHONY: quality
+quality: build
+	@cmake --build $(BUILD) -j$(JOBS) --target normal_accuracy feature_sensitivity plane_sampling
+	@scripts/quality.sh $(BUILD) $(BUILD)/quality $(JOBS)
+
 clean:
 	rm -rf $(BUILD)

@@ -3,7 +3,7 @@
 
   plot_quality.py analysis DIR   (from `hpds analyze`)  -> levels.png, compare.png, compare_curves.png
   plot_quality.py normals DIR    (from bench/normal_accuracy) -> normal_error_cdf.png, normal_error_bars.png
-  plot_quality.py features DIR   (from bench/feature_sensitivity) -> feature_levels.png
+  plot_quality.py features DIR   (from bench/feature_sensitivity) -> feature_levels.png, feature_sculpture.png
 
 Needs Debian's python3-matplotlib (scripts/debian-packages.txt). Headless: the Agg backend, no display.
 """
@@ -119,21 +119,20 @@ def plot_analysis(d):
 
 def plot_normals(d):
     rows = read_csv(os.path.join(d, "normal_errors.csv"))
-    # {scene: {(method, neighbourhood): sorted errors}}
+    # {scene: {(method, neighbourhood): [(quantile, error)]}}
     errs = defaultdict(lambda: defaultdict(list))
     for r in rows:
-        errs[r["scene"]][(r["method"], r["neighborhood"])].append(as_float(r["error_deg"]))
+        errs[r["scene"]][(r["method"], r["neighborhood"])].append((as_float(r["quantile"]), as_float(r["error_deg"])))
     scenes = list(errs)
     fig, ax = plt.subplots(2, len(scenes), figsize=(4.6 * len(scenes), 8), squeeze=False)
     for col, s in enumerate(scenes):
         for row, nb in enumerate(("knn", "radius")):
             a = ax[row][col]
-            for (m, n), e in sorted(errs[s].items()):
-                if n != nb:
+            for (m, n), qe in sorted(errs[s].items()):
+                if n != nb or m.startswith("ablation_"):
                     continue
-                e = sorted(e)
-                ys = [(i + 1) / len(e) for i in range(len(e))]
-                a.plot(e, ys, label=m, lw=2.2 if m.startswith("hpds") else 1.2)
+                qe = sorted(qe)
+                a.plot([e for _, e in qe], [q for q, _ in qe], label=m, lw=2.2 if m.startswith("hpds") else 1.2)
             a.axvline(10.0, color="grey", lw=0.8, ls="--")
             a.set(xscale="log", xlim=(0.05, 90), ylim=(0, 1), xlabel="angular error [deg]", ylabel="fraction of samples",
                   title=f"{s} ({nb})")
@@ -146,7 +145,7 @@ def plot_normals(d):
     summary = read_csv(os.path.join(d, "normal_accuracy.csv"))
     fig, ax = plt.subplots(1, 2, figsize=(14, 5))
     for i, nb in enumerate(("knn", "radius")):
-        sel = [r for r in summary if r["neighborhood"] == nb]
+        sel = [r for r in summary if r["neighborhood"] == nb and not r["method"].startswith("ablation_")]
         methods = list(dict.fromkeys(r["method"] for r in sel))
         width = 0.8 / max(1, len(methods))
         for j, m in enumerate(methods):
@@ -165,22 +164,45 @@ def plot_normals(d):
 
 def plot_features(d):
     rows = read_csv(os.path.join(d, "feature_levels.csv"))
-    orders = list(dict.fromkeys(r["order"] for r in rows))
-    fig, ax = plt.subplots(1, 2, figsize=(12, 4.5))
-    for o in orders:
-        sel = [r for r in rows if r["order"] == o]
-        lv = [int(r["level"]) for r in sel]
-        ax[0].plot(lv, [as_float(r["mean_feature"]) for r in sel], marker="o", label=o)
-        ax[1].plot(lv, [100 * as_float(r["high_share"]) for r in sel], marker="o", label=o)
-    base = as_float(rows[0]["input_high_share"]) * 100 if rows else float("nan")
-    ax[1].axhline(base, color="grey", lw=0.8, ls="--", label="share in the input")
-    ax[0].set(xlabel="levels 0..D", ylabel="mean feature value of the samples", title="Mean feature value per level")
-    ax[1].set(xlabel="levels 0..D", ylabel="high-feature samples [%]", title="Share of high-feature points (top 10 %)")
-    for a in ax:
+    feats = [f for f in dict.fromkeys(r["feature"] for r in rows)]
+    fig, ax = plt.subplots(1, len(feats), figsize=(5 * len(feats), 4.5), squeeze=False)
+    for i, f in enumerate(feats):
+        a = ax[0][i]
+        base = f.replace("_sculpture", "")
+        for o in ("random", base):
+            sel = [r for r in rows if r["feature"] == f and r["order"] == o]
+            a.plot([int(r["level"]) for r in sel], [100 * as_float(r["high_share"]) for r in sel], marker="o",
+                   label=f"{o} order")
+        a.axhline(10.0, color="grey", lw=0.8, ls="--", label="share in the input (top 10 %)")
+        where = "sculpture samples" if f.endswith("_sculpture") else "all samples"
+        a.set(xlabel="levels 0..D", ylabel="high-feature samples [%]", title=f"{base}: {where}")
         a.legend(fontsize=8)
         a.grid(alpha=0.3)
     fig.tight_layout()
-    fig.savefig(os.path.join(d, "feature_levels.png"), dpi=110)
+    fig.savefig(os.path.join(d, "feature_levels.png"), dpi=100)
+    plt.close(fig)
+
+    pics = os.path.join(d, "pictures")
+    orders = ["random", "sphericity", "surface_variation"]
+    levels = sorted({int(n.split("_L")[1].split(".")[0]) for n in os.listdir(pics) if n.startswith("sculpture_")})
+    if not levels:
+        return
+    fig, ax = plt.subplots(len(levels), len(orders), figsize=(4.2 * len(orders), 4.2 * len(levels)), squeeze=False)
+    for r, lv in enumerate(levels):
+        for c, o in enumerate(orders):
+            a = ax[r][c]
+            path = os.path.join(pics, f"sculpture_{o}_L{lv}.png")
+            if os.path.exists(path):
+                a.imshow(mpimg.imread(path))
+            a.set_xticks([])
+            a.set_yticks([])
+            if r == 0:
+                a.set_title(f"{o} order")
+            if c == 0:
+                a.set_ylabel(f"levels 0..{lv}")
+    fig.suptitle("Sculpture, samples coloured by sphericity (dark = flat, yellow = high); grey = input")
+    fig.tight_layout(rect=(0, 0, 1, 0.97))
+    fig.savefig(os.path.join(d, "feature_sculpture.png"), dpi=90)
     plt.close(fig)
 
 
