@@ -44,6 +44,7 @@ fuzz: deps
 
 # Performance against PCL on the real frames and a 5 M point synthetic stream; prints a table, writes JSON.
 bench: build
+	@cmake --build $(BUILD) -j$(JOBS) --target perf_benchmark
 	@$(BUILD)/bench/perf_benchmark --data ../shared/data/lidar --json $(BUILD)/bench/perf.json
 
 demo: build
