@@ -109,7 +109,7 @@ CloudError fromRosCloud(const sensor_msgs::PointCloud2 &msg, hpds::PointBuffer &
   const std::size_t row_bytes = std::size_t(msg.width) * msg.point_step;
   if (msg.row_step == row_bytes) {
     bytes.assign(msg.data.begin(), msg.data.end());
-  } else {
+  } else if (row_bytes > 0) {  // zero-width rows: nothing to copy, and empty vectors may hold null pointers
     bytes.resize(row_bytes * msg.height);
     for (std::uint32_t row = 0; row < msg.height; ++row)
       std::memcpy(bytes.data() + row * row_bytes, msg.data.data() + std::size_t(row) * msg.row_step, row_bytes);
