@@ -30,7 +30,7 @@ std::size_t expectSameConfig(const HpdsConfig &a, const HpdsConfig &b) {
   [[maybe_unused]] const auto &[cell_size, max_depth] = a.hierarchy;
   [[maybe_unused]] const auto &[type, seed, feature_radius] = a.order;
   [[maybe_unused]] const auto &[level, spacing] = a.output;
-  [[maybe_unused]] const auto &[enabled, radius, k, min_neighbors] = a.normals;
+  [[maybe_unused]] const auto &[enabled, radius, k, min_neighbors, neighborhood_level_offset, max_growth] = a.normals;
   [[maybe_unused]] const auto &[evict_distance, max_samples] = a.map;
   [[maybe_unused]] const auto &[skip_zero_points, min_range, max_range] = a.input;
 
@@ -51,6 +51,8 @@ std::size_t expectSameConfig(const HpdsConfig &a, const HpdsConfig &b) {
   same("normals.radius", a.normals.radius, b.normals.radius);
   same("normals.k", a.normals.k, b.normals.k);
   same("normals.min_neighbors", a.normals.min_neighbors, b.normals.min_neighbors);
+  same("normals.neighborhood_level_offset", a.normals.neighborhood_level_offset, b.normals.neighborhood_level_offset);
+  same("normals.max_growth", a.normals.max_growth, b.normals.max_growth);
   same("map.evict_distance", a.map.evict_distance, b.map.evict_distance);
   same("map.max_samples", a.map.max_samples, b.map.max_samples);
   same("input.skip_zero_points", a.input.skip_zero_points, b.input.skip_zero_points);
@@ -93,6 +95,8 @@ HpdsConfig nonDefaultConfig() {
   c.normals.radius = 1.0 / 3.0;
   c.normals.k = 20;
   c.normals.min_neighbors = 7;
+  c.normals.neighborhood_level_offset = 3;
+  c.normals.max_growth = 2.5;
   c.map.evict_distance = 123.456;
   c.map.max_samples = 1000000;
   c.input.skip_zero_points = false;
@@ -228,6 +232,8 @@ TEST(ConfigYaml, InvalidDocumentsNameTheKey) {
       {"hierarchy: {max_depth: -1}", "hierarchy.max_depth", "0..21"},
       {"hierarchy: {max_depth: 4}\noutput: {level: 5}", "output.level", "max_depth"},
       {"normals: {min_neighbors: 2}", "normals.min_neighbors", ">= 3"},
+      {"normals: {neighborhood_level_offset: -1}", "normals.neighborhood_level_offset", "0..21"},
+      {"normals: {max_growth: 0.5}", "normals.max_growth", "1..1024"},
       {"normals: {k: 4}", "normals.k", "min_neighbors"},
       {"threads: -1", "threads", "0..1024"},
       // unknown keys

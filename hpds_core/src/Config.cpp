@@ -71,6 +71,12 @@ void validateConfig(const HpdsConfig &c) {
                                       std::to_string(c.normals.min_neighbors));
   if (c.normals.k > 0 && c.normals.k < c.normals.min_neighbors)
     fail("normals.k", "must be >= normals.min_neighbors (" + std::to_string(c.normals.min_neighbors) + ")");
+  if (c.normals.neighborhood_level_offset < 0 || c.normals.neighborhood_level_offset > 21)
+    fail("normals.neighborhood_level_offset",
+         "must be in 0..21, got " + std::to_string(c.normals.neighborhood_level_offset));
+  requireFinite("normals.max_growth", c.normals.max_growth);
+  if (c.normals.max_growth < 1.0 || c.normals.max_growth > 1024.0)
+    fail("normals.max_growth", "must be in 1..1024 (1 = off), got " + std::to_string(c.normals.max_growth));
   requireNonNegative("map.evict_distance", c.map.evict_distance);
   requireNonNegative("input.min_range", c.input.min_range);
   requireNonNegative("input.max_range", c.input.max_range);

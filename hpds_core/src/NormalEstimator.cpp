@@ -21,6 +21,8 @@ NormalParams normalParamsFor(const HpdsConfig &config, int level) {
   p.radius = config.normals.radius;
   if (p.radius <= 0.0 && p.k == 0) p.radius = 2.5 * poissonRadius(config.hierarchy.cell_size, level);
   p.min_neighbors = config.normals.min_neighbors;
+  p.neighborhood_level_offset = config.normals.neighborhood_level_offset;
+  p.max_growth = config.normals.max_growth;
   p.threads = config.threads;
   return p;
 }
