@@ -91,6 +91,9 @@ HpdsConfig scanConfig(const Options &o, int threads) {
   c.hierarchy.max_depth = o.level;  // build up to the output level only, as a live downsampler would
   c.output.level = o.level;
   c.threads = threads;
+  // The plain estimator: the same radius neighbourhood PCL gets (the default refinements widen it).
+  c.normals.neighborhood_level_offset = 0;
+  c.normals.max_growth = 1.0;
   return c;
 }
 
