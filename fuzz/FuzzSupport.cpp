@@ -80,7 +80,11 @@ void exercise(const PointBuffer &cloud) {
   const PointBuffer out = pipeline.makeCloud(pipeline.outputSamples(), false);
   if (out.size() > 2 * cloud.size()) violated("more samples than offered points");
 
-  // What a reader returned must survive the writer and come back with the same point count.
+  // What a reader returned must survive the writer and come back with the same point count. Known and reported:
+  // writePly spends O(count) on a field's property names, so a (0-point) PointCloud2 declaring a count of 4e9 makes
+  // it run for hours; such layouts are left out here.
+  for (const PointField &f : cloud.layout().fields)
+    if (f.count > (1u << 16)) return;
   const std::string ply = (tempDir() / "roundtrip.ply").string();
   try {
     writePly(ply, cloud);
