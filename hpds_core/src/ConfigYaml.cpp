@@ -314,6 +314,10 @@ void assign(const YAML::Node &value, const std::string &dotted, const Key &key, 
   std::visit([&](auto *field) { parseValue(value, dotted, field); }, key.ref(config));
 }
 
+// Top-level section owned by the ROS node (hpds_node/NodeConfig); the core accepts it without reading it.
+constexpr const char *kRosSection = "ros";
+constexpr const char *kRosDiagnosticPeriod = "diagnostic_period";
+
 void applyDocument(const YAML::Node &root, HpdsConfig &config) {
   if (root.IsNull()) return;  // empty file or a file of comments: all defaults
   if (!root.IsMap()) fail(kDocument, "expected a map of config keys, got " + describe(root));
@@ -325,8 +329,15 @@ void applyDocument(const YAML::Node &root, HpdsConfig &config) {
       assign(entry.second, name, *key, config);
       continue;
     }
-    if (!isSection(name)) failUnknown(name);
     const YAML::Node &section = entry.second;
+    if (name == kRosSection) {
+      // The ROS node's own settings (topics' frames, rates, queue): read and validated by hpds_node, which keeps
+      // one file for the node and the CLI. Here only its shape is checked.
+      if (!section.IsNull() && !section.IsMap()) fail(name, "expected a map of ros.* keys, got " + describe(section));
+      continue;
+    }
+    if (name == kRosDiagnosticPeriod) continue;  // the node's diagnostics period, validated by hpds_node
+    if (!isSection(name)) failUnknown(name);
     if (section.IsNull()) continue;  // a section whose keys are all commented out
     if (!section.IsMap()) fail(name, "expected a map of " + name + ".* keys, got " + describe(section));
     for (const auto &item : section) {

@@ -52,7 +52,9 @@ std::string toJson(const RunReport &r) {
   j << "  \"seconds\": {\"read\": " << num(r.seconds.read) << ", \"insert\": " << num(r.seconds.insert)
     << ", \"normals\": " << num(r.seconds.normals) << ", \"write\": " << num(r.seconds.write) << "},\n";
   j << "  \"hierarchy_memory_bytes\": " << r.hierarchy_bytes << ",\n";
-  j << "  \"peak_memory_bytes\": " << peakMemoryBytes() << "\n";
+  j << "  \"peak_memory_bytes\": " << peakMemoryBytes();
+  for (const auto &[name, value] : r.extra) j << ",\n  \"" << name << "\": " << value;
+  j << "\n";
   j << "}\n";
   return j.str();
 }

@@ -26,6 +26,8 @@ struct RunReport {
   std::uint64_t invalid_normals = 0;
   std::uint64_t hierarchy_bytes = 0;
   StageSeconds seconds;
+  /// Further top-level members a command adds (name, JSON value text), e.g. replay's message counts.
+  std::vector<std::pair<std::string, std::string>> extra;
 };
 
 /// Peak resident set size of this process in bytes (getrusage), 0 if unknown.

@@ -4,7 +4,6 @@
 #include <rosbag/view.h>
 #include <tf2/buffer_core.h>
 #include <tf2_msgs/TFMessage.h>
-#include <unistd.h>
 
 #include <chrono>
 #include <filesystem>
@@ -47,26 +46,12 @@ bool endsWith(const std::string &s, const std::string &suffix) {
   return tail == suffix;
 }
 
-// The node's YAML (config keys + `ros:`) first, then the CLI's sampling flags over it with the same rules as
-// `hpds sample` (resolveConfig reads the config keys back from a file), then the ROS flags.
+// The node's YAML gives the ros: settings; the config keys and the sampling flags go through the same path as
+// `hpds sample` (the core loader skips `ros:`); then the ROS flags.
 hpds_node::NodeConfig resolveNodeConfig(const ReplayArgs &a) {
   hpds_node::NodeConfig config;
-  SamplingOptions sampling = a.sampling;
-  std::filesystem::path scratch;
-  if (!sampling.config_file.empty()) {
-    config = hpds_node::loadNodeConfigFile(sampling.config_file);
-    scratch = std::filesystem::temp_directory_path() /
-              ("hpds_replay_config_" + std::to_string(::getpid()) + ".yaml");
-    std::ofstream(scratch) << dumpConfigYaml(config.hpds);
-    sampling.config_file = scratch.string();
-  }
-  try {
-    config.hpds = resolveConfig(sampling);
-  } catch (...) {
-    if (!scratch.empty()) std::filesystem::remove(scratch);
-    throw;
-  }
-  if (!scratch.empty()) std::filesystem::remove(scratch);
+  if (!a.sampling.config_file.empty()) config = hpds_node::loadNodeConfigFile(a.sampling.config_file);
+  config.hpds = resolveConfig(a.sampling);
   if (a.fixed_frame) config.ros.fixed_frame = *a.fixed_frame;
   if (a.output_frame) config.ros.output_frame = *a.output_frame;
   if (a.local_map_radius) config.ros.local_map_radius = *a.local_map_radius;
@@ -225,13 +210,8 @@ int runReplay(const ReplayArgs &a) {
   std::cout << "wrote " << a.output << "\n";
   if (!a.stats.empty()) {
     // The report of `hpds sample`, plus the message counts only a replay has.
-    std::string json = toJson(report);
-    const std::size_t close = json.rfind('}');
-    json = json.substr(0, close);
-    while (!json.empty() && (json.back() == '\n' || json.back() == ' ')) json.pop_back();
-    json += ",\n  \"messages\": " + messagesJson(s, wrong_type) + "\n}\n";
-    std::ofstream f(a.stats, std::ios::binary | std::ios::trunc);
-    if (!(f << json)) throw std::runtime_error("cannot write stats file '" + a.stats + "'");
+    report.extra.emplace_back("messages", messagesJson(s, wrong_type));
+    writeJsonFile(a.stats, report);
   }
   return s.processed > 0 ? 0 : 1;
 }

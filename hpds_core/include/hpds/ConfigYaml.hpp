@@ -3,7 +3,9 @@
 // Contract
 // - The YAML mirrors the struct: top-level `mode`, `threads` and one map per section
 //   (`hierarchy`, `order`, `output`, `normals`, `map`, `input`); enums are their toString() names.
-// - Strict: unknown keys, wrong types, quoted numbers and yes/no booleans are errors, never ignored.
+// - Strict: unknown keys, wrong types, quoted numbers and yes/no booleans are errors, never ignored. The one
+//   exception is the ROS node's own top-level keys (`ros:` map, `diagnostic_period`): read and validated by
+//   hpds_node, so that one file configures the node and the CLI alike.
 // - Every error is std::invalid_argument whose message starts with the dotted key
 //   ("hierarchy.max_depth: expected an integer, got 'abc'"); errors with no key start with "(document)"
 //   (syntax errors, which carry yaml-cpp's line and column) or "config file '<path>'" (unreadable file).
