@@ -180,7 +180,7 @@ TEST(ConfigYaml, DumpLoadRoundTrip) {
 }
 
 TEST(ConfigYaml, EmptyDocumentsGiveDefaults) {
-  for (const char *text : {"", "# only a comment\n", "---\n", "hierarchy:\n", "\n\n"}) {
+  for (const char *text : {"", "# only a comment\n", "---\n", "hierarchy:\n", "\n\n", "---\n...\n", "~\n", "%YAML 1.2\n---\n"}) {
     SCOPED_TRACE(text);
     expectSameConfig(hpds::loadConfigString(text), HpdsConfig{});
   }
@@ -277,6 +277,9 @@ TEST(ConfigYaml, InvalidDocumentsNameTheKey) {
       {"hierarchy: {max_depth: 3}\nhierarchy: {cell_size: 3}\n", "hierarchy", "duplicate key"},
       {"hierarchy: {max_depth: 3, max_depth: 4}", "hierarchy.max_depth", "duplicate key"},
       {"mode: scan\n---\nmode: map\n", "(document)", "one YAML document"},
+      {"mode: scan\n...\nmode: map\n", "(document)", "one YAML document"},
+      {"mode: scan\n---\n,\n", "(document)", "one YAML document"},
+      {",\n", "(document)", "not YAML"},
       // syntax
       {"hierarchy: {cell_size: 4.0\nthreads: 1\n", "(document)", "line "},
       {"hierarchy:\n  cell_size: 4.0\n max_depth: 3\n", "(document)", "YAML syntax error"},

@@ -314,6 +314,62 @@ void assign(const YAML::Node &value, const std::string &dotted, const Key &key, 
   std::visit([&](auto *field) { parseValue(value, dotted, field); }, key.ref(config));
 }
 
+// Lines of the text, without comments and trailing blanks, that mean something to a YAML parser.
+std::vector<std::string_view> meaningfulLines(std::string_view text) {
+  std::vector<std::string_view> lines;
+  while (!text.empty()) {
+    const std::size_t nl = text.find('\n');
+    std::string_view line = text.substr(0, nl);
+    text = nl == std::string_view::npos ? std::string_view() : text.substr(nl + 1);
+    // A '#' starts a comment at the line start or after a blank (our keys and values never contain one).
+    for (std::size_t i = 0; i < line.size(); ++i)
+      if (line[i] == '#' && (i == 0 || line[i - 1] == ' ' || line[i - 1] == '\t')) {
+        line = line.substr(0, i);
+        break;
+      }
+    while (!line.empty() && (line.back() == ' ' || line.back() == '\t' || line.back() == '\r')) line.remove_suffix(1);
+    if (!line.empty()) lines.push_back(line);
+  }
+  return lines;
+}
+
+bool isMarker(std::string_view line, std::string_view marker) {
+  return line.substr(0, 3) == marker && (line.size() == 3 || line[3] == ' ' || line[3] == '\t');
+}
+
+// Documents in the text: a "---" at column 0 after content, or content after a "..." end marker, starts another.
+std::size_t countDocuments(std::string_view text) {
+  std::size_t documents = 0;
+  bool open = false;  // a document has started and not been ended by "..."
+  bool content = false;
+  for (std::string_view line : meaningfulLines(text)) {
+    if (line[0] == '%') continue;  // directives
+    if (isMarker(line, "---")) {
+      if (open && content) ++documents;
+      open = true;
+      content = line.size() > 3;
+      continue;
+    }
+    if (isMarker(line, "...")) {
+      if (open || content) ++documents;
+      open = content = false;
+      continue;
+    }
+    open = content = true;
+  }
+  return documents + (open ? 1 : 0);
+}
+
+// True when the text holds anything besides comments, directives, markers and an explicit null.
+bool hasContent(std::string_view text) {
+  for (std::string_view line : meaningfulLines(text)) {
+    if (line[0] == '%' || isMarker(line, "---") || isMarker(line, "...")) continue;
+    if (line == "~" || line == "null" || line == "Null" || line == "NULL") continue;
+    return true;
+  }
+  return false;
+}
+
 // Top-level section owned by the ROS node (hpds_node/NodeConfig); the core accepts it without reading it.
 constexpr const char *kRosSection = "ros";
 constexpr const char *kRosDiagnosticPeriod = "diagnostic_period";
@@ -355,19 +411,24 @@ void applyDocument(const YAML::Node &root, HpdsConfig &config) {
 
 void applyConfigYaml(const std::string &yaml_text, HpdsConfig &config, const std::string &source) {
   try {
-    std::vector<YAML::Node> documents;
+    // yaml-cpp 0.7's LoadAll never returns on some garbage (a lone ','), so documents are counted here and the
+    // text is parsed with Load, which does return.
+    const std::size_t documents = countDocuments(yaml_text);
+    if (documents > 1) fail(kDocument, "expected one YAML document, got " + std::to_string(documents));
+    YAML::Node document;
     try {
-      documents = YAML::LoadAll(yaml_text);
+      document = YAML::Load(yaml_text);
     } catch (const YAML::Exception &e) {
       std::string where;
       if (!e.mark.is_null())
         where = " at line " + std::to_string(e.mark.line + 1) + ", column " + std::to_string(e.mark.column + 1);
       fail(kDocument, "YAML syntax error" + where + ": " + e.msg);
     }
-    if (documents.size() > 1)
-      fail(kDocument, "expected one YAML document, got " + std::to_string(documents.size()));
+    // Load reads some garbage (a lone ',') as an empty document; only comments and markers may be empty.
+    if (document.IsNull() && hasContent(yaml_text))
+      fail(kDocument, "expected a map of config keys, got text that is not YAML");
     HpdsConfig result = config;  // work on a copy so a failure leaves the caller's config untouched
-    if (!documents.empty()) applyDocument(documents.front(), result);
+    applyDocument(document, result);
     validateConfig(result);
     config = result;
   } catch (const std::invalid_argument &e) {
