@@ -104,9 +104,7 @@ class FrameProcessor {
   [[nodiscard]] const NodeConfig &config() const { return config_; }
 
  private:
-  [[nodiscard]] std::vector<hpds::SampleId> samplesHit(const hpds::PointBuffer &points,
-                                                       const Eigen::Isometry3d &sensor_to_target, int min_level,
-                                                       int max_level, double hit_radius) const;
+  [[nodiscard]] std::vector<hpds::SampleId> samplesHit(int min_level, int max_level, double hit_radius) const;
   void toMsg(const std::vector<hpds::SampleId> &ids, const std_msgs::Header &header,
              sensor_msgs::PointCloud2 &out) const;
 
