@@ -338,6 +338,16 @@ TEST(HostileCli, DISABLED_ALoneColourChannelSurvivesSampleThenVerify) {
   EXPECT_EQ(hpds("verify " + q(tmp / "red.ply") + " --cell-size 4", &log), 0) << log;
 }
 
+// Found by fuzz_ply: this PLY passes the reader's checks and then trips an assert(false) inside PCL's PLYReader
+// (ply_io.cpp:298, vertexScalarPropertyCallback: data index out of range), so `hpds sample` dies with SIGABRT.
+// Run in a subprocess; move the file to test/regressions/ply/ and enable once the reader refuses it.
+TEST(HostileCli, DISABLED_PlyThatTripsPclsAssertIsRefused) {
+  const fs::path input = fs::path(HPDS_SOURCE_DIR) / "test" / "regressions" / "pending" / "pcl_assert.ply";
+  const auto tmp = test::scratchDir("hostile_pcl_assert");
+  std::string log;
+  EXPECT_EQ(hpds("sample " + q(input) + " -o " + q(tmp / "o.ply"), &log), 1) << log;
+}
+
 // ---------------------------------------------------------------- core Pipeline
 
 TEST(HostilePipeline, EveryNumericXyzTypeIsReadByValue) {
@@ -551,7 +561,7 @@ TEST(Regressions, EveryFuzzerCrashInputIsHandled) {
   const auto tmp = test::scratchDir("regressions");
   std::size_t replayed = 0;
   for (const auto &dir : fs::directory_iterator(root)) {
-    if (!dir.is_directory()) continue;
+    if (!dir.is_directory() || dir.path().filename() == "pending") continue;  // pending: see the DISABLED_ test
     const std::string target = dir.path().filename().string();
     for (const auto &entry : fs::directory_iterator(dir.path())) {
       if (!entry.is_regular_file() || entry.path().filename().string().front() == '.' ||
