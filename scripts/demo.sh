@@ -16,4 +16,7 @@ echo
 echo "== 3. independent check of the written sampling (k-d tree, not the sampler's grids)"
 "$hpds" verify "$out/map.ply" --cell-size 4
 echo
-echo "demo output: $out/map.ply (open it in CloudCompare or MeshLab), $out/stats.json"
+echo "== 4. pictures: top and side views coloured by level and by normal"
+"$hpds" render "$out/map.ply" -o "$out/pictures" --color level,normal --view top,side
+echo
+echo "demo output: $out/map.ply (open it in CloudCompare or MeshLab), $out/stats.json, $out/pictures/*.png"
