@@ -5,6 +5,8 @@
 
 #include <array>
 #include <cstdio>
+#include <fstream>
+#include <iterator>
 #include <random>
 
 namespace hpds::test {
@@ -37,6 +39,15 @@ int runCommand(const std::string &command, std::string *output) {
   const int status = ::pclose(pipe);
   if (output) *output = out;
   return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + (WIFSIGNALED(status) ? WTERMSIG(status) : 0);
+}
+
+std::string shellQuote(const std::filesystem::path &path) { return "'" + path.string() + "'"; }
+
+int runHpds(const std::string &args, std::string *output) { return runCommand(cliPath() + " " + args, output); }
+
+std::string readText(const std::filesystem::path &path) {
+  std::ifstream f(path, std::ios::binary);
+  return std::string(std::istreambuf_iterator<char>(f), {});
 }
 
 }  // namespace hpds::test

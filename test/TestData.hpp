@@ -25,4 +25,13 @@ std::string cliPath();
 /// Runs a shell command, returns its exit status (0..255) and captures stdout+stderr into `output`.
 int runCommand(const std::string &command, std::string *output = nullptr);
 
+/// `path` single-quoted for a shell command line.
+std::string shellQuote(const std::filesystem::path &path);
+
+/// Runs `hpds ARGS` (the built CLI), as runCommand.
+int runHpds(const std::string &args, std::string *output = nullptr);
+
+/// The whole file as text ("" when it cannot be read).
+std::string readText(const std::filesystem::path &path);
+
 }  // namespace hpds::test

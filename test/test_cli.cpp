@@ -17,17 +17,9 @@
 namespace hpds {
 namespace {
 
-using test::cliPath;
-using test::runCommand;
-
-std::string q(const std::filesystem::path &p) { return "'" + p.string() + "'"; }
-
-int hpds(const std::string &args, std::string *out = nullptr) { return runCommand(cliPath() + " " + args, out); }
-
-std::string readText(const std::filesystem::path &p) {
-  std::ifstream f(p);
-  return std::string(std::istreambuf_iterator<char>(f), {});
-}
+using test::readText;
+using test::runHpds;
+using test::shellQuote;
 
 int maxLevel(const PointBuffer &b) {
   const PointField *l = b.layout().find("level");
@@ -45,8 +37,8 @@ TEST(Cli, EveryRealSensorFrameSamplesVerifiesAndKeepsItsFields) {
     SCOPED_TRACE(name);
     const auto out = tmp / (std::string(name) + ".ply");
     std::string log;
-    ASSERT_EQ(hpds("sample " + q(dir / name) + " -o " + q(out) + " --normals --spacing 0.1", &log), 0) << log;
-    ASSERT_EQ(hpds("verify " + q(out) + " --cell-size 4 --input " + q(dir / name), &log), 0) << log;
+    ASSERT_EQ(runHpds("sample " + shellQuote(dir / name) + " -o " + shellQuote(out) + " --normals --spacing 0.1", &log), 0) << log;
+    ASSERT_EQ(runHpds("verify " + shellQuote(out) + " --cell-size 4 --input " + shellQuote(dir / name), &log), 0) << log;
     EXPECT_NE(log.find("OK: no violations"), std::string::npos) << log;
     const PointBuffer in = readPointCloud((dir / name).string());
     const PointBuffer s = readPointCloud(out.string());
@@ -71,13 +63,13 @@ TEST(Cli, LevelAndSpacingSelectTheWrittenLevels) {
   HPDS_REQUIRE_SHARED_DATA();
   const auto in = test::sharedLidarDir() / "hesai_xt32.pcd";
   const auto tmp = test::scratchDir("cli_levels");
-  ASSERT_EQ(hpds("sample " + q(in) + " -o " + q(tmp / "l3.ply") + " --level 3"), 0);
+  ASSERT_EQ(runHpds("sample " + shellQuote(in) + " -o " + shellQuote(tmp / "l3.ply") + " --level 3"), 0);
   EXPECT_EQ(maxLevel(readPointCloud((tmp / "l3.ply").string())), 3);
-  ASSERT_EQ(hpds("sample " + q(in) + " -o " + q(tmp / "s.ply") + " --spacing 0.5 --cell-size 2"), 0);
+  ASSERT_EQ(runHpds("sample " + shellQuote(in) + " -o " + shellQuote(tmp / "s.ply") + " --spacing 0.5 --cell-size 2"), 0);
   // r_D = sqrt(3)/2 * 2 / 2^D: r_1 = 0.866, r_2 = 0.433 <= 0.5 -> level 2.
   EXPECT_EQ(maxLevel(readPointCloud((tmp / "s.ply").string())), 2);
   std::string log;
-  EXPECT_EQ(hpds("sample " + q(in) + " -o " + q(tmp / "x.ply") + " --level 2 --spacing 0.5", &log), 2) << log;
+  EXPECT_EQ(runHpds("sample " + shellQuote(in) + " -o " + shellQuote(tmp / "x.ply") + " --level 2 --spacing 0.5", &log), 2) << log;
 }
 
 TEST(Cli, Hdl32PairInMapModeWithPosesVerifies) {
@@ -96,13 +88,13 @@ TEST(Cli, Hdl32PairInMapModeWithPosesVerifies) {
     for (int i = 0; i < 12; ++i) poses << m[i] << (i == 11 ? "\n" : " ");
   }
   std::string log;
-  ASSERT_EQ(hpds("sample " + q(dir / "hdl32_a.pcd") + " " + q(dir / "hdl32_b.pcd") + " --mode map --poses " +
-                     q(tmp / "poses.txt") + " --normals --spacing 0.2 -o " + q(tmp / "map.ply") + " --stats " +
-                     q(tmp / "stats.json"),
+  ASSERT_EQ(runHpds("sample " + shellQuote(dir / "hdl32_a.pcd") + " " + shellQuote(dir / "hdl32_b.pcd") + " --mode map --poses " +
+                     shellQuote(tmp / "poses.txt") + " --normals --spacing 0.2 -o " + shellQuote(tmp / "map.ply") + " --stats " +
+                     shellQuote(tmp / "stats.json"),
                  &log),
             0)
       << log;
-  ASSERT_EQ(hpds("verify " + q(tmp / "map.ply") + " --cell-size 4", &log), 0) << log;
+  ASSERT_EQ(runHpds("verify " + shellQuote(tmp / "map.ply") + " --cell-size 4", &log), 0) << log;
   const PointBuffer map = readPointCloud((tmp / "map.ply").string());
   EXPECT_EQ(map.layout().find("frame"), nullptr);
   const std::string stats = readText(tmp / "stats.json");
@@ -126,8 +118,8 @@ TEST(Cli, Hdl32PairInMapModeWithPosesVerifies) {
     std::ofstream one(tmp / "one.txt");
     one << "1 0 0 0 0 1 0 0 0 0 1 0\n";
   }
-  EXPECT_EQ(hpds("sample " + q(dir / "hdl32_a.pcd") + " " + q(dir / "hdl32_b.pcd") + " --mode map --poses " +
-                     q(tmp / "one.txt") + " -o " + q(tmp / "x.ply"),
+  EXPECT_EQ(runHpds("sample " + shellQuote(dir / "hdl32_a.pcd") + " " + shellQuote(dir / "hdl32_b.pcd") + " --mode map --poses " +
+                     shellQuote(tmp / "one.txt") + " -o " + shellQuote(tmp / "x.ply"),
                  &log),
             1);
   EXPECT_NE(log.find("one pose per input"), std::string::npos) << log;
@@ -136,15 +128,15 @@ TEST(Cli, Hdl32PairInMapModeWithPosesVerifies) {
 TEST(Cli, SyntheticStreamScanModeTagsFramesAndSeedsAreDeterministic) {
   const auto tmp = test::scratchDir("cli_synth");
   std::string log;
-  ASSERT_EQ(hpds("synth -o " + q(tmp / "s") + " --frames 2 --beams 8 --azimuth-steps 600", &log), 0) << log;
-  const std::string inputs = q(tmp / "s" / "frame_000000.pcd") + " " + q(tmp / "s" / "frame_000001.pcd");
-  ASSERT_EQ(hpds("sample " + inputs + " --mode scan --seed 5 -o " + q(tmp / "a.ply"), &log), 0) << log;
-  ASSERT_EQ(hpds("sample " + inputs + " --mode scan --seed 5 -o " + q(tmp / "b.ply")), 0);
-  ASSERT_EQ(hpds("sample " + inputs + " --mode scan --seed 6 -o " + q(tmp / "c.ply")), 0);
+  ASSERT_EQ(runHpds("synth -o " + shellQuote(tmp / "s") + " --frames 2 --beams 8 --azimuth-steps 600", &log), 0) << log;
+  const std::string inputs = shellQuote(tmp / "s" / "frame_000000.pcd") + " " + shellQuote(tmp / "s" / "frame_000001.pcd");
+  ASSERT_EQ(runHpds("sample " + inputs + " --mode scan --seed 5 -o " + shellQuote(tmp / "a.ply"), &log), 0) << log;
+  ASSERT_EQ(runHpds("sample " + inputs + " --mode scan --seed 5 -o " + shellQuote(tmp / "b.ply")), 0);
+  ASSERT_EQ(runHpds("sample " + inputs + " --mode scan --seed 6 -o " + shellQuote(tmp / "c.ply")), 0);
   EXPECT_EQ(readText(tmp / "a.ply"), readText(tmp / "b.ply"));
   // Scan-mode frames sampled by parallel workers: the same bytes as one thread.
-  ASSERT_EQ(hpds("sample " + inputs + " --mode scan --seed 5 --threads 2 --normals -o " + q(tmp / "p2.ply"), &log), 0) << log;
-  ASSERT_EQ(hpds("sample " + inputs + " --mode scan --seed 5 --threads 1 --normals -o " + q(tmp / "p1.ply"), &log), 0) << log;
+  ASSERT_EQ(runHpds("sample " + inputs + " --mode scan --seed 5 --threads 2 --normals -o " + shellQuote(tmp / "p2.ply"), &log), 0) << log;
+  ASSERT_EQ(runHpds("sample " + inputs + " --mode scan --seed 5 --threads 1 --normals -o " + shellQuote(tmp / "p1.ply"), &log), 0) << log;
   EXPECT_EQ(readText(tmp / "p1.ply"), readText(tmp / "p2.ply"));
   EXPECT_NE(readText(tmp / "a.ply"), readText(tmp / "c.ply"));
   const PointBuffer a = readPointCloud((tmp / "a.ply").string());
@@ -155,12 +147,12 @@ TEST(Cli, SyntheticStreamScanModeTagsFramesAndSeedsAreDeterministic) {
   for (std::size_t i = 0; i < a.size(); ++i) frames.insert(readAsDouble(a.record(i), *frame));
   EXPECT_EQ(frames, (std::set<double>{0.0, 1.0}));
   for (const char *name : {"intensity", "ring", "time"}) EXPECT_NE(a.layout().find(name), nullptr) << name;
-  ASSERT_EQ(hpds("sample " + inputs + " --mode map --poses " + q(tmp / "s" / "poses.txt") + " -o " + q(tmp / "m.ply") +
+  ASSERT_EQ(runHpds("sample " + inputs + " --mode map --poses " + shellQuote(tmp / "s" / "poses.txt") + " -o " + shellQuote(tmp / "m.ply") +
                      " --order sphericity --normals --threads 2",
                  &log),
             0)
       << log;
-  EXPECT_EQ(hpds("verify " + q(tmp / "m.ply") + " --cell-size 4", &log), 0) << log;
+  EXPECT_EQ(runHpds("verify " + shellQuote(tmp / "m.ply") + " --cell-size 4", &log), 0) << log;
 }
 
 TEST(Cli, VerifyCatchesABrokenSampling) {
@@ -176,13 +168,13 @@ TEST(Cli, VerifyCatchesABrokenSampling) {
     for (int k = 0; k < 4; ++k) writeFromDouble(b.record(i), l.fields[k], pts[i][k]);
   writePly((tmp / "bad.ply").string(), b);
   std::string log;
-  EXPECT_EQ(hpds("verify " + q(tmp / "bad.ply") + " --cell-size 4", &log), 1) << log;
+  EXPECT_EQ(runHpds("verify " + shellQuote(tmp / "bad.ply") + " --cell-size 4", &log), 1) << log;
   EXPECT_NE(log.find("FAILED"), std::string::npos) << log;
 }
 
 TEST(Cli, BadInputGivesAClearErrorAndNonZeroExit) {
   const auto tmp = test::scratchDir("cli_bad");
-  const std::string out = " -o " + q(tmp / "out.ply");
+  const std::string out = " -o " + shellQuote(tmp / "out.ply");
   std::mt19937_64 rng(1);
   {
     std::ofstream g(tmp / "garbage.pcd", std::ios::binary);
@@ -204,28 +196,28 @@ TEST(Cli, BadInputGivesAClearErrorAndNonZeroExit) {
     std::string message;
   };
   const std::vector<Case> cases = {
-      {q(tmp / "missing.pcd") + out, 1, "missing.pcd"},
-      {q(tmp / "garbage.pcd") + out, 1, "garbage.pcd"},
-      {q(tmp / "empty.pcd") + out, 1, "empty.pcd"},
-      {q(tmp / "truncated.pcd") + out, 1, "truncated"},
-      {q(tmp / "odd.bin") + out, 1, "odd.bin"},
-      {q(tmp / "cloud.xyz") + out, 1, "cloud.xyz"},
-      {q(tmp / "odd.bin") + out + " --config " + q(tmp / "bad.yaml"), 1, "hierarchy.cell_sise"},
-      {q(tmp / "odd.bin") + out + " --config " + q(tmp / "neg.yaml"), 1, "hierarchy.cell_size"},
-      {q(tmp / "odd.bin") + out + " --max-depth 22", 1, "hierarchy.max_depth"},
-      {q(tmp / "odd.bin") + out + " --cell-size nan", 1, "hierarchy.cell_size"},
-      {q(tmp / "odd.bin") + out + " --order zigzag", 1, "zigzag"},
-      {q(tmp / "odd.bin"), 2, "output"},
+      {shellQuote(tmp / "missing.pcd") + out, 1, "missing.pcd"},
+      {shellQuote(tmp / "garbage.pcd") + out, 1, "garbage.pcd"},
+      {shellQuote(tmp / "empty.pcd") + out, 1, "empty.pcd"},
+      {shellQuote(tmp / "truncated.pcd") + out, 1, "truncated"},
+      {shellQuote(tmp / "odd.bin") + out, 1, "odd.bin"},
+      {shellQuote(tmp / "cloud.xyz") + out, 1, "cloud.xyz"},
+      {shellQuote(tmp / "odd.bin") + out + " --config " + shellQuote(tmp / "bad.yaml"), 1, "hierarchy.cell_sise"},
+      {shellQuote(tmp / "odd.bin") + out + " --config " + shellQuote(tmp / "neg.yaml"), 1, "hierarchy.cell_size"},
+      {shellQuote(tmp / "odd.bin") + out + " --max-depth 22", 1, "hierarchy.max_depth"},
+      {shellQuote(tmp / "odd.bin") + out + " --cell-size nan", 1, "hierarchy.cell_size"},
+      {shellQuote(tmp / "odd.bin") + out + " --order zigzag", 1, "zigzag"},
+      {shellQuote(tmp / "odd.bin"), 2, "output"},
   };
   for (const Case &c : cases) {
     std::string log;
-    EXPECT_EQ(hpds("sample " + c.args, &log), c.code) << c.args << "\n" << log;
+    EXPECT_EQ(runHpds("sample " + c.args, &log), c.code) << c.args << "\n" << log;
     EXPECT_NE(log.find(c.message), std::string::npos) << c.args << "\n" << log;
     if (c.code == 1) {
       EXPECT_NE(log.find("hpds: error:"), std::string::npos) << log;
     }
   }
-  EXPECT_EQ(hpds("verify " + q(tmp / "garbage.pcd") + " --cell-size 4"), 1);
+  EXPECT_EQ(runHpds("verify " + shellQuote(tmp / "garbage.pcd") + " --cell-size 4"), 1);
 }
 
 TEST(Cli, NanOnlyAndHugeCoordinateFramesAreCountedNotFatal) {
@@ -241,17 +233,17 @@ TEST(Cli, NanOnlyAndHugeCoordinateFramesAreCountedNotFatal) {
   writeKittiBin((tmp / "nan.bin").string(), nan);
   writeKittiBin((tmp / "huge.bin").string(), huge);
   std::string log;
-  ASSERT_EQ(hpds("sample " + q(tmp / "nan.bin") + " -o " + q(tmp / "nan.ply") + " --stats " + q(tmp / "nan.json"), &log), 0)
+  ASSERT_EQ(runHpds("sample " + shellQuote(tmp / "nan.bin") + " -o " + shellQuote(tmp / "nan.ply") + " --stats " + shellQuote(tmp / "nan.json"), &log), 0)
       << log;
   EXPECT_NE(readText(tmp / "nan.json").find("\"skipped_invalid\": 50"), std::string::npos);
   EXPECT_EQ(readPointCloud((tmp / "nan.ply").string()).size(), 0u);
   // 1e7 m with 2^-21 * 1 m cells is beyond exact keys: counted and warned about, the near point still sampled.
-  ASSERT_EQ(hpds("sample " + q(tmp / "huge.bin") + " -o " + q(tmp / "huge.ply") + " --cell-size 1 --max-depth 21", &log), 0)
+  ASSERT_EQ(runHpds("sample " + shellQuote(tmp / "huge.bin") + " -o " + shellQuote(tmp / "huge.ply") + " --cell-size 1 --max-depth 21", &log), 0)
       << log;
   EXPECT_NE(log.find("beyond the exact key range"), std::string::npos) << log;
   EXPECT_EQ(readPointCloud((tmp / "huge.ply").string()).size(), 1u);
   // At 4 m cells and depth 8 the same coordinates are exact and all three are kept.
-  ASSERT_EQ(hpds("sample " + q(tmp / "huge.bin") + " -o " + q(tmp / "huge8.ply"), &log), 0) << log;
+  ASSERT_EQ(runHpds("sample " + shellQuote(tmp / "huge.bin") + " -o " + shellQuote(tmp / "huge8.ply"), &log), 0) << log;
   EXPECT_EQ(readPointCloud((tmp / "huge8.ply").string()).size(), 3u);
 }
 

@@ -363,35 +363,34 @@ TEST(MapFileBytes, Crc32MatchesTheStandardCheckValue) {
 
 // ---------------------------------------------------------------- CLI
 
-std::string q(const fs::path &p) { return "'" + p.string() + "'"; }
-int hpds(const std::string &args, std::string *out = nullptr) {
-  return test::runCommand(test::cliPath() + " " + args, out);
-}
+using test::runHpds;
+using test::shellQuote;
+
 
 TEST(MapFileCli, SaveThenLoadContinuesTheMap) {
   const auto tmp = test::scratchDir("map_cli");
   std::string log;
-  ASSERT_EQ(hpds("synth -o " + q(tmp / "s") + " --frames 4 --beams 8 --azimuth-steps 600", &log), 0) << log;
-  auto frame = [&](int i) { return q(tmp / "s" / ("frame_00000" + std::to_string(i) + ".pcd")); };
+  ASSERT_EQ(runHpds("synth -o " + shellQuote(tmp / "s") + " --frames 4 --beams 8 --azimuth-steps 600", &log), 0) << log;
+  auto frame = [&](int i) { return shellQuote(tmp / "s" / ("frame_00000" + std::to_string(i) + ".pcd")); };
   const auto poses = readKittiPoses((tmp / "s" / "poses.txt").string());
   auto posesFile = [&](const fs::path &p, int from, int to) {
     writeKittiPoses(p.string(), std::vector<Eigen::Isometry3d>(poses.begin() + from, poses.begin() + to));
-    return q(p);
+    return shellQuote(p);
   };
   const std::string common = " --mode map --max-depth 6 --seed 3";
-  ASSERT_EQ(hpds("sample " + frame(0) + " " + frame(1) + " " + frame(2) + " " + frame(3) + " --poses " +
-                     posesFile(tmp / "p03.txt", 0, 4) + common + " -o " + q(tmp / "whole.ply"),
+  ASSERT_EQ(runHpds("sample " + frame(0) + " " + frame(1) + " " + frame(2) + " " + frame(3) + " --poses " +
+                     posesFile(tmp / "p03.txt", 0, 4) + common + " -o " + shellQuote(tmp / "whole.ply"),
                  &log),
             0)
       << log;
-  ASSERT_EQ(hpds("sample " + frame(0) + " " + frame(1) + " --poses " + posesFile(tmp / "p01.txt", 0, 2) + common +
-                     " -o " + q(tmp / "half.ply") + " --save-map " + q(tmp / "m.hpdsmap"),
+  ASSERT_EQ(runHpds("sample " + frame(0) + " " + frame(1) + " --poses " + posesFile(tmp / "p01.txt", 0, 2) + common +
+                     " -o " + shellQuote(tmp / "half.ply") + " --save-map " + shellQuote(tmp / "m.hpdsmap"),
                  &log),
             0)
       << log;
-  ASSERT_EQ(hpds("sample " + frame(2) + " " + frame(3) + " --poses " + posesFile(tmp / "p23.txt", 2, 4) + common +
-                     " -o " + q(tmp / "cont.ply") + " --load-map " + q(tmp / "m.hpdsmap") + " --save-map " +
-                     q(tmp / "m.hpdsmap"),
+  ASSERT_EQ(runHpds("sample " + frame(2) + " " + frame(3) + " --poses " + posesFile(tmp / "p23.txt", 2, 4) + common +
+                     " -o " + shellQuote(tmp / "cont.ply") + " --load-map " + shellQuote(tmp / "m.hpdsmap") + " --save-map " +
+                     shellQuote(tmp / "m.hpdsmap"),
                  &log),
             0)
       << log;
@@ -410,15 +409,15 @@ TEST(MapFileCli, SaveThenLoadContinuesTheMap) {
   };
   writeBytes(tmp / "junk.hpdsmap", {1, 2, 3});
   const std::vector<Case> cases = {
-      {frame(0) + " --mode scan --save-map " + q(tmp / "x.hpdsmap"), "--mode map"},
-      {frame(0) + " --mode scan --load-map " + q(tmp / "m.hpdsmap"), "--mode map"},
-      {frame(0) + common + " --load-map " + q(tmp / "nope.hpdsmap"), "nope.hpdsmap: file not found"},
-      {frame(0) + common + " --load-map " + q(tmp / "junk.hpdsmap"), "junk.hpdsmap: not an hpds map file"},
-      {frame(0) + " --mode map --max-depth 5 --load-map " + q(tmp / "m.hpdsmap"), "max_depth"},
-      {frame(0) + common + " --save-map " + q(tmp / "nodir" / "m.hpdsmap"), "m.hpdsmap"},
+      {frame(0) + " --mode scan --save-map " + shellQuote(tmp / "x.hpdsmap"), "--mode map"},
+      {frame(0) + " --mode scan --load-map " + shellQuote(tmp / "m.hpdsmap"), "--mode map"},
+      {frame(0) + common + " --load-map " + shellQuote(tmp / "nope.hpdsmap"), "nope.hpdsmap: file not found"},
+      {frame(0) + common + " --load-map " + shellQuote(tmp / "junk.hpdsmap"), "junk.hpdsmap: not an hpds map file"},
+      {frame(0) + " --mode map --max-depth 5 --load-map " + shellQuote(tmp / "m.hpdsmap"), "max_depth"},
+      {frame(0) + common + " --save-map " + shellQuote(tmp / "nodir" / "m.hpdsmap"), "m.hpdsmap"},
   };
   for (const Case &c : cases) {
-    EXPECT_EQ(hpds("sample " + c.args + " -o " + q(tmp / "o.ply"), &log), 1) << c.args << "\n" << log;
+    EXPECT_EQ(runHpds("sample " + c.args + " -o " + shellQuote(tmp / "o.ply"), &log), 1) << c.args << "\n" << log;
     EXPECT_NE(log.find("hpds: error: "), std::string::npos) << log;
     EXPECT_NE(log.find(c.message), std::string::npos) << c.args << "\n" << log;
   }

@@ -15,15 +15,10 @@ namespace hpds {
 namespace {
 
 using test::cliPath;
+using test::readText;
 using test::runCommand;
-
-std::string q(const std::filesystem::path &p) { return "'" + p.string() + "'"; }
-int hpds(const std::string &args, std::string *out = nullptr) { return runCommand(cliPath() + " " + args, out); }
-
-std::string readText(const std::filesystem::path &p) {
-  std::ifstream f(p);
-  return std::string(std::istreambuf_iterator<char>(f), {});
-}
+using test::runHpds;
+using test::shellQuote;
 
 bool isPng(const std::filesystem::path &p) {
   std::ifstream f(p, std::ios::binary);
@@ -47,9 +42,9 @@ class QualityCli : public ::testing::Test {
   static void SetUpTestSuite() {
     dir_ = new std::filesystem::path(test::scratchDir("quality_cli"));
     std::string log;
-    ASSERT_EQ(hpds("synth -o " + q(*dir_ / "stream") + " --frames 4 --scene planar_urban --seed 3", &log), 0) << log;
-    ASSERT_EQ(hpds("sample " + q(*dir_ / "stream") + "/frame_*.pcd --poses " + q(*dir_ / "stream/poses.txt") +
-                       " --mode map --normals --cell-size 4 --max-depth 7 --spacing 0.15 -o " + q(*dir_ / "map.ply"),
+    ASSERT_EQ(runHpds("synth -o " + shellQuote(*dir_ / "stream") + " --frames 4 --scene planar_urban --seed 3", &log), 0) << log;
+    ASSERT_EQ(runHpds("sample " + shellQuote(*dir_ / "stream") + "/frame_*.pcd --poses " + shellQuote(*dir_ / "stream/poses.txt") +
+                       " --mode map --normals --cell-size 4 --max-depth 7 --spacing 0.15 -o " + shellQuote(*dir_ / "map.ply"),
                    &log),
               0)
         << log;
@@ -62,8 +57,8 @@ std::filesystem::path *QualityCli::dir_ = nullptr;
 TEST_F(QualityCli, AnalyzeWritesDataAndFindsBlueNoiseOnlyInHpds) {
   const auto out = *dir_ / "analysis";
   std::string log;
-  ASSERT_EQ(hpds("analyze " + q(*dir_ / "map.ply") + " --cell-size 4 -o " + q(out) + " --input " + q(*dir_ / "stream") +
-                     "/frame_*.pcd --poses " + q(*dir_ / "stream/poses.txt") + " --plane-band 0.04 --no-plots",
+  ASSERT_EQ(runHpds("analyze " + shellQuote(*dir_ / "map.ply") + " --cell-size 4 -o " + shellQuote(out) + " --input " + shellQuote(*dir_ / "stream") +
+                     "/frame_*.pcd --poses " + shellQuote(*dir_ / "stream/poses.txt") + " --plane-band 0.04 --no-plots",
                  &log),
             0)
       << log;
@@ -110,25 +105,25 @@ TEST_F(QualityCli, AnalyzeWritesDataAndFindsBlueNoiseOnlyInHpds) {
 TEST_F(QualityCli, RenderWritesEveryColourAndView) {
   const auto out = *dir_ / "render";
   std::string log;
-  ASSERT_EQ(hpds("render " + q(*dir_ / "map.ply") + " -o " + q(out) + " --width 400 --height 300", &log), 0) << log;
+  ASSERT_EQ(runHpds("render " + shellQuote(*dir_ / "map.ply") + " -o " + shellQuote(out) + " --width 400 --height 300", &log), 0) << log;
   for (const char *c : {"level", "normal", "feature"})
     for (const char *v : {"top", "front", "side"})
       EXPECT_TRUE(isPng(out / ("render_" + std::string(c) + "_" + v + ".png"))) << c << " " << v;
   // A crop with nothing inside is an error, not an empty picture.
-  EXPECT_EQ(hpds("render " + q(*dir_ / "map.ply") + " -o " + q(out) + " --crop 900,900,900,901,901,901", &log), 1);
+  EXPECT_EQ(runHpds("render " + shellQuote(*dir_ / "map.ply") + " -o " + shellQuote(out) + " --crop 900,900,900,901,901,901", &log), 1);
   EXPECT_NE(log.find("no points to render"), std::string::npos) << log;
 }
 
 TEST_F(QualityCli, BadInputGivesClearErrors) {
   std::string log;
   // A plain cloud has no level field.
-  EXPECT_EQ(hpds("analyze " + q(*dir_ / "stream/frame_000000.pcd") + " --cell-size 4 -o " + q(*dir_ / "bad"), &log), 1);
+  EXPECT_EQ(runHpds("analyze " + shellQuote(*dir_ / "stream/frame_000000.pcd") + " --cell-size 4 -o " + shellQuote(*dir_ / "bad"), &log), 1);
   EXPECT_NE(log.find("no `level` field"), std::string::npos) << log;
-  EXPECT_NE(hpds("analyze " + q(*dir_ / "map.ply") + " --cell-size 4 -o " + q(*dir_ / "bad") + " --patch 1,2", &log), 0);
-  EXPECT_EQ(hpds("analyze " + q(*dir_ / "map.ply") + " --cell-size 0 -o " + q(*dir_ / "bad"), &log), 1);
+  EXPECT_NE(runHpds("analyze " + shellQuote(*dir_ / "map.ply") + " --cell-size 4 -o " + shellQuote(*dir_ / "bad") + " --patch 1,2", &log), 0);
+  EXPECT_EQ(runHpds("analyze " + shellQuote(*dir_ / "map.ply") + " --cell-size 0 -o " + shellQuote(*dir_ / "bad"), &log), 1);
   EXPECT_NE(log.find("--cell-size"), std::string::npos) << log;
   // A patch in empty space.
-  EXPECT_EQ(hpds("analyze " + q(*dir_ / "map.ply") + " --cell-size 4 -o " + q(*dir_ / "bad") + " --patch 500,500,4 "
+  EXPECT_EQ(runHpds("analyze " + shellQuote(*dir_ / "map.ply") + " --cell-size 4 -o " + shellQuote(*dir_ / "bad") + " --patch 500,500,4 "
                  "--no-plots", &log), 1);
   EXPECT_NE(log.find("--patch"), std::string::npos) << log;
 }
