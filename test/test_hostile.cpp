@@ -338,11 +338,11 @@ TEST(HostileCli, DISABLED_ALoneColourChannelSurvivesSampleThenVerify) {
   EXPECT_EQ(hpds("verify " + q(tmp / "red.ply") + " --cell-size 4", &log), 0) << log;
 }
 
-// Found by fuzz_ply: this PLY passes the reader's checks and then trips an assert(false) inside PCL's PLYReader
-// (ply_io.cpp:298, vertexScalarPropertyCallback: data index out of range), so `hpds sample` dies with SIGABRT.
-// Run in a subprocess; move the file to test/regressions/ply/ and enable once the reader refuses it.
-TEST(HostileCli, DISABLED_PlyThatTripsPclsAssertIsRefused) {
-  const fs::path input = fs::path(HPDS_SOURCE_DIR) / "test" / "regressions" / "pending" / "pcl_assert.ply";
+// Found by fuzz_ply: binary garbage in the header passed the reader's checks and then tripped an assert(false)
+// inside PCL's PLYReader (ply_io.cpp:298), so `hpds sample` died with SIGABRT. Non-ASCII header bytes are now
+// refused first. Run in a subprocess, so a regression shows as a failed exit code, not a dead test binary.
+TEST(HostileCli, PlyThatTripsPclsAssertIsRefused) {
+  const fs::path input = fs::path(HPDS_SOURCE_DIR) / "test" / "regressions" / "ply" / "pcl_assert.ply";
   const auto tmp = test::scratchDir("hostile_pcl_assert");
   std::string log;
   EXPECT_EQ(hpds("sample " + q(input) + " -o " + q(tmp / "o.ply"), &log), 1) << log;

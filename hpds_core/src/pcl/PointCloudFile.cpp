@@ -530,6 +530,13 @@ PlyHeader parsePlyHeader(const std::string &path, const FileBytes &file) {
         fail(path, "not a PLY file (no end_header in the first " + std::to_string(kMaxHeaderBytes) + " bytes)");
       fail(path, "truncated PLY header: no end_header");
     }
+    // A PLY header is ASCII text. Other bytes (binary garbage in a name or an obj_info value) make PCL's tokenizer
+    // disagree with this one about the layout, which ends in an assert inside PCL's reader (fuzz_ply found one).
+    for (const char c : *line)
+      if (!((c >= 0x20 && c <= 0x7E) || c == '\t' || c == '\r'))
+        lineError("byte 0x" + std::string(1, "0123456789abcdef"[(static_cast<unsigned char>(c) >> 4) & 15]) +
+                  std::string(1, "0123456789abcdef"[static_cast<unsigned char>(c) & 15]) +
+                  " is not ASCII text");
     const auto tok = splitWhitespace(*line);
     if (tok.empty()) continue;
     const std::string_view key = tok[0];
