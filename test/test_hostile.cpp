@@ -326,16 +326,27 @@ TEST(HostileCli, ConfigOfALoneCommaIsRefusedNotHung) {
       << log;
 }
 
-// Found by fuzz_pcd: a uchar `red` without green/blue is sampled and written to the PLY, which the PLY reader then
-// refuses ("colour properties red/green/blue must all be present"), so `hpds verify` cannot read `hpds sample`'s
-// output. Enable once writer and reader agree.
-TEST(HostileCli, DISABLED_ALoneColourChannelSurvivesSampleThenVerify) {
+// Found by fuzz_pcd: a uchar `red` without green/blue was sampled and written to the PLY, which the PLY reader then
+// refused ("colour properties red/green/blue must all be present"; PCL's reader cannot pack such a set), so
+// `hpds verify` could not read `hpds sample`'s output. Such PLY files are now read by hpds's own vertex reader,
+// which keeps the field as it is.
+TEST(HostileCli, ALoneColourChannelSurvivesSampleThenVerify) {
   const auto tmp = test::scratchDir("hostile_red");
   writeText(tmp / "red.pcd", "VERSION 0.7\nFIELDS x y z red\nSIZE 4 4 4 1\nTYPE F F F U\nCOUNT 1 1 1 1\nWIDTH 2\n"
                              "HEIGHT 1\nPOINTS 2\nDATA ascii\n1 2 3 200\n4 5 6 100\n");
   std::string log;
   ASSERT_EQ(hpds("sample " + q(tmp / "red.pcd") + " -o " + q(tmp / "red.ply"), &log), 0) << log;
   EXPECT_EQ(hpds("verify " + q(tmp / "red.ply") + " --cell-size 4", &log), 0) << log;
+  // The field and its bytes came through: uint8, and each sample's value one of the inputs'.
+  const PointBuffer out = readPointCloud((tmp / "red.ply").string());
+  const PointField *red = out.layout().find("red");
+  ASSERT_NE(red, nullptr);
+  EXPECT_EQ(red->type, FieldType::UInt8);
+  ASSERT_GT(out.size(), 0u);
+  for (std::size_t i = 0; i < out.size(); ++i) {
+    const double v = readAsDouble(out.record(i), *red);
+    EXPECT_TRUE(v == 200.0 || v == 100.0) << v;
+  }
 }
 
 // Found by fuzz_ply: binary garbage in the header passed the reader's checks and then tripped an assert(false)

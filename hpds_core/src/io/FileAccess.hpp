@@ -1,13 +1,21 @@
-// Internal to the I/O files: one error convention ("<path>: <what>", std::runtime_error), an owning FILE*, and the
-// checks every reader makes before opening a path.
+// Internal to the I/O files: one error convention ("<path>: <what>", std::runtime_error), an owning FILE*, the
+// checks every reader makes before opening a path, and the limits readers enforce (writers refuse to produce files
+// beyond them, so that whatever is written reads back).
 #pragma once
 
+#include <cstddef>
+#include <cstdint>
 #include <cstdio>
 #include <memory>
 #include <stdexcept>
 #include <string>
 
 namespace hpds::io_detail {
+
+/// A PCD/PLY header longer than this is not a point-cloud header (real ones are a few hundred bytes).
+constexpr std::size_t kMaxHeaderBytes = 1 << 20;
+/// Elements one field may have (PCD COUNT; a PLY writer expands them into this many properties).
+constexpr std::uint32_t kMaxFieldCount = 1 << 20;
 
 [[noreturn]] inline void fail(const std::string &path, const std::string &what) {
   throw std::runtime_error(path + ": " + what);

@@ -22,16 +22,19 @@
 #include <charconv>
 #include <cstdint>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <limits>
+#include <locale.h>
 #include <mutex>
 #include <optional>
 #include <stdexcept>
 #include <string>
 #include <string_view>
 #include <system_error>
+#include <type_traits>
 #include <vector>
 
 #include "hpds/io/KittiBin.hpp"
@@ -43,12 +46,12 @@ namespace {
 namespace fs = std::filesystem;
 
 using io_detail::fail;
+// Headers are small (a few hundred bytes); a file with no end of header in kMaxHeaderBytes is not a point cloud.
+using io_detail::kMaxFieldCount;
+using io_detail::kMaxHeaderBytes;
 
-// Headers are small (a few hundred bytes); a file with no end of header in this many bytes is not a point cloud.
-constexpr std::size_t kMaxHeaderBytes = 1 << 20;
 // Sanity limits far above any real sensor record, low enough that products below cannot overflow 64 bits.
 constexpr std::uint64_t kMaxFields = 1 << 16;
-constexpr std::uint64_t kMaxFieldCount = 1 << 20;
 constexpr std::uint64_t kMaxPointStep = 1 << 24;
 // LZF emits at most 264 bytes per 3-byte back-reference; a claimed expansion beyond this factor is corruption.
 constexpr std::uint64_t kMaxLzfExpansion = 128;
@@ -490,25 +493,34 @@ std::int64_t atoiLike(std::string_view token) {
   return res.ec == std::errc() ? value : 0;
 }
 
-// PCL packs uchar red/green/blue into one 4-byte "rgb" field: it reserves the field at "red" and advances its write
-// position at "blue". A set that is incomplete or out of order makes it write past the end of the cloud, which its
-// assertion-enabled builds turn into an abort; so only complete, ordered sets are let through.
-void checkPlyColours(const std::string &path, const PlyElement &vertex) {
-  for (const std::string prefix : {"", "diffuse_"}) {
-    int index[3] = {-1, -1, -1};
-    const char *names[3] = {"red", "green", "blue"};
-    for (std::size_t i = 0; i < vertex.properties.size(); ++i) {
-      const PlyProperty &p = vertex.properties[i];
-      if (p.is_list || p.type != FieldType::UInt8) continue;
-      for (int c = 0; c < 3; ++c)
-        if (p.name == prefix + names[c]) index[c] = static_cast<int>(i);
-    }
-    const bool any = index[0] >= 0 || index[1] >= 0 || index[2] >= 0;
-    const bool complete = index[0] >= 0 && index[1] >= 0 && index[2] >= 0;
-    if (any && (!complete || index[0] > index[2]))
-      fail(path, "unsupported PLY: uchar colour properties " + prefix + "red/" + prefix + "green/" + prefix +
-                     "blue must all be present, red before blue");
+// PCL packs uchar red/green/blue into one 4-byte "rgb" field by position: it reserves the field at "red", keeps
+// writing the following properties from where "red" stood, and writes the packed value and moves on at "blue"; a uchar
+// "alpha" renames the last "rgb" field to "rgba" (asserting when there is none) and ORs itself into it. That is right
+// only for a run red, green, blue (plain or diffuse_) with nothing between, optionally followed by alpha, and no
+// property of its own called rgb/rgba. Anything else (a lone channel, another order, an alpha without colours)
+// misplaces bytes, writes past the cloud or aborts inside PCL, so such files go to readPlyVertices instead.
+bool pclPacksColours(const PlyElement &vertex) {
+  // What PCL makes of a vertex property: 0 red, 1 green, 2 blue, 3 alpha, -1 an ordinary property.
+  auto role = [](const PlyProperty &p) {
+    if (p.is_list || p.type != FieldType::UInt8) return -1;
+    if (p.name == "red" || p.name == "diffuse_red") return 0;
+    if (p.name == "green" || p.name == "diffuse_green") return 1;
+    if (p.name == "blue" || p.name == "diffuse_blue") return 2;
+    return p.name == "alpha" ? 3 : -1;
+  };
+  const auto &props = vertex.properties;
+  std::size_t first = props.size(), seen = 0;
+  bool packed_name = false;
+  for (std::size_t i = 0; i < props.size(); ++i) {
+    packed_name = packed_name || props[i].name == "rgb" || props[i].name == "rgba";
+    const int r = role(props[i]);
+    if (r < 0) continue;
+    if (seen == 0) first = i;
+    // The k-th colour property must be the k-th of red, green, blue, alpha and stand right after the previous one.
+    if (r != static_cast<int>(seen) || i != first + seen) return false;
+    ++seen;
   }
+  return seen == 0 || (seen >= 3 && !packed_name);
 }
 
 PlyHeader parsePlyHeader(const std::string &path, const FileBytes &file) {
@@ -607,7 +619,6 @@ PlyHeader parsePlyHeader(const std::string &path, const FileBytes &file) {
         if (p.is_list)
           fail(path,
                "unsupported PLY: vertex property '" + p.name + "' is a list (PCL sizes it from the first vertex only)");
-      checkPlyColours(path, e);
     }
   }
   return h;
@@ -654,33 +665,59 @@ void checkPlyBinary(const std::string &path, const FileBytes &file, const PlyHea
   }
 }
 
-// Value a token of an ASCII PLY must parse as. PCL's reader turns unparsable text (and "1.0" for an int property)
-// into NaN or 0 without a word, so the check is strict.
-bool plyAsciiValueOk(std::string_view token, FieldType type) {
+// A float or double parsed from text, locale-independently: from_chars, and for values beyond the type's range
+// (which from_chars reports without a value) strtod/strtof in the C locale, which give +-inf or +-0 as appropriate.
+template <typename T>
+T parseReal(std::string_view token) {
+  if (!token.empty() && token.front() == '+') token.remove_prefix(1);
+  T value{};
+  const auto res = std::from_chars(token.data(), token.data() + token.size(), value);
+  if (res.ec == std::errc()) return value;
+  static const locale_t c_locale = newlocale(LC_ALL_MASK, "C", static_cast<locale_t>(nullptr));
+  const std::string text(token);
+  if constexpr (std::is_same_v<T, float>)
+    return strtof_l(text.c_str(), nullptr, c_locale);
+  else
+    return strtod_l(text.c_str(), nullptr, c_locale);
+}
+
+template <typename T>
+bool parseIntegerInto(std::string_view token, std::uint8_t *out) {
+  const auto v = parseInteger<std::int64_t>(token);
+  if (!v || *v < std::int64_t(std::numeric_limits<T>::min()) || *v > std::int64_t(std::numeric_limits<T>::max()))
+    return false;
+  const T value = static_cast<T>(*v);
+  if (out) std::memcpy(out, &value, sizeof value);
+  return true;
+}
+
+// Parses a token of an ASCII PLY as a value of `type` and, when `out` is given, stores its bytes there. PCL's reader
+// turns unparsable text (and "1.0" for an int property) into NaN or 0 without a word, so the check is strict.
+bool parsePlyAsciiValue(std::string_view token, FieldType type, std::uint8_t *out) {
   switch (type) {
-    case FieldType::Int8: {
-      const auto v = parseInteger<std::int64_t>(token);
-      return v && *v >= -128 && *v <= 127;
-    }
-    case FieldType::UInt8: {
-      const auto v = parseInteger<std::int64_t>(token);
-      return v && *v >= 0 && *v <= 255;
-    }
-    case FieldType::Int16: {
-      const auto v = parseInteger<std::int64_t>(token);
-      return v && *v >= -32768 && *v <= 32767;
-    }
-    case FieldType::UInt16: {
-      const auto v = parseInteger<std::int64_t>(token);
-      return v && *v >= 0 && *v <= 65535;
-    }
+    case FieldType::Int8:
+      return parseIntegerInto<std::int8_t>(token, out);
+    case FieldType::UInt8:
+      return parseIntegerInto<std::uint8_t>(token, out);
+    case FieldType::Int16:
+      return parseIntegerInto<std::int16_t>(token, out);
+    case FieldType::UInt16:
+      return parseIntegerInto<std::uint16_t>(token, out);
     case FieldType::Int32:
-      return parseInteger<std::int32_t>(token).has_value();
+      return parseIntegerInto<std::int32_t>(token, out);
     case FieldType::UInt32:
-      return parseInteger<std::uint32_t>(token).has_value();
+      return parseIntegerInto<std::uint32_t>(token, out);
     case FieldType::Float32:
     case FieldType::Float64:
-      return isNumber(token);
+      if (!isNumber(token)) return false;
+      if (out && type == FieldType::Float32) {
+        const float value = parseReal<float>(token);
+        std::memcpy(out, &value, sizeof value);
+      } else if (out) {
+        const double value = parseReal<double>(token);
+        std::memcpy(out, &value, sizeof value);
+      }
+      return true;
   }
   return false;
 }
@@ -714,7 +751,7 @@ void checkPlyAscii(const std::string &path, const FileBytes &file, const PlyHead
           const auto n = parseInteger<std::uint32_t>(token);
           if (!n) fail(path, "ascii " + e.name + " " + std::to_string(i) + ": list size " + quote(token) + " invalid");
           for (std::uint32_t k = 0; k < *n; ++k) nextToken(e, i);
-        } else if (is_vertex && !plyAsciiValueOk(token, p.type)) {
+        } else if (is_vertex && !parsePlyAsciiValue(token, p.type, nullptr)) {
           fail(path, "ascii vertex " + std::to_string(i) + ": " + quote(token) + " is not a valid " +
                          fieldTypeName(p.type) + " value for property '" + p.name + "'");
         }
@@ -722,6 +759,142 @@ void checkPlyAscii(const std::string &path, const FileBytes &file, const PlyHead
     }
     if (is_vertex) break;
   }
+}
+
+// ---------------------------------------------------------------------------------------------------------------------
+// hpds's own PLY vertex reader, for the colour arrangements PCL cannot pack (see pclPacksColours)
+
+void checkCloudLayout(const std::string &path, const PointLayout &layout);
+
+// Sequential reads of the data section with every read checked against what is left of the file.
+class PlyDataStream {
+ public:
+  PlyDataStream(const std::string &path, const PlyHeader &h) : path_(path), format_(h.format), in_(path, std::ios::binary) {
+    if (!in_) fail(path, std::string("cannot open: ") + std::strerror(errno));
+    in_.seekg(static_cast<std::streamoff>(h.data_offset));
+    if (!in_) fail(path, "cannot seek to the PLY data");
+  }
+
+  /// Reads `n` bytes into `out` (binary), failing with "truncated" when the file ends first.
+  void read(std::uint8_t *out, std::uint64_t n, const std::string &where) {
+    in_.read(reinterpret_cast<char *>(out), static_cast<std::streamsize>(n));
+    if (static_cast<std::uint64_t>(in_.gcount()) != n) fail(path_, "truncated: binary data ends in " + where);
+  }
+  /// Skips `n` bytes (binary).
+  void skip(std::uint64_t n, const std::string &where) {
+    in_.ignore(static_cast<std::streamsize>(n));
+    if (static_cast<std::uint64_t>(in_.gcount()) != n) fail(path_, "truncated: binary data ends in " + where);
+  }
+  /// Next whitespace-separated token (ascii), or nullptr at the end of the file.
+  const std::string *next() { return (in_ >> token_) ? &token_ : nullptr; }
+  const std::string &token(const std::string &where) {
+    if (!next()) fail(path_, "truncated: ascii data ends in " + where);
+    return token_;
+  }
+  /// A list's element count, whatever its declared integer type.
+  std::uint64_t listSize(FieldType type, const std::string &where) {
+    if (format_ == PlyFormat::Ascii) {
+      const auto n = parseInteger<std::uint32_t>(token(where));
+      if (!n) fail(path_, where + ": list size " + quote(token_) + " invalid");
+      return *n;
+    }
+    std::uint8_t bytes[8] = {};
+    const PointField f{"", 0, type, 1};
+    read(bytes, f.byteSize(), where);
+    if (format_ == PlyFormat::BinaryBE) std::reverse(bytes, bytes + f.byteSize());
+    const double n = readAsDouble(bytes, f);
+    if (n < 0) fail(path_, where + ": negative list size " + std::to_string(static_cast<std::int64_t>(n)));
+    return static_cast<std::uint64_t>(n);
+  }
+  /// Moves past one element's instances without storing them.
+  void skipElement(const PlyElement &e) {
+    const std::string where = "element '" + e.name + "'";
+    if (format_ != PlyFormat::Ascii) {
+      std::uint64_t record = 0;
+      bool fixed = true;
+      for (const auto &p : e.properties) {
+        record += fieldTypeSize(p.type);
+        fixed = fixed && !p.is_list;
+      }
+      // Every instance takes at least one byte (elements without properties are refused), so the loop below is
+      // bounded by the file's size.
+      if (fixed) return skip(e.count * record, where);
+    }
+    for (std::uint64_t i = 0; i < e.count; ++i) {
+      for (const auto &p : e.properties) {
+        const std::uint64_t n = p.is_list ? listSize(p.list_size_type, where) : 1;
+        if (format_ != PlyFormat::Ascii) {
+          skip(n * fieldTypeSize(p.type), where);
+        } else {
+          for (std::uint64_t k = 0; k < n; ++k) token(where);
+        }
+      }
+    }
+  }
+
+ private:
+  const std::string &path_;
+  PlyFormat format_;
+  std::ifstream in_;
+  std::string token_;
+};
+
+// Reads the vertex element as it is declared: one field per property, in order, with the property's name and type
+// (no packing, widening or renaming), organised by obj_info num_cols/num_rows as PCL would. Elements before the vertex
+// are walked past; those after it are not read. Expects the header checks (parsePlyHeader, checkPlyObjInfo) done.
+PointBuffer readPlyVertices(const std::string &path, const FileBytes &file, const PlyHeader &h) {
+  const PlyElement *vertex = findVertex(h);
+  if (!vertex) fail(path, "no x/y/z fields (no vertex element)");
+  // The header is at most kMaxHeaderBytes, so point_step stays far below 2^32 and n * point_step below 2^64.
+  PointLayout layout;
+  std::vector<std::uint32_t> offsets;
+  for (const PlyProperty &p : vertex->properties) {
+    offsets.push_back(layout.point_step);
+    if (p.name != "_") layout.fields.push_back({p.name, layout.point_step, p.type, 1});  // "_": padding, as from PCL
+    layout.point_step += static_cast<std::uint32_t>(fieldTypeSize(p.type));
+  }
+  checkCloudLayout(path, layout);
+
+  // Nothing is allocated beyond what the file can hold: binary records are stored whole, ascii values take at least
+  // two bytes each (a character and a separator).
+  const std::uint64_t n = vertex->count;
+  const std::uint64_t data_bytes = file.size - std::min(file.size, h.data_offset);
+  const bool ascii = h.format == PlyFormat::Ascii;
+  if (ascii ? n * vertex->properties.size() > data_bytes / 2 + 1 : n * layout.point_step > data_bytes)
+    fail(path, "truncated: header says " + std::to_string(n) + " points but the data holds only " +
+                   std::to_string(data_bytes) + " bytes");
+
+  PointBuffer cloud(layout, static_cast<std::size_t>(n));
+  PlyDataStream data(path, h);
+  for (const PlyElement &e : h.elements) {
+    if (&e == vertex) break;
+    data.skipElement(e);
+  }
+  if (!ascii) {
+    data.read(cloud.bytes().data(), cloud.bytes().size(), "the vertex element");
+    if (h.format == PlyFormat::BinaryBE)
+      for (std::size_t i = 0; i < cloud.size(); ++i)
+        for (std::size_t k = 0; k < offsets.size(); ++k) {
+          std::uint8_t *value = cloud.record(i) + offsets[k];
+          std::reverse(value, value + fieldTypeSize(vertex->properties[k].type));
+        }
+  } else {
+    for (std::size_t i = 0; i < cloud.size(); ++i)
+      for (std::size_t k = 0; k < offsets.size(); ++k) {
+        const PlyProperty &p = vertex->properties[k];
+        const std::string *token = data.next();
+        if (!token)
+          fail(path, "truncated: ascii data ends in vertex " + std::to_string(i) + " of " + std::to_string(n));
+        if (!parsePlyAsciiValue(*token, p.type, cloud.record(i) + offsets[k]))
+          fail(path, "ascii vertex " + std::to_string(i) + ": " + quote(*token) + " is not a valid " +
+                         fieldTypeName(p.type) + " value for property '" + p.name + "'");
+      }
+  }
+
+  const auto cols = static_cast<std::uint32_t>(h.obj_cols);
+  const auto rows = static_cast<std::uint32_t>(h.obj_rows);
+  if (cols != 0 && rows != 0 && std::uint64_t(cols) * rows == n) cloud.setOrganization(cols, rows);
+  return cloud;
 }
 
 // ---------------------------------------------------------------------------------------------------------------------
@@ -760,6 +933,20 @@ class QuietPcl {
   }
 };
 
+// What every cloud a reader returns must satisfy: a valid layout with x, y and z.
+void checkCloudLayout(const std::string &path, const PointLayout &layout) {
+  try {
+    layout.validate();
+  } catch (const std::invalid_argument &e) {
+    fail(path, std::string("invalid point layout: ") + e.what());
+  }
+  if (!layout.find("x") || !layout.find("y") || !layout.find("z")) {
+    std::string names;
+    for (const auto &f : layout.fields) names += (names.empty() ? "" : " ") + f.name;
+    fail(path, "no x/y/z fields (fields: " + (names.empty() ? std::string("none") : names) + ")");
+  }
+}
+
 PointBuffer fromPcl(const std::string &path, const pcl::PCLPointCloud2 &pc) {
   if (pc.is_bigendian) fail(path, "big-endian point data is not supported");
   PointLayout layout;
@@ -777,16 +964,7 @@ PointBuffer fromPcl(const std::string &path, const pcl::PCLPointCloud2 &pc) {
     field.count = f.count;
     layout.fields.push_back(std::move(field));
   }
-  try {
-    layout.validate();
-  } catch (const std::invalid_argument &e) {
-    fail(path, std::string("invalid point layout: ") + e.what());
-  }
-  if (!layout.find("x") || !layout.find("y") || !layout.find("z")) {
-    std::string names;
-    for (const auto &f : layout.fields) names += (names.empty() ? "" : " ") + f.name;
-    fail(path, "no x/y/z fields (fields: " + (names.empty() ? std::string("none") : names) + ")");
-  }
+  checkCloudLayout(path, layout);
 
   // Sizes are checked against the bytes PCL actually produced before anything is allocated: width/height can come
   // from file content PCL applies after sizing its buffer (a PLY "camera" element's viewport).
@@ -873,6 +1051,8 @@ PointBuffer readPly(const std::string &path) {
     checkPlyAscii(path, file, header);
   else
     checkPlyBinary(path, file, header);
+  const PlyElement *vertex = findVertex(header);
+  if (vertex && !pclPacksColours(*vertex)) return readPlyVertices(path, file, header);
 
   pcl::PCLPointCloud2 pc;
   int result = -1;

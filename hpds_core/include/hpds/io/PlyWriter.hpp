@@ -7,8 +7,9 @@
 // - An organised cloud (height > 1) also gets `obj_info num_cols W` / `obj_info num_rows H`, which PCL's reader uses to
 //   restore width/height.
 // - Read back through readPointCloud the values are identical, with PCL's naming conventions applied by its reader:
-//   uchar red/green/blue(/alpha) are packed into one `rgb`/`rgba` field (so such fields are only readable back as a
-//   complete red, green, blue set) and nx/ny/nz are renamed normal_x/y/z.
+//   adjacent uchar red, green, blue(, alpha) fields are packed into one `rgb`/`rgba` field and nx/ny/nz are renamed
+//   normal_x/y/z. Any other uchar colour arrangement (a lone `red`, another order) comes back field by field as
+//   written (readPointCloud reads such files itself).
 // - Errors: std::runtime_error whose message starts with the path: I/O failure, or a field name that cannot be a PLY
 //   property name (empty, whitespace) or that collides once count > 1 fields are expanded. A failed write removes the
 //   partial file.

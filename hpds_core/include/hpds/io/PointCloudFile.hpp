@@ -14,11 +14,18 @@
 //   value a number of the declared type); so truncated, empty or garbage input raises an exception instead of
 //   crashing PCL, hanging or allocating gigabytes. Memory use is bounded by the file size (up to ~128x it for
 //   binary_compressed, LZF's maximum expansion).
-//   Constructs that PCL 1.13 mishandles are refused: PLY vertex list properties, incomplete or misordered uchar
-//   red/green/blue sets, indented obj_info lines; PCD binary data whose first bytes spell a header keyword.
+//   Constructs that PCL 1.13 mishandles are refused: PLY vertex list properties, indented obj_info lines; PCD binary
+//   data whose first bytes spell a header keyword.
 // - PLY conventions of PCL's reader apply: uchar red/green/blue(/alpha) become one packed "rgb" (float32) or "rgba"
 //   (uint32) field, nx/ny/nz become normal_x/normal_y/normal_z. A uchar "intensity", which PCL widens to float32, is
 //   given back its uint8 type.
+// - PCL packs colours correctly only for a run of uchar red, green, blue (or diffuse_*) with nothing between,
+//   optionally followed by alpha, and no property of its own named rgb/rgba. A PLY whose vertex has any other uchar
+//   colour arrangement (a lone `red`, another order, an alpha without colours, a property inside the run) is read by
+//   hpds's own vertex reader instead (ascii and binary of either endianness, the same pre-checks, every read bounded
+//   by the file): one field per vertex property with its declared name and type, bytes as in the file, "_"
+//   properties as padding, no renaming; organised by obj_info num_cols/num_rows like PCL. So writePly's output always
+//   reads back.
 // - Errors: std::runtime_error whose message starts with the path and says what is wrong ("file not found", "empty
 //   file", "not a PCD file", "truncated: header says N points of S bytes but data holds M bytes", "no x/y/z fields",
 //   "unsupported extension", ...). Exceptions thrown inside PCL are converted to the same form.
