@@ -961,6 +961,55 @@ TEST(BadInput, EveryTruncationAndHeaderMutationIsHandled) {
   }
 }
 
+// fuzz_pcd found x with COUNT 2 accepted by the reader (the pipeline sampled its first element and the PLY written
+// from it had no x); the reader refuses vector-valued coordinates itself, naming the file and the field.
+TEST(BadInput, VectorValuedCoordinatesAreRefusedOnReading) {
+  const ScratchDir scratch("io_bad_xyz_count");
+  const fs::path &dir = scratch.path;
+  writeBytes(dir / "x2.pcd", pcdHeader("x y z", "4 4 4", "F F F", "2 1 1", "1", "1", "1", "ascii") + "1 2 3 4\n");
+  expectError([&] { (void)readPointCloud((dir / "x2.pcd").string()); }, "x2.pcd", {"field 'x'", "count 2"});
+  writeBytes(dir / "z3.pcd", pcdHeader("x y z i", "4 4 8 1", "F F F U", "1 1 3 1", "2", "1", "2", "binary") +
+                                 std::string(2 * (4 + 4 + 24 + 1), '\0'));
+  expectError([&] { (void)readPointCloud((dir / "z3.pcd").string()); }, "z3.pcd", {"field 'z'", "count 3"});
+  // Other fields may be vectors.
+  writeBytes(dir / "i2.pcd", pcdHeader("x y z i", "4 4 4 4", "F F F F", "1 1 1 2", "1", "1", "1", "ascii") +
+                                 "1 2 3 4 5\n");
+  EXPECT_EQ(readPointCloud((dir / "i2.pcd").string()).layout().find("i")->count, 2u);
+}
+
+// A field's count becomes that many PLY properties; fuzz_cloud_conversion found writePly spending hours on a (0-point)
+// cloud declaring 4e9. Writers refuse counts beyond what the readers accept (2^20), at once.
+TEST(WritePointCloud, FieldCountsBeyondTheReadersLimitAreRefusedAtOnce) {
+  const ScratchDir scratch("io_write_count");
+  const fs::path &dir = scratch.path;
+  auto cloudWithCount = [](std::uint32_t count) {
+    PointLayout layout;
+    layout.append("x", FieldType::Float32);
+    layout.append("y", FieldType::Float32);
+    layout.append("z", FieldType::Float32);
+    layout.append("f", FieldType::UInt8, count);
+    return PointBuffer(layout, 0);
+  };
+  for (const char *name : {"huge.ply", "huge.pcd"}) {
+    const auto t0 = std::chrono::steady_clock::now();
+    expectError([&] { writePointCloud((dir / name).string(), cloudWithCount(4000000000u)); }, name,
+                {"field 'f'", "count 4000000000", "1048576"});
+    EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(), 5.0);
+    expectError([&] { writePointCloud((dir / name).string(), cloudWithCount((1u << 20) + 1)); }, name,
+                {"count 1048577"});
+    EXPECT_FALSE(fs::exists(dir / name));
+  }
+  // At the limit PCD writes and reads back; PLY (one header line per element) would outgrow the header limit readers
+  // apply, so it is refused too rather than written unreadable.
+  writePcd((dir / "limit.pcd").string(), cloudWithCount(1u << 20));
+  EXPECT_EQ(readPointCloud((dir / "limit.pcd").string()).layout().find("f")->count, 1u << 20);
+  expectError([&] { writePly((dir / "limit.ply").string(), cloudWithCount(1u << 20)); }, "limit.ply",
+              {"header would exceed"});
+  // Below the header limit a vector field still round-trips through PLY as numbered properties.
+  writePly((dir / "ok.ply").string(), cloudWithCount(1000));
+  EXPECT_NE(readPointCloud((dir / "ok.ply").string()).layout().find("f_999"), nullptr);
+}
+
 TEST(BadInput, PoseFiles) {
   const ScratchDir scratch("io_bad_poses");
   const fs::path &dir = scratch.path;

@@ -18,8 +18,6 @@ using io_detail::fail;
 using io_detail::FilePtr;
 using io_detail::requireRegularFile;
 
-
-
 // The original PLY type names: every PLY reader knows them, while the sized aliases (int8, float32...) are an
 // extension some readers lack.
 const char *plyTypeName(FieldType type) {
@@ -51,6 +49,8 @@ bool isValidPropertyName(const std::string &name) {
   return true;
 }
 
+constexpr const char *kEndHeader = "end_header\n";
+
 // One contiguous byte range of a record that goes to the file unchanged.
 struct Span {
   std::uint32_t offset;
@@ -74,6 +74,13 @@ void writePly(const std::string &path, const PointBuffer &cloud) {
   }
   header += "element vertex " + std::to_string(cloud.size()) + "\n";
 
+  // A field of count N becomes N properties: refuse what no reader accepts before spending time on it (a
+  // PointCloud2 may declare a count of 4e9 for a cloud of 0 points).
+  for (const PointField &f : layout.fields)
+    if (f.count > io_detail::kMaxFieldCount)
+      fail(path, "cannot write PLY: field '" + f.name + "' has count " + std::to_string(f.count) + ", more than the " +
+                     std::to_string(io_detail::kMaxFieldCount) + " elements a field may have");
+
   std::set<std::string> names;
   std::vector<Span> spans;
   std::size_t out_step = 0;
@@ -86,6 +93,9 @@ void writePly(const std::string &path, const PointBuffer &cloud) {
       const std::string name = f.count == 1 ? f.name : f.name + "_" + std::to_string(c);
       if (!names.insert(name).second) fail(path, "cannot write PLY: property name '" + name + "' would appear twice");
       header += std::string("property ") + type + " " + name + "\n";
+      if (header.size() + std::strlen(kEndHeader) > io_detail::kMaxHeaderBytes)
+        fail(path, "cannot write PLY: the header would exceed " + std::to_string(io_detail::kMaxHeaderBytes) +
+                       " bytes (too many properties), which readers refuse");
     }
     // Adjacent fields merge into one span so that the copy loop below stays short for typical layouts.
     const auto bytes = static_cast<std::uint32_t>(elem * f.count);
@@ -95,7 +105,7 @@ void writePly(const std::string &path, const PointBuffer &cloud) {
       spans.push_back({f.offset, bytes});
     out_step += bytes;
   }
-  header += "end_header\n";
+  header += kEndHeader;
 
   FilePtr file(std::fopen(path.c_str(), "wb"));
   if (!file) fail(path, std::string("cannot open for writing: ") + std::strerror(errno));

@@ -933,7 +933,7 @@ class QuietPcl {
   }
 };
 
-// What every cloud a reader returns must satisfy: a valid layout with x, y and z.
+// What every cloud a reader returns must satisfy: a valid layout with single-valued x, y and z.
 void checkCloudLayout(const std::string &path, const PointLayout &layout) {
   try {
     layout.validate();
@@ -944,6 +944,13 @@ void checkCloudLayout(const std::string &path, const PointLayout &layout) {
     std::string names;
     for (const auto &f : layout.fields) names += (names.empty() ? "" : " ") + f.name;
     fail(path, "no x/y/z fields (fields: " + (names.empty() ? std::string("none") : names) + ")");
+  }
+  // The pipeline reads one coordinate per axis; a vector-valued x would be sampled by its first element and lost on
+  // writing (fuzz_pcd found it), so it is refused here, where the file can still be named.
+  for (const char *axis : {"x", "y", "z"}) {
+    const PointField &f = *layout.find(axis);
+    if (f.count != 1)
+      fail(path, "field '" + f.name + "' has count " + std::to_string(f.count) + ": x, y and z must be single values");
   }
 }
 
@@ -1101,8 +1108,12 @@ void writePcd(const std::string &path, const PointBuffer &cloud) {
     fail(path, std::string("cannot write PCD: invalid layout: ") + e.what());
   }
   if (layout.fields.empty()) fail(path, "cannot write PCD: the cloud has no fields");
-  for (const auto &f : layout.fields)
+  for (const auto &f : layout.fields) {
     if (!isValidPcdFieldName(f.name)) fail(path, "cannot write PCD: field name " + quote(f.name) + " is invalid");
+    if (f.count > kMaxFieldCount)
+      fail(path, "cannot write PCD: field '" + f.name + "' has count " + std::to_string(f.count) +
+                     ", more than the " + std::to_string(kMaxFieldCount) + " elements a field may have");
+  }
 
   // PCL's header writer assumes fields in offset order and derives "_" padding from the gaps between them.
   std::vector<PointField> fields = layout.fields;

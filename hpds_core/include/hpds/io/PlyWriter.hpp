@@ -10,9 +10,10 @@
 //   adjacent uchar red, green, blue(, alpha) fields are packed into one `rgb`/`rgba` field and nx/ny/nz are renamed
 //   normal_x/y/z. Any other uchar colour arrangement (a lone `red`, another order) comes back field by field as
 //   written (readPointCloud reads such files itself).
-// - Errors: std::runtime_error whose message starts with the path: I/O failure, or a field name that cannot be a PLY
-//   property name (empty, whitespace) or that collides once count > 1 fields are expanded. A failed write removes the
-//   partial file.
+// - Errors: std::runtime_error whose message starts with the path: I/O failure, a field name that cannot be a PLY
+//   property name (empty, whitespace) or that collides once count > 1 fields are expanded, a field count above 2^20
+//   (refused at once, whatever the count: the time spent is bounded), or a header that would outgrow the 1 MiB the
+//   readers accept (too many properties). A failed write removes the partial file.
 // - Thread-safety: reentrant; concurrent calls on different paths are safe.
 #pragma once
 
