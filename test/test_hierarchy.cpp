@@ -3,6 +3,7 @@
 // checked pairwise on the output.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <map>
 #include <numeric>
@@ -12,6 +13,7 @@
 #include "hpds/CellKey.hpp"
 #include "hpds/Hierarchy.hpp"
 #include "hpds/LevelGrid.hpp"
+#include "hpds/ViewDirection.hpp"
 
 namespace hpds {
 namespace {
@@ -81,6 +83,59 @@ TEST(LevelGrid, MatchesMapUnderRandomInsertEraseFind) {
     EXPECT_EQ(ref.at(std::make_tuple(k.x, k.y, k.z)), id);
   });
   EXPECT_EQ(visited, ref.size());
+}
+
+TEST(LevelGrid, ChurnInAMovingWindowKeepsMemoryBoundedAndMatchesTheMap) {
+  // A map-mode pattern: cells appear ahead and are erased behind, forever. Freed pool chunks must be reused or
+  // compacted, not accumulate; every answer must still match a std::map.
+  std::mt19937_64 rng(5);
+  std::uniform_int_distribution<int> c(0, 39), big(0, 3);
+  LevelGrid grid;
+  std::map<std::tuple<int, int, int>, SampleId> ref;
+  std::size_t mem_early = 0, mem_late = 0;
+  for (int step = 0; step < 400; ++step) {
+    for (int i = 0; i < 300; ++i) {
+      // Denser blocks now and then, so chunks move between size classes.
+      const int x = step * 4 + c(rng) / (big(rng) == 0 ? 8 : 1), y = c(rng), z = c(rng) / 4;
+      const SampleId id = static_cast<SampleId>(step * 1000 + i);
+      ASSERT_EQ(grid.insert(CellKey{x, y, z}, id), ref.emplace(std::make_tuple(x, y, z), id).second);
+    }
+    for (auto it = ref.begin(); it != ref.end();) {
+      if (std::get<0>(it->first) < step * 4 - 40) {
+        ASSERT_TRUE(grid.erase(CellKey{std::get<0>(it->first), std::get<1>(it->first), std::get<2>(it->first)}));
+        it = ref.erase(it);
+      } else {
+        ++it;
+      }
+    }
+    ASSERT_EQ(grid.size(), ref.size());
+    if (step == 100) mem_early = grid.memUsage();
+    if (step > 100) mem_late = std::max(mem_late, grid.memUsage());
+  }
+  for (const auto &[k, id] : ref) ASSERT_EQ(grid.find(CellKey{std::get<0>(k), std::get<1>(k), std::get<2>(k)}), id);
+  EXPECT_LE(mem_late, mem_early * 2) << "grid memory grew from " << mem_early << " to " << mem_late;
+}
+
+TEST(ViewDirection, RoundTripsExactlyAndKeepsTheDirection) {
+  std::mt19937_64 rng(9);
+  std::normal_distribution<double> g(0.0, 1.0);
+  double worst = 0.0;
+  for (int i = 0; i < 200000; ++i) {
+    double v[3] = {g(rng), g(rng), g(rng)};
+    if (i % 7 == 0) v[i % 3] = 0.0;  // on the octahedron's seams
+    if (i % 11 == 0) v[2] = -std::fabs(v[2]) * 1e-9;  // just below the equator
+    const double s = std::pow(10.0, (i % 9) - 4);  // length never matters
+    const std::uint32_t code = encodeViewDirection(s * v[0], s * v[1], s * v[2]);
+    const std::array<float, 3> d = decodeViewDirection(code);
+    ASSERT_EQ(encodeViewDirection(d[0], d[1], d[2]), code) << "decode then encode must be the identity";
+    const double n = std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+    const double dot = (d[0] * v[0] + d[1] * v[1] + d[2] * v[2]) / n;
+    worst = std::max(worst, std::acos(std::min(1.0, dot)));
+  }
+  EXPECT_LT(worst, 5e-4) << "radians";
+  const std::array<float, 3> zero = decodeViewDirection(encodeViewDirection(0.0, 0.0, 0.0));
+  EXPECT_EQ(zero, (std::array<float, 3>{0.0f, 0.0f, 0.0f}));
+  EXPECT_EQ(encodeViewDirection(NAN, 1.0, 0.0), encodeViewDirection(0.0, 0.0, 0.0));
 }
 
 // ---------------------------------------------------------------- brute-force reference of the greedy rule

@@ -88,7 +88,7 @@ void expectIdentical(const Hierarchy &a, const Hierarchy &b) {
     ASSERT_EQ(std::memcmp(a.position(i), b.position(j), 24), 0) << i;
     ASSERT_EQ(a.level(i), b.level(j));
     ASSERT_EQ(a.frameIndex(i), b.frameIndex(j));
-    ASSERT_EQ(std::memcmp(a.toViewpoint(i), b.toViewpoint(j), 12), 0);
+    ASSERT_EQ(a.toViewpoint(i), b.toViewpoint(j));
     if (step) {
       ASSERT_EQ(std::memcmp(a.record(i), b.record(j), step), 0);
     }

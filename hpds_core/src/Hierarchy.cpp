@@ -63,15 +63,32 @@ double Hierarchy::conflictAt(int level, const double q[3], const CellKey &k, dou
     lo[a] = g[a][0] <= prune ? -1 : 0;
     hi[a] = g[a][2] <= prune ? 1 : 0;
   }
+  // The neighbourhood spans one or two blocks per axis; each block is hashed at most once, on first use, and an
+  // empty cell is answered by its block's mask.
+  constexpr int sh = LevelGrid::kBlockShift;
+  const std::int32_t b0[3] = {(k.x + lo[0]) >> sh, (k.y + lo[1]) >> sh, (k.z + lo[2]) >> sh};
+  const LevelGrid::Block *blocks[8];
+  unsigned fetched = 0;
   for (int dx = lo[0]; dx <= hi[0]; ++dx) {
     const double gx2 = g[0][dx + 1];
+    const std::int32_t cx = k.x + dx;
+    const int ox = (cx >> sh) - b0[0];
     for (int dy = lo[1]; dy <= hi[1]; ++dy) {
       const double gxy2 = gx2 + g[1][dy + 1];
       if (gxy2 > prune) continue;
+      const std::int32_t cy = k.y + dy;
+      const int oxy = ox | (((cy >> sh) - b0[1]) << 1);
       for (int dz = lo[2]; dz <= hi[2]; ++dz) {
         if (gxy2 + g[2][dz + 1] > prune) continue;
         if (skip_own && (dx | dy | dz) == 0) continue;
-        const SampleId s = grid.find(CellKey{k.x + dx, k.y + dy, k.z + dz});
+        const std::int32_t cz = k.z + dz;
+        const int slot = oxy | (((cz >> sh) - b0[2]) << 2);
+        if (!(fetched & (1u << slot))) {
+          blocks[slot] = grid.findBlock(cx >> sh, cy >> sh, cz >> sh);
+          fetched |= 1u << slot;
+        }
+        if (!blocks[slot]) continue;
+        const SampleId s = grid.idAt(*blocks[slot], LevelGrid::localBit(cx, cy, cz));
         if (s == kNoSample) continue;
         const double *p = position(s);
         const double ddx = p[0] - q[0], ddy = p[1] - q[1], ddz = p[2] - q[2];
@@ -98,10 +115,19 @@ SampleId Hierarchy::allocate() {
   }
   if (level_.size() >= kNoSample) throw std::length_error("hierarchy: more than 2^32-1 sample slots");
   const SampleId id = static_cast<SampleId>(level_.size());
+  if (level_.size() == level_.capacity()) {
+    // Grow by a quarter instead of doubling: per-sample arrays are most of a long-running map's memory.
+    const std::size_t cap = level_.size() + level_.size() / 4 + 1024;
+    level_.reserve(cap);
+    frame_.reserve(cap);
+    view_.reserve(cap);
+    xyz_.reserve(3 * cap);
+    records_.reserve(cap * record_layout_.point_step);
+  }
   level_.push_back(kFreeSlotLevel);
   frame_.push_back(0);
+  view_.push_back(0);
   xyz_.resize(xyz_.size() + 3);
-  to_view_.resize(to_view_.size() + 3);
   records_.resize(records_.size() + record_layout_.point_step);
   return id;
 }
@@ -188,8 +214,7 @@ InsertResult Hierarchy::insert(const InsertBatch &batch) {
           std::memcpy(&xyz_[3 * std::size_t(id)], q, 3 * sizeof(double));
           level_[id] = static_cast<std::uint8_t>(d);
           frame_[id] = batch.frame_index;
-          for (int a = 0; a < 3; ++a)
-            to_view_[3 * std::size_t(id) + a] = static_cast<float>(batch.viewpoint[a] - q[a]);
+          view_[id] = encodeViewDirection(batch.viewpoint[0] - q[0], batch.viewpoint[1] - q[1], batch.viewpoint[2] - q[2]);
           if (batch.records && record_layout_.point_step)
             std::memcpy(&records_[std::size_t(id) * record_layout_.point_step], batch.records + pi * batch.record_step,
                         record_layout_.point_step);
@@ -222,7 +247,7 @@ SampleId Hierarchy::restoreSample(const double xyz[3], int level, std::uint32_t 
   std::memcpy(&xyz_[3 * std::size_t(id)], xyz, 3 * sizeof(double));
   level_[id] = static_cast<std::uint8_t>(level);
   frame_[id] = frame_index;
-  std::memcpy(&to_view_[3 * std::size_t(id)], to_viewpoint, 3 * sizeof(float));
+  view_[id] = encodeViewDirection(to_viewpoint[0], to_viewpoint[1], to_viewpoint[2]);
   if (record_layout_.point_step) {
     std::uint8_t *dst = &records_[std::size_t(id) * record_layout_.point_step];
     if (record)
@@ -274,9 +299,11 @@ void Hierarchy::shrink() {
   xyz_.shrink_to_fit();
   level_.shrink_to_fit();
   frame_.shrink_to_fit();
-  to_view_.shrink_to_fit();
+  view_.shrink_to_fit();
   records_.shrink_to_fit();
   free_ids_.shrink_to_fit();
+  std::vector<CellKey>().swap(finest_keys_);  // `= {}` would keep the capacity
+  for (auto &p : pending_) std::vector<std::uint64_t>().swap(p);
 }
 
 void Hierarchy::clear() {
@@ -284,7 +311,7 @@ void Hierarchy::clear() {
   xyz_.clear();
   level_.clear();
   frame_.clear();
-  to_view_.clear();
+  view_.clear();
   records_.clear();
   free_ids_.clear();
   live_ = 0;
@@ -304,7 +331,7 @@ std::size_t Hierarchy::memUsage() const {
   std::size_t bytes = 0;
   for (const auto &g : grids_) bytes += g.memUsage();
   bytes += xyz_.capacity() * sizeof(double) + level_.capacity() + frame_.capacity() * sizeof(std::uint32_t) +
-           to_view_.capacity() * sizeof(float) + records_.capacity() + free_ids_.capacity() * sizeof(SampleId);
+           view_.capacity() * sizeof(std::uint32_t) + records_.capacity() + free_ids_.capacity() * sizeof(SampleId);
   bytes += finest_keys_.capacity() * sizeof(CellKey);
   for (const auto &p : pending_) bytes += p.capacity() * sizeof(std::uint64_t);
   return bytes;

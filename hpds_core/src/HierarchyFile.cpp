@@ -25,7 +25,8 @@
 //   48 per field: u32 name_len, name bytes, u32 offset, u8 datatype, u32 count
 //   header_size - 4: u32 CRC-32 of bytes [0, header_size - 4)
 //   body: sample_count entries of kEntryFixedBytes + point_step bytes:
-//         f64 x y z, u8 level, u32 frame_index, f32 to_viewpoint[3], record bytes
+//         f64 x y z, u8 level, u32 frame_index, f32 to_viewpoint[3] (unit direction since the map keeps only
+//         that; older files' full vectors load the same), record bytes
 //   last 4 bytes: u32 CRC-32 of the body entries
 
 namespace hpds {
@@ -384,7 +385,7 @@ void saveHierarchy(const std::string &path, const Hierarchy &hierarchy, std::uin
       e[24] = static_cast<std::uint8_t>(hierarchy.level(id));
       const std::uint32_t frame = hierarchy.frameIndex(id);
       std::memcpy(e + 25, &frame, 4);
-      std::memcpy(e + 29, hierarchy.toViewpoint(id), 12);
+      std::memcpy(e + 29, hierarchy.toViewpoint(id).data(), 12);
       if (step) std::memcpy(e + kEntryFixedBytes, hierarchy.record(id), step);
       if (chunk.size() >= chunk_entries * entry_bytes) flush();
     }

@@ -113,7 +113,7 @@ std::vector<SampleNormal> estimateNormals(const Hierarchy &h, const std::vector<
       for (const auto &n : nb) acc.add(index ? &xyz[3 * std::size_t(n.second)] : h.position(n.second));
       const LocalPca pca = acc.solve(/*accurate=*/false);
       if (!pca.valid) continue;
-      const float *v = h.toViewpoint(id);
+      const std::array<float, 3> v = h.toViewpoint(id);
       const double dot = pca.normal[0] * v[0] + pca.normal[1] * v[1] + pca.normal[2] * v[2];
       const double s = dot < 0.0 ? -1.0 : 1.0;
       result[i] = SampleNormal{{static_cast<float>(s * pca.normal[0]), static_cast<float>(s * pca.normal[1]),

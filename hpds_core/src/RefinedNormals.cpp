@@ -124,7 +124,7 @@ std::vector<SampleNormal> estimateNormalsRefined(const Hierarchy &h, const std::
         rho *= 2.0;
       }
       if (!have) continue;
-      const float *v = h.toViewpoint(id);
+      const std::array<float, 3> v = h.toViewpoint(id);
       const double dot = chosen.normal[0] * v[0] + chosen.normal[1] * v[1] + chosen.normal[2] * v[2];
       const double s = dot < 0.0 ? -1.0 : 1.0;
       result[i] = SampleNormal{{static_cast<float>(s * chosen.normal[0]), static_cast<float>(s * chosen.normal[1]),

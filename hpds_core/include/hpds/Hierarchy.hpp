@@ -11,7 +11,7 @@
 // - Positions are in the fixed frame, metres, double precision. Coordinates whose finest-level cell index would
 //   reach 2^30 are refused (counted as out_of_range) instead of producing wrong keys.
 // - Samples keep a copy of their input record (the bytes of every input field), the frame index that contributed
-//   them and the vector from sample to that frame's viewpoint (for normal orientation).
+//   them and the direction from sample to that frame's viewpoint (for normal orientation; 4 bytes, ViewDirection).
 // - Sample ids are stable until the sample is evicted; evicted ids are reused by later insertions.
 // - Not thread-safe for mutation; const queries may run concurrently.
 #pragma once
@@ -24,6 +24,7 @@
 
 #include "hpds/LevelGrid.hpp"
 #include "hpds/PointBuffer.hpp"
+#include "hpds/ViewDirection.hpp"
 
 namespace hpds {
 
@@ -67,9 +68,9 @@ class Hierarchy {
   /// order, the rejected ones then try level 1 in the same order, and so on.
   InsertResult insert(const InsertBatch &batch);
 
-  /// Puts back a sample exactly as saved (persistence): no spacing test, but the position must be in range and its
-  /// level-`level` cell free, else std::invalid_argument (a file that breaks this is corrupt). `record` may be null
-  /// (zeroed record).
+  /// Puts back a sample exactly as saved (persistence; only the direction of `to_viewpoint` is kept): no spacing
+  /// test, but the position must be in range and its level-`level` cell free, else std::invalid_argument (a file
+  /// that breaks this is corrupt). `record` may be null (zeroed record).
   SampleId restoreSample(const double xyz[3], int level, std::uint32_t frame_index, const float to_viewpoint[3],
                          const std::uint8_t *record);
 
@@ -79,6 +80,7 @@ class Hierarchy {
   std::size_t evictToCap(const double center[3], std::size_t max_samples);
   /// Removes every sample. Memory is kept for the next batch (scan mode); call shrink() to give it back.
   void clear();
+  /// Gives back memory not needed by the live samples: empty grids, spare sample capacity, insertion scratch.
   void shrink();
 
   [[nodiscard]] int maxDepth() const { return max_depth_; }
@@ -96,8 +98,9 @@ class Hierarchy {
   [[nodiscard]] const double *position(SampleId id) const { return &xyz_[3 * std::size_t(id)]; }
   [[nodiscard]] int level(SampleId id) const { return level_[id]; }
   [[nodiscard]] std::uint32_t frameIndex(SampleId id) const { return frame_[id]; }
-  /// Vector from the sample to the viewpoint of the frame that contributed it [m].
-  [[nodiscard]] const float *toViewpoint(SampleId id) const { return &to_view_[3 * std::size_t(id)]; }
+  /// Unit direction from the sample to the viewpoint of the frame that contributed it ((0,0,0) when the sample
+  /// lies at that viewpoint).
+  [[nodiscard]] std::array<float, 3> toViewpoint(SampleId id) const { return decodeViewDirection(view_[id]); }
   /// The sample's input record (recordLayout().point_step bytes), or nullptr without records.
   [[nodiscard]] const std::uint8_t *record(SampleId id) const {
     return record_layout_.point_step ? &records_[std::size_t(id) * record_layout_.point_step] : nullptr;
@@ -148,7 +151,7 @@ class Hierarchy {
   std::vector<double> xyz_;
   std::vector<std::uint8_t> level_;
   std::vector<std::uint32_t> frame_;
-  std::vector<float> to_view_;
+  std::vector<std::uint32_t> view_;  // ViewDirection codes
   std::vector<std::uint8_t> records_;
   std::vector<SampleId> free_ids_;
   std::size_t live_ = 0;
@@ -169,7 +172,7 @@ void Hierarchy::visitBall(int level, const double q[3], double radius, Fn &fn) c
   const double span_f = std::ceil(radius / e);
   const double r2 = radius * radius;
   // A ball much larger than the level's cells: scanning the occupied cells is cheaper than walking the ball.
-  if (!(span_f < 64.0) || (2.0 * span_f + 1.0) * (2.0 * span_f + 1.0) * (2.0 * span_f + 1.0) > 4.0 * grid.capacity()) {
+  if (!(span_f < 64.0) || (2.0 * span_f + 1.0) * (2.0 * span_f + 1.0) * (2.0 * span_f + 1.0) > 4.0 * double(grid.capacity() + grid.size())) {
     grid.forEach([&](const CellKey &, SampleId s) {
       const double *p = position(s);
       const double ddx = p[0] - q[0], ddy = p[1] - q[1], ddz = p[2] - q[2];

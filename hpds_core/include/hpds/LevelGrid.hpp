@@ -1,12 +1,15 @@
 // LevelGrid: the sparse grid of one hierarchy level, cell key -> sample id, at most one sample per cell.
 //
 // Contract
-// - Open addressing with linear probing over 16-byte slots (three int32 coordinates + the id), no per-insert
-//   allocation; erase uses backward-shift deletion so lookups never scan tombstones.
+// - Cells are grouped in blocks of 4x4x4. A flat open-addressing hash (linear probing, backward-shift deletion)
+//   maps a block key to a 64-bit occupancy mask and an offset into one shared id pool, where the block's ids are
+//   stored compactly in mask-bit order. A neighbourhood query therefore hashes once per block (one to eight per
+//   3x3x3 neighbourhood) and answers "empty" from the mask alone; no per-insert allocation beyond pool growth.
 // - Iteration order depends on the insertion history only (no pointers, no randomisation): deterministic.
 // - Move-only; not thread-safe for concurrent mutation; concurrent const lookups are safe.
 #pragma once
 
+#include <array>
 #include <cstddef>
 #include <cstdint>
 #include <vector>
@@ -20,20 +23,49 @@ inline constexpr SampleId kNoSample = 0xFFFFFFFFu;
 
 class LevelGrid {
  public:
+  /// Cells per block along each axis is 1 << kBlockShift.
+  static constexpr int kBlockShift = 2;
+
+  /// One block: which of its 64 cells hold a sample, and where their ids start in the pool. Blocks with an empty
+  /// mask do not exist (a zero mask marks a free hash slot).
+  struct Block {
+    std::int32_t x, y, z;  ///< block coordinates (cell coordinates >> kBlockShift)
+    std::uint32_t base;    ///< the id itself when one cell is occupied, else the first id of this block in the pool
+    std::uint64_t mask;    ///< bit (cx | cy << 2 | cz << 4) set when that local cell is occupied
+  };
+
   LevelGrid() = default;
   LevelGrid(const LevelGrid &) = delete;
   LevelGrid &operator=(const LevelGrid &) = delete;
   LevelGrid(LevelGrid &&) noexcept = default;
   LevelGrid &operator=(LevelGrid &&) noexcept = default;
 
+  /// The block with block coordinates (bx, by, bz), or nullptr when none of its cells is occupied. The pointer is
+  /// valid until the next mutation.
+  [[nodiscard]] const Block *findBlock(std::int32_t bx, std::int32_t by, std::int32_t bz) const {
+    if (size_ == 0) return nullptr;
+    for (std::size_t i = hash(bx, by, bz) & mask_;; i = (i + 1) & mask_) {
+      const Block &b = slots_[i];
+      if (b.mask == 0) return nullptr;
+      if (b.x == bx && b.y == by && b.z == bz) return &b;
+    }
+  }
+  /// Index of a cell inside its block.
+  [[nodiscard]] static unsigned localBit(std::int32_t x, std::int32_t y, std::int32_t z) {
+    return static_cast<unsigned>((x & 3) | ((y & 3) << 2) | ((z & 3) << 4));
+  }
+  /// Sample in local cell `bit` of block `b`, or kNoSample.
+  [[nodiscard]] SampleId idAt(const Block &b, unsigned bit) const {
+    const std::uint64_t m = std::uint64_t(1) << bit;
+    if (!(b.mask & m)) return kNoSample;
+    if ((b.mask & (b.mask - 1)) == 0) return b.base;
+    return ids_[b.base + static_cast<unsigned>(__builtin_popcountll(b.mask & (m - 1)))];
+  }
+
   /// Sample in `key`'s cell, or kNoSample.
   [[nodiscard]] SampleId find(const CellKey &key) const {
-    if (slots_.empty()) return kNoSample;
-    for (std::size_t i = hash(key) & mask_;; i = (i + 1) & mask_) {
-      const Slot &s = slots_[i];
-      if (s.id == kNoSample) return kNoSample;
-      if (s.x == key.x && s.y == key.y && s.z == key.z) return s.id;
-    }
+    const Block *b = findBlock(key.x >> kBlockShift, key.y >> kBlockShift, key.z >> kBlockShift);
+    return b ? idAt(*b, localBit(key.x, key.y, key.z)) : kNoSample;
   }
   /// Stores `id` in a free cell; returns false (and stores nothing) when the cell is occupied.
   bool insert(const CellKey &key, SampleId id);
@@ -44,35 +76,49 @@ class LevelGrid {
   /// Empties the grid but keeps its capacity (scan mode refills a similar amount every frame).
   void reset();
 
+  /// Occupied cells.
   [[nodiscard]] std::size_t size() const { return size_; }
+  /// Occupied blocks and hash slots for blocks (a full scan visits every slot).
+  [[nodiscard]] std::size_t blockCount() const { return blocks_; }
   [[nodiscard]] std::size_t capacity() const { return slots_.size(); }
-  [[nodiscard]] std::size_t memUsage() const { return slots_.capacity() * sizeof(Slot); }
+  [[nodiscard]] std::size_t memUsage() const;
 
   /// Calls fn(const CellKey&, SampleId) for every occupied cell.
   template <typename Fn>
   void forEach(Fn &&fn) const {
-    for (const Slot &s : slots_)
-      if (s.id != kNoSample) fn(CellKey{s.x, s.y, s.z}, s.id);
+    for (const Block &b : slots_)
+      for (std::uint64_t m = b.mask; m != 0; m &= m - 1) {
+        const unsigned bit = static_cast<unsigned>(__builtin_ctzll(m));
+        const CellKey k{b.x * 4 + static_cast<std::int32_t>(bit & 3), b.y * 4 + static_cast<std::int32_t>((bit >> 2) & 3),
+                        b.z * 4 + static_cast<std::int32_t>(bit >> 4)};
+        fn(k, idAt(b, bit));
+      }
   }
 
  private:
-  struct Slot {
-    std::int32_t x, y, z;
-    SampleId id;
-  };
-  static std::size_t hash(const CellKey &k) {
-    std::uint64_t h = static_cast<std::uint64_t>(static_cast<std::uint32_t>(k.x)) * 0x9E3779B97F4A7C15ull;
-    h ^= static_cast<std::uint64_t>(static_cast<std::uint32_t>(k.y)) * 0xC2B2AE3D27D4EB4Full;
-    h ^= static_cast<std::uint64_t>(static_cast<std::uint32_t>(k.z)) * 0x165667B19E3779F9ull;
+  static std::size_t hash(std::int32_t x, std::int32_t y, std::int32_t z) {
+    std::uint64_t h = static_cast<std::uint64_t>(static_cast<std::uint32_t>(x)) * 0x9E3779B97F4A7C15ull;
+    h ^= static_cast<std::uint64_t>(static_cast<std::uint32_t>(y)) * 0xC2B2AE3D27D4EB4Full;
+    h ^= static_cast<std::uint64_t>(static_cast<std::uint32_t>(z)) * 0x165667B19E3779F9ull;
     h ^= h >> 31;
     h *= 0xBF58476D1CE4E5B9ull;
     h ^= h >> 29;
     return static_cast<std::size_t>(h);
   }
+  /// Pool chunk sizes are powers of two from 2 to 64 ids; class c holds 2 << c (for counts >= 2).
+  static int sizeClass(unsigned count);
+  std::uint32_t allocChunk(int cls);
+  void freeChunk(std::uint32_t base, int cls);
+  void compactPool();
   void rehash(std::size_t new_capacity);
+  void eraseSlot(std::size_t i);
 
-  std::vector<Slot> slots_;
+  std::vector<Block> slots_;
+  std::vector<SampleId> ids_;
+  std::array<std::vector<std::uint32_t>, 6> free_chunks_;
   std::size_t size_ = 0;
+  std::size_t blocks_ = 0;
+  std::size_t free_ids_ = 0;  ///< ids held by chunks on the free lists
   std::size_t mask_ = 0;
 };
 
