@@ -333,6 +333,36 @@ TEST(Pipeline, EvictionBoundsMemoryOnALongDrive) {
   }
 }
 
+TEST(Pipeline, ScratchFromOneHugeFrameIsGivenBackOnceFramesAreSmallAgain) {
+  // One frame of 600 k points (a 10 M point frame behaves the same, slower), then small frames: in both modes the
+  // memory sized for the huge frame must not stay for the life of the pipeline.
+  std::mt19937_64 rng(11);
+  std::uniform_real_distribution<double> u(-40.0, 40.0);
+  std::vector<std::array<double, 3>> big(600000), small(2000);
+  for (auto &p : big) p = {u(rng), u(rng), 0.05 * u(rng)};
+  for (auto &p : small) p = {0.2 * u(rng), 0.2 * u(rng), 0.01 * u(rng)};
+  const Frame huge = makeFrame(big), little = makeFrame(small);
+  for (const Mode mode : {Mode::Scan, Mode::Map}) {
+    HpdsConfig c;
+    c.mode = mode;
+    c.hierarchy.max_depth = 5;
+    Pipeline p(c);
+    p.addFrame(little);
+    const std::size_t before = p.memUsage();
+    p.addFrame(huge);
+    const std::size_t peak = p.memUsage();
+    ASSERT_GT(peak, 20 * before) << "the huge frame must actually need more memory";
+    for (int i = 0; i < 40; ++i) p.addFrame(little);
+    const std::size_t after = p.memUsage();
+    // Scan mode keeps nothing of the huge frame; map mode keeps its samples (no eviction here) but not the
+    // per-point scratch (40 B per input point).
+    if (mode == Mode::Scan)
+      EXPECT_LT(after, 4 * before + (1u << 20)) << "scan mode: " << before << " -> " << peak << " -> " << after;
+    else
+      EXPECT_LT(after + 30 * big.size(), peak) << "map mode: " << before << " -> " << peak << " -> " << after;
+  }
+}
+
 // ---------------------------------------------------------------- normals
 
 TEST(Normals, MatchBruteForcePcaAndAreOrientedTowardTheSensor) {
@@ -380,7 +410,7 @@ TEST(Normals, MatchBruteForcePcaAndAreOrientedTowardTheSensor) {
     EXPECT_NEAR(n.norm(), 1.0, 1e-5);
     EXPECT_LT(angleDeg(n, es.eigenvectors().col(0)), 0.1);
     EXPECT_NEAR(normals[i].curvature, es.eigenvalues()(0) / es.eigenvalues().sum(), 1e-4);
-    const float *v = h.toViewpoint(ids[i]);
+    const std::array<float, 3> v = h.toViewpoint(ids[i]);
     EXPECT_GT(n.dot(Eigen::Vector3d(v[0], v[1], v[2])), 0.0) << "normal must face the sensor";
   }
   EXPECT_GT(valid, 50u);

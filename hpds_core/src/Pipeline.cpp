@@ -52,6 +52,14 @@ FrameResult Pipeline::addFrame(const Frame &frame) {
   // 1. Scan mode starts every frame on an empty hierarchy.
   if (!map_mode) hierarchy_.clear();
   hierarchy_.setRecordLayout(layout);
+  // Capacity kept from a frame far larger than any recent one (the peak decays by 10% per frame) is released
+  // instead of being held for the life of the pipeline.
+  recent_points_ = std::max(static_cast<double>(pts.size()), 0.9 * recent_points_);
+  if (static_cast<double>(candidates_.capacity()) > 4.0 * recent_points_ + 65536.0) {
+    std::vector<double>().swap(xyz_);  // `= {}` would keep the capacity
+    std::vector<std::uint32_t>().swap(candidates_);
+    hierarchy_.shrink();
+  }
 
   // 2. Sensor-frame filtering, then into the fixed frame.
   const auto t_order = std::chrono::steady_clock::now();
@@ -130,6 +138,10 @@ FrameResult Pipeline::addFrame(const Frame &frame) {
   totals_ += c;
   ++frames_;
   return result;
+}
+
+std::size_t Pipeline::memUsage() const {
+  return hierarchy_.memUsage() + xyz_.capacity() * sizeof(double) + candidates_.capacity() * sizeof(std::uint32_t);
 }
 
 void Pipeline::replaceMap(Hierarchy &&map, std::uint32_t next_frame) {

@@ -73,6 +73,9 @@ class Pipeline {
   [[nodiscard]] int outputLevel() const { return output_level_; }
   [[nodiscard]] const FrameCounters &totals() const { return totals_; }
   [[nodiscard]] std::uint32_t framesProcessed() const { return frames_; }
+  /// Bytes held: the hierarchy (samples, grids, insertion scratch) and the per-frame scratch. Scratch grown for a
+  /// rare huge frame is given back once recent frames are far smaller (bounded memory in long runs).
+  [[nodiscard]] std::size_t memUsage() const;
   /// Index the next frame gets (its `frame` tag and its random-order seed offset). Scan-mode workers that share a
   /// stream set it to the input index, so the output does not depend on which worker took the frame.
   void setNextFrameIndex(std::uint32_t index) { frames_ = index; }
@@ -88,9 +91,10 @@ class Pipeline {
   Hierarchy hierarchy_;
   FrameCounters totals_;
   std::uint32_t frames_ = 0;
-  // Per-frame scratch.
+  // Per-frame scratch, and a slowly decaying peak of recent frame sizes that decides when to give it back.
   std::vector<double> xyz_;
   std::vector<std::uint32_t> candidates_;
+  double recent_points_ = 0.0;
 };
 
 }  // namespace hpds
