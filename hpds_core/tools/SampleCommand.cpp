@@ -11,6 +11,7 @@
 #include "hpds/HierarchyFile.hpp"
 #include "hpds/ParallelFor.hpp"
 #include "hpds/Pipeline.hpp"
+#include "hpds/ScanFrames.hpp"
 #include "hpds/io/PlyWriter.hpp"
 #include "hpds/io/PointCloudFile.hpp"
 #include "hpds/io/PoseFile.hpp"
@@ -112,20 +113,11 @@ int runSample(const SampleArgs &a) {
     std::vector<StageSeconds> seconds(a.inputs.size());
     std::mutex progress_mutex;
     std::size_t done = 0;
-    HpdsConfig inner = config;
-    inner.threads = 1;
-    parallelFor(
-        a.inputs.size(), threads,
-        [&](std::size_t b, std::size_t e) {
-          Pipeline p(inner);
-          for (std::size_t i = b; i < e; ++i) {
-            p.setNextFrameIndex(static_cast<std::uint32_t>(i));
-            counters[i] = runFrame(p, i, seconds[i], &clouds[i]);
-            const std::lock_guard<std::mutex> lock(progress_mutex);
-            progress.step(++done, a.inputs[i]);
-          }
-        },
-        /*grain=*/1);
+    forEachScanFrame(config, a.inputs.size(), threads, [&](Pipeline &p, std::size_t i) {
+      counters[i] = runFrame(p, i, seconds[i], &clouds[i]);
+      const std::lock_guard<std::mutex> lock(progress_mutex);
+      progress.step(++done, a.inputs[i]);
+    });
     for (std::size_t i = 0; i < a.inputs.size(); ++i) {
       appendCloud(output, clouds[i], a.inputs[i]);
       totals += counters[i];
