@@ -7,6 +7,8 @@
 #include <cmath>
 #include <stdexcept>
 
+#include "hpds/HierarchyFile.hpp"
+
 namespace hpds_node {
 
 const char *toString(DropReason reason) {
@@ -92,6 +94,19 @@ CloudError FrameProcessor::check(const sensor_msgs::PointCloud2 &msg, std::strin
 }
 
 void FrameProcessor::countDrop(DropReason reason) { ++stats_.dropped[static_cast<int>(reason)]; }
+
+void FrameProcessor::saveMap(const std::string &path) const {
+  if (config_.hpds.mode != hpds::Mode::Map)
+    throw std::invalid_argument("saving a map needs mode: map (scan mode keeps no map)");
+  hpds::saveMap(path, pipeline_);
+}
+
+void FrameProcessor::loadMap(const std::string &path) {
+  hpds::loadMap(path, pipeline_);  // strong guarantee: throws before anything changes
+  // The loaded map has not been published as a local map yet: send one with the next frame.
+  local_map_sent_ = false;
+  last_local_map_stamp_ = 0.0;
+}
 
 ProcessedFrame FrameProcessor::process(const sensor_msgs::PointCloud2 &msg, const Eigen::Isometry3d &sensor_to_target,
                                        const OutputRequest &wants) {

@@ -19,6 +19,9 @@ class HpdsNodelet : public nodelet::Nodelet {
       NODELET_FATAL_STREAM("hpds: invalid parameter, not starting: " << e.what());
       // A nodelet cannot exit its manager; failing the load makes `nodelet load/standalone` report it.
       throw;
+    } catch (const std::runtime_error &e) {  // ros/load_map_on_start: the map file cannot be loaded
+      NODELET_FATAL_STREAM("hpds: not starting: " << e.what());
+      throw;
     }
   }
 

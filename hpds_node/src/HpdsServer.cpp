@@ -5,7 +5,9 @@
 #include <algorithm>
 #include <charconv>
 #include <cmath>
+#include <filesystem>
 #include <sstream>
+#include <system_error>
 
 namespace hpds_node {
 
@@ -96,6 +98,8 @@ HpdsServer::HpdsServer(ros::NodeHandle nh, ros::NodeHandle private_nh, const std
       target_frame_(processor_->targetFrame()),
       updater_(nh, private_nh, name) {
   const bool map_mode = config_.hpds.mode == hpds::Mode::Map;
+  // Before anything is advertised: a node that cannot load its map does not appear at all.
+  if (config_.ros.load_map_on_start) loadMapOnStart();
   if (!target_frame_.empty()) tf_listener_ = std::make_unique<tf2_ros::TransformListener>(tf_buffer_, nh_);
 
   pub_output_ = pnh_.advertise<sensor_msgs::PointCloud2>("output", 4);
@@ -121,6 +125,11 @@ HpdsServer::HpdsServer(ros::NodeHandle nh, ros::NodeHandle private_nh, const std
   worker_ = std::thread([this] { workerLoop(); });
   // roscpp's own queue only has to absorb bursts while onCloud runs; the counted dropping happens in queue_.
   sub_ = pnh_.subscribe("input", static_cast<std::uint32_t>(config_.ros.queue_size) + 4, &HpdsServer::onCloud, this);
+  // Advertised in scan mode too, so that a call gets a clear answer rather than "service does not exist".
+  srv_save_map_ = pnh_.advertiseService<std_srvs::Trigger::Request, std_srvs::Trigger::Response>(
+      "save_map", [this](auto &req, auto &res) { return onMapService(true, req, res); });
+  srv_load_map_ = pnh_.advertiseService<std_srvs::Trigger::Request, std_srvs::Trigger::Response>(
+      "load_map", [this](auto &req, auto &res) { return onMapService(false, req, res); });
 
   std::ostringstream summary;
   summary << "hpds: " << hpds::toString(config_.hpds.mode) << " mode, output levels 0.."
@@ -133,12 +142,96 @@ HpdsServer::HpdsServer(ros::NodeHandle nh, ros::NodeHandle private_nh, const std
 
 HpdsServer::~HpdsServer() {
   sub_.shutdown();
+  // A service call in progress waits for the worker, which is still running: it is answered before this returns.
+  srv_save_map_.shutdown();
+  srv_load_map_.shutdown();
   {
     std::lock_guard<std::mutex> lock(queue_mutex_);
     stopping_ = true;
   }
   queue_cv_.notify_all();
   if (worker_.joinable()) worker_.join();
+  // The worker is gone: the map is complete (no frame half-inserted) and nothing else touches it.
+  if (config_.ros.save_map_on_shutdown && config_.hpds.mode == hpds::Mode::Map) {
+    const auto [ok, message] = runMapCommand(true);
+    if (ok) {
+      ROS_INFO_STREAM_NAMED("hpds", "hpds: shutdown: " << message);
+    } else {
+      ROS_ERROR_STREAM_NAMED("hpds", "hpds: shutdown: the map was not saved: " << message);
+    }
+  }
+}
+
+void HpdsServer::loadMapOnStart() {
+  const std::string &path = config_.ros.map_file;
+  std::error_code ec;
+  if (std::filesystem::status(path, ec).type() == std::filesystem::file_type::not_found) {
+    ROS_WARN_STREAM_NAMED("hpds", "hpds: ros/load_map_on_start: map file '"
+                                      << path << "' does not exist (yet): starting with an empty map");
+    return;
+  }
+  const auto [ok, message] = runMapCommand(false);
+  if (!ok) throw std::runtime_error("ros/load_map_on_start: " + message);
+  ROS_INFO_STREAM_NAMED("hpds", "hpds: " << message);
+}
+
+std::pair<bool, std::string> HpdsServer::runMapCommand(bool save) {
+  const std::string &path = config_.ros.map_file;
+  const hpds::Pipeline &pipeline = processor_->pipeline();
+  std::ostringstream msg;
+  try {
+    if (save) {
+      processor_->saveMap(path);
+      msg << "saved " << pipeline.hierarchy().sampleCount() << " samples (next frame index "
+          << pipeline.framesProcessed() << ") to '" << path << "'";
+    } else {
+      processor_->loadMap(path);
+      msg << "loaded " << pipeline.hierarchy().sampleCount() << " samples (next frame index "
+          << pipeline.framesProcessed() << ") from '" << path << "'";
+    }
+    return {true, msg.str()};
+  } catch (const std::exception &e) {
+    msg << (save ? "saving the map failed: " : "loading the map failed: ") << e.what();
+    if (!save) msg << "; the running map (" << pipeline.hierarchy().sampleCount() << " samples) is unchanged";
+    return {false, msg.str()};
+  } catch (...) {
+    return {false, save ? "saving the map failed: unknown error" : "loading the map failed: unknown error"};
+  }
+}
+
+bool HpdsServer::onMapService(bool save, std_srvs::Trigger::Request &, std_srvs::Trigger::Response &res) {
+  const char *service = save ? "~save_map" : "~load_map";
+  res.success = false;
+  if (config_.hpds.mode != hpds::Mode::Map) {
+    res.message = "this node runs in scan mode, which keeps no map: saving and loading need mode: map";
+  } else if (config_.ros.map_file.empty()) {
+    res.message = "parameter " + pnh_.getNamespace() + "/ros/map_file is not set (the path of the map file)";
+  } else {
+    // Run by the worker between two frames; answered there (or refused here when the node is stopping).
+    auto command = std::make_shared<MapCommand>();
+    command->save = save;
+    std::future<std::pair<bool, std::string>> result = command->done.get_future();
+    bool queued = false;
+    {
+      std::lock_guard<std::mutex> lock(queue_mutex_);
+      if (!stopping_) {
+        commands_.push_back(command);
+        queued = true;
+      }
+    }
+    if (queued) {
+      queue_cv_.notify_all();
+      std::tie(res.success, res.message) = result.get();
+    } else {
+      res.message = "the node is shutting down";
+    }
+  }
+  if (res.success) {
+    ROS_INFO_STREAM_NAMED("hpds", "hpds: " << service << ": " << res.message);
+  } else {
+    ROS_ERROR_STREAM_NAMED("hpds", "hpds: " << service << ": " << res.message);
+  }
+  return true;  // the outcome is in the response: a false return would hide the message from the caller
 }
 
 void HpdsServer::onCloud(const sensor_msgs::PointCloud2::ConstPtr &msg) {
@@ -157,12 +250,25 @@ void HpdsServer::onCloud(const sensor_msgs::PointCloud2::ConstPtr &msg) {
 void HpdsServer::workerLoop() {
   for (;;) {
     sensor_msgs::PointCloud2::ConstPtr msg;
+    std::shared_ptr<MapCommand> command;
     {
       std::unique_lock<std::mutex> lock(queue_mutex_);
-      queue_cv_.wait(lock, [this] { return stopping_ || !queue_.empty(); });
-      if (stopping_) return;
-      msg = queue_.front();
-      queue_.pop_front();
+      queue_cv_.wait(lock, [this] { return stopping_ || !queue_.empty() || !commands_.empty(); });
+      // Map commands first, and all of them before stopping: each caller is waiting for its answer.
+      if (!commands_.empty()) {
+        command = commands_.front();
+        commands_.pop_front();
+      } else if (stopping_) {
+        return;
+      } else {
+        msg = queue_.front();
+        queue_.pop_front();
+      }
+    }
+    if (command) {
+      command->done.set_value(runMapCommand(command->save));
+      takeSnapshot(0.0);
+      continue;
     }
     double seconds = 0.0;
     try {

@@ -63,6 +63,14 @@ std::string parseString(const YAML::Node &n, const std::string &key) {
   return n.Scalar();
 }
 
+bool parseBool(const YAML::Node &n, const std::string &key) {
+  // Only plain true/false, as hpds::applyConfigYaml: yes/no/on/off and quoted strings are refused.
+  if (!n.IsScalar() || isQuoted(n)) fail(key, "expected true or false, got " + describe(n));
+  if (n.Scalar() == "true") return true;
+  if (n.Scalar() == "false") return false;
+  fail(key, "expected true or false, got '" + n.Scalar() + "'");
+}
+
 std::string parseFrameId(const YAML::Node &n, const std::string &key) {
   std::string id = parseString(n, key);
   // tf2 refuses ids with a leading slash; ROS 1 launch files still commonly write them.
@@ -94,6 +102,12 @@ void applyRosSection(const YAML::Node &section, RosConfig &ros) {
       ros.local_map_rate = parseNumber(v, key);
     } else if (leaf == "queue_size") {
       ros.queue_size = parseInt(v, key);
+    } else if (leaf == "map_file") {
+      ros.map_file = parseString(v, key);
+    } else if (leaf == "load_map_on_start") {
+      ros.load_map_on_start = parseBool(v, key);
+    } else if (leaf == "save_map_on_shutdown") {
+      ros.save_map_on_shutdown = parseBool(v, key);
     } else if (leaf == "publish_levels") {
       ros.publish_levels.clear();
       YAML::Node list = v;
@@ -111,7 +125,7 @@ void applyRosSection(const YAML::Node &section, RosConfig &ros) {
     } else {
       fail(key,
            "unknown key (ros keys: fixed_frame, output_frame, tf_timeout, local_map_radius, local_map_rate, "
-           "publish_levels, queue_size)");
+           "publish_levels, queue_size, map_file, load_map_on_start, save_map_on_shutdown)");
     }
   }
 }
@@ -177,6 +191,13 @@ void validateRosConfig(const RosConfig &ros, const hpds::HpdsConfig &config) {
   }
   if (config.mode == hpds::Mode::Map && ros.fixed_frame.empty())
     fail("ros.fixed_frame", "must be set in map mode (the frame the map is built in)");
+  if (ros.map_file.find('\0') != std::string::npos) fail("ros.map_file", "contains a NUL character");
+  for (const auto &[key, on] : {std::pair<const char *, bool>{"ros.load_map_on_start", ros.load_map_on_start},
+                                {"ros.save_map_on_shutdown", ros.save_map_on_shutdown}}) {
+    if (!on) continue;
+    if (config.mode != hpds::Mode::Map) fail(key, "needs mode: map (scan mode keeps no map)");
+    if (ros.map_file.empty()) fail(key, "needs ros.map_file (the path of the map file) to be set");
+  }
 }
 
 const std::vector<std::string> &nodeOnlyKeys() {
@@ -246,6 +267,9 @@ std::string dumpRosConfigYaml(const RosConfig &ros) {
   for (std::size_t i = 0; i < ros.publish_levels.size(); ++i) s << (i ? ", " : "") << ros.publish_levels[i];
   s << "]\n";
   s << "  queue_size: " << ros.queue_size << "\n";
+  s << "  map_file: " << quoted(ros.map_file) << "\n";
+  s << "  load_map_on_start: " << (ros.load_map_on_start ? "true" : "false") << "\n";
+  s << "  save_map_on_shutdown: " << (ros.save_map_on_shutdown ? "true" : "false") << "\n";
   return s.str();
 }
 

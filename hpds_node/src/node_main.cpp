@@ -15,6 +15,9 @@ int main(int argc, char **argv) {
   } catch (const std::invalid_argument &e) {
     ROS_FATAL_STREAM("hpds: invalid parameter, not starting: " << e.what());
     return 1;
+  } catch (const std::runtime_error &e) {  // ros/load_map_on_start: the map file exists but cannot be loaded
+    ROS_FATAL_STREAM("hpds: not starting: " << e.what());
+    return 1;
   }
   ros::spin();
   server.reset();  // stop the worker while roscpp is still up

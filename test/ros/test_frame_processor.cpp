@@ -2,7 +2,13 @@
 // core pipeline's, map-mode ~output is the set of samples hit by the frame, local-map timing, drops.
 #include <gtest/gtest.h>
 
+#include <unistd.h>
+
 #include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <functional>
+#include <iterator>
 #include <limits>
 
 #include "hpds/SyntheticLidar.hpp"
@@ -249,6 +255,129 @@ TEST(FrameProcessor, SensorPoseDoesNotDependOnLaterTransforms) {
     different += a.matrix() != b.matrix();
   }
   EXPECT_EQ(different, 0);
+}
+
+}  // namespace
+
+namespace {
+
+namespace fs = std::filesystem;
+
+std::vector<std::uint8_t> readBytes(const fs::path &p) {
+  std::ifstream in(p, std::ios::binary);
+  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+}
+
+void writeBytes(const fs::path &p, const std::vector<std::uint8_t> &bytes) {
+  std::ofstream out(p, std::ios::binary | std::ios::trunc);
+  out.write(reinterpret_cast<const char *>(bytes.data()), static_cast<std::streamsize>(bytes.size()));
+}
+
+std::string errorOf(const std::function<void()> &f) {
+  try {
+    f();
+  } catch (const std::exception &e) {
+    return e.what();
+  }
+  return "";
+}
+
+// Persistence: a processor that saves after frame k and one that loads that file continue identically (same
+// samples, same frame index, byte-identical outputs), the load restarts the local-map clock, and a refused file
+// changes nothing.
+TEST(FrameProcessor, SavedMapLoadsIntoAnotherProcessorAndContinuesIdentically) {
+  hpds::SyntheticLidarConfig lidar_config = smallLidar();
+  lidar_config.frames = 5;
+  const hpds::SyntheticLidar lidar(lidar_config);
+  NodeConfig config;
+  config.hpds.mode = hpds::Mode::Map;
+  config.hpds.output.level = 4;
+  config.hpds.hierarchy.max_depth = 6;
+  config.ros.fixed_frame = "odom";
+  config.ros.local_map_rate = 1.0;  // frames 0.1 s apart: after frame 0, no local map within these frames
+  config.ros.publish_levels = {3};
+  const fs::path dir = fs::temp_directory_path() / ("hpds_fp_persist_" + std::to_string(::getpid()));
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  const std::string file = (dir / "m.hpdsmap").string();
+  auto frame = [&](int i) { return toMsg(lidar.frame(i).frame.points, 10.0 + 0.1 * i); };
+
+  FrameProcessor a(config);
+  for (int i = 0; i < 2; ++i) ASSERT_TRUE(a.process(frame(i), lidar.pose(i), OutputRequest::all()).processed);
+  a.saveMap(file);
+  const std::size_t saved = a.pipeline().hierarchy().sampleCount();
+  ASSERT_GT(saved, 1000u);
+  ASSERT_EQ(a.pipeline().framesProcessed(), 2u);
+
+  // b has a map of its own (another frame) that the load replaces entirely.
+  FrameProcessor b(config);
+  ASSERT_TRUE(b.process(frame(3), lidar.pose(3), OutputRequest::all()).processed);
+  b.loadMap(file);
+  EXPECT_EQ(b.pipeline().hierarchy().sampleCount(), saved);
+  EXPECT_EQ(b.pipeline().framesProcessed(), 2u);
+  for (int i = 2; i < 4; ++i) {
+    SCOPED_TRACE(i);
+    const auto ra = a.process(frame(i), lidar.pose(i), OutputRequest::all());
+    const auto rb = b.process(frame(i), lidar.pose(i), OutputRequest::all());
+    ASSERT_TRUE(ra.processed && rb.processed);
+    EXPECT_GT(rb.new_samples.width, 0u);
+    EXPECT_EQ(ra.output.data, rb.output.data);
+    EXPECT_EQ(ra.new_samples.data, rb.new_samples.data);
+    ASSERT_EQ(ra.levels.size(), 1u);
+    ASSERT_EQ(rb.levels.size(), 1u);
+    EXPECT_EQ(ra.levels[0].second.data, rb.levels[0].second.data);
+    // The loaded map gets a local map with its first frame; a (1 Hz) has sent one 0.1 s ago and waits.
+    EXPECT_FALSE(ra.has_local_map);
+    EXPECT_EQ(rb.has_local_map, i == 2);
+  }
+  EXPECT_EQ(a.pipeline().hierarchy().sampleCount(), b.pipeline().hierarchy().sampleCount());
+  EXPECT_EQ(a.pipeline().framesProcessed(), b.pipeline().framesProcessed());
+
+  // Refused files: the error names the file, and b's map and frame counter are untouched.
+  const std::vector<std::uint8_t> good = readBytes(file);
+  ASSERT_GT(good.size(), 1000u);
+  std::vector<std::uint8_t> corrupt = good;
+  corrupt[good.size() / 2] ^= 0x10;
+  const std::vector<std::uint8_t> truncated(good.begin(), good.begin() + static_cast<std::ptrdiff_t>(good.size() / 2));
+  const std::vector<std::pair<std::vector<std::uint8_t>, std::string>> bad = {
+      {corrupt, "corrupt"}, {truncated, "truncated"}, {{'n', 'o', 'p', 'e'}, "not an hpds map file"}};
+  const std::size_t before = b.pipeline().hierarchy().sampleCount();
+  for (const auto &[bytes, word] : bad) {
+    writeBytes(file, bytes);
+    const std::string e = errorOf([&] { b.loadMap(file); });
+    EXPECT_NE(e.find(file), std::string::npos) << e;
+    EXPECT_NE(e.find(word), std::string::npos) << e;
+    EXPECT_EQ(b.pipeline().hierarchy().sampleCount(), before);
+    EXPECT_EQ(b.pipeline().framesProcessed(), 4u);
+  }
+  fs::remove(file);
+  EXPECT_NE(errorOf([&] { b.loadMap(file); }).find("file not found"), std::string::npos);
+  // Another hierarchy (max_depth) is refused as well.
+  NodeConfig deeper = config;
+  deeper.hpds.hierarchy.max_depth = 7;
+  FrameProcessor c(deeper);
+  a.saveMap(file);
+  EXPECT_NE(errorOf([&] { c.loadMap(file); }).find("max_depth"), std::string::npos);
+  // ... and after all that, b continues exactly like a.
+  const auto ra = a.process(frame(4), lidar.pose(4), OutputRequest::all());
+  const auto rb = b.process(frame(4), lidar.pose(4), OutputRequest::all());
+  EXPECT_EQ(ra.output.data, rb.output.data);
+  EXPECT_EQ(ra.new_samples.data, rb.new_samples.data);
+
+  // Saving into a missing directory fails and names the path.
+  const std::string nowhere = (dir / "missing" / "m.hpdsmap").string();
+  EXPECT_NE(errorOf([&] { a.saveMap(nowhere); }).find(nowhere), std::string::npos);
+  fs::remove_all(dir);
+}
+
+TEST(FrameProcessor, ScanModeHasNoMapToSaveOrLoad) {
+  NodeConfig config;
+  FrameProcessor p(config);
+  const std::string file = (fs::temp_directory_path() / "hpds_fp_scan.hpdsmap").string();
+  EXPECT_THROW(p.saveMap(file), std::invalid_argument);
+  EXPECT_THROW(p.loadMap(file), std::invalid_argument);
+  EXPECT_NE(errorOf([&] { p.saveMap(file); }).find("mode: map"), std::string::npos);
+  EXPECT_FALSE(fs::exists(file));
 }
 
 }  // namespace

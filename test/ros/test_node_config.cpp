@@ -2,6 +2,7 @@
 #include <gtest/gtest.h>
 
 #include <fstream>
+#include <tuple>
 
 #include "hpds/ConfigYaml.hpp"
 #include "hpds_node/NodeConfig.hpp"
@@ -97,6 +98,67 @@ TEST(NodeConfig, ErrorsNameTheKeyAndLeaveTheConfigUnchanged) {
   EXPECT_EQ(c.ros.queue_size, 7) << "strong guarantee";
 }
 
+TEST(NodeConfig, MapPersistenceKeys) {
+  NodeConfig c;
+  EXPECT_EQ(c.ros.map_file, "");
+  EXPECT_FALSE(c.ros.load_map_on_start);
+  EXPECT_FALSE(c.ros.save_map_on_shutdown);
+  hpds_node::applyNodeConfigYaml(
+      "mode: map\nros: {map_file: /var/lib/hpds/m.hpdsmap, load_map_on_start: true, save_map_on_shutdown: true}", c,
+      "test");
+  EXPECT_EQ(c.ros.map_file, "/var/lib/hpds/m.hpdsmap");
+  EXPECT_TRUE(c.ros.load_map_on_start);
+  EXPECT_TRUE(c.ros.save_map_on_shutdown);
+  // The services alone need nothing at configuration time (they answer success=false in scan mode or without a
+  // file); a path may be set in scan mode.
+  NodeConfig s;
+  EXPECT_NO_THROW(hpds_node::applyNodeConfigYaml("mode: scan\nros: {map_file: m.hpdsmap}", s, "test"));
+  EXPECT_EQ(s.ros.map_file, "m.hpdsmap");
+  NodeConfig off;
+  EXPECT_NO_THROW(hpds_node::applyNodeConfigYaml(
+      "mode: map\nros: {load_map_on_start: false, save_map_on_shutdown: false}", off, "test"));
+}
+
+TEST(NodeConfig, MapPersistenceErrors) {
+  // (yaml, key prefix, words the message must contain)
+  const std::vector<std::tuple<std::string, std::string, std::string>> cases = {
+      {"mode: map\nros: {load_map_on_start: true}", "ros.load_map_on_start:", "ros.map_file"},
+      {"mode: map\nros: {save_map_on_shutdown: true}", "ros.save_map_on_shutdown:", "ros.map_file"},
+      {"mode: map\nros: {map_file: \"\", save_map_on_shutdown: true}", "ros.save_map_on_shutdown:", "ros.map_file"},
+      {"ros: {map_file: m.hpdsmap, load_map_on_start: true}", "ros.load_map_on_start:", "mode: map"},
+      {"mode: scan\nros: {map_file: m.hpdsmap, save_map_on_shutdown: true}", "ros.save_map_on_shutdown:",
+       "mode: map"},
+      {"mode: map\nros: {map_file: m, load_map_on_start: yes}", "ros.load_map_on_start:", "true or false"},
+      {"mode: map\nros: {map_file: m, load_map_on_start: \"true\"}", "ros.load_map_on_start:", "true or false"},
+      {"mode: map\nros: {map_file: m, save_map_on_shutdown: 1}", "ros.save_map_on_shutdown:", "true or false"},
+      {"ros: {map_file: [a, b]}", "ros.map_file:", "string"},
+      {"ros: {map_file: {a: b}}", "ros.map_file:", "string"},
+      {"ros: {map_file: \"a\\0b\"}", "ros.map_file:", "NUL"},
+      {"ros: {save_map: true}", "ros.save_map:", "map_file, load_map_on_start, save_map_on_shutdown"},
+  };
+  for (const auto &[yaml, prefix, words] : cases) {
+    const std::string e = errorOf(yaml);
+    EXPECT_EQ(e.rfind(prefix, 0), 0u) << yaml << " -> '" << e << "'";
+    EXPECT_NE(e.find(words), std::string::npos) << yaml << " -> '" << e << "'";
+    EXPECT_NE(e.find("(in test)"), std::string::npos) << e;
+  }
+  // Strong guarantee: a refused persistence key leaves every value as it was.
+  NodeConfig c;
+  c.hpds.mode = hpds::Mode::Map;
+  c.ros.map_file = "kept.hpdsmap";
+  EXPECT_THROW(hpds_node::applyNodeConfigYaml("ros: {map_file: \"\", load_map_on_start: true}", c, ""),
+               std::invalid_argument);
+  EXPECT_EQ(c.ros.map_file, "kept.hpdsmap");
+  EXPECT_FALSE(c.ros.load_map_on_start);
+  // validateRosConfig on its own (what FrameProcessor and the node call) applies the same rules.
+  hpds_node::RosConfig ros;
+  ros.save_map_on_shutdown = true;
+  EXPECT_THROW(hpds_node::validateRosConfig(ros, c.hpds), std::invalid_argument);
+  ros.map_file = "m.hpdsmap";
+  EXPECT_NO_THROW(hpds_node::validateRosConfig(ros, c.hpds));
+  EXPECT_THROW(hpds_node::validateRosConfig(ros, hpds::HpdsConfig{}), std::invalid_argument) << "scan mode";
+}
+
 TEST(NodeConfig, RosDumpLoadsBack) {
   NodeConfig c;
   c.ros.fixed_frame = "odom";
@@ -104,6 +166,10 @@ TEST(NodeConfig, RosDumpLoadsBack) {
   c.ros.tf_timeout = 0.3;
   c.ros.publish_levels = {0, 5};
   c.ros.queue_size = 4;
+  c.hpds.mode = hpds::Mode::Map;
+  c.ros.map_file = "/tmp/a map \"quoted\".hpdsmap";
+  c.ros.load_map_on_start = true;
+  c.ros.save_map_on_shutdown = true;
   NodeConfig d;
   hpds_node::applyNodeConfigYaml(hpds::dumpConfigYaml(c.hpds) + hpds_node::dumpRosConfigYaml(c.ros), d, "dump");
   EXPECT_EQ(d.ros.fixed_frame, c.ros.fixed_frame);
@@ -111,6 +177,9 @@ TEST(NodeConfig, RosDumpLoadsBack) {
   EXPECT_EQ(d.ros.tf_timeout, c.ros.tf_timeout);
   EXPECT_EQ(d.ros.publish_levels, c.ros.publish_levels);
   EXPECT_EQ(d.ros.queue_size, c.ros.queue_size);
+  EXPECT_EQ(d.ros.map_file, c.ros.map_file);
+  EXPECT_TRUE(d.ros.load_map_on_start);
+  EXPECT_TRUE(d.ros.save_map_on_shutdown);
 }
 
 // The project's documented config file loads as node settings (the node reads it through <rosparam load>) and,

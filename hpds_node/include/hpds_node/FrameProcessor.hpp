@@ -19,6 +19,10 @@
 //                 at least 1 / ros.local_map_rate after the last local map (or went backwards: a looped bag).
 //   Clouds use the OutputCloud layout (x y z float32, level uint8, [normal_x/y/z curvature], input fields).
 // - Drops: a message whose fields differ from the map's (map mode) is dropped and counted (LayoutChanged).
+// - Persistence (map mode): saveMap writes the map and the frame counter (hpds::saveMap, atomic); loadMap replaces
+//   them with a file's (hpds::loadMap: on any error nothing changes) and restarts the local-map clock, so the next
+//   frame continues exactly as it would have after the frames that built the file (same frame index, same
+//   samples, a ~local_map on that frame). ProcessorStats count messages over the processor's life and are kept.
 // - Deterministic: same config and same sequence of (message, transform) give byte-identical outputs.
 // - Not thread-safe: one thread drives a FrameProcessor; stats() copies are safe to hand to other threads.
 #pragma once
@@ -98,6 +102,14 @@ class FrameProcessor {
 
   /// Counts a frame dropped before process() (no transform, overload, nobody listening).
   void countDrop(DropReason reason);
+
+  /// Map mode: writes the map to `path` (see contract). Throws std::invalid_argument in scan mode and
+  /// std::runtime_error ("<path>: <problem>") when the file cannot be written; the map is never changed.
+  void saveMap(const std::string &path) const;
+  /// Map mode: replaces the map with the one in `path` (see contract). Throws std::invalid_argument in scan mode and
+  /// std::runtime_error ("<path>: <problem>") for a missing, corrupt, truncated or incompatible file, leaving the
+  /// processor unchanged.
+  void loadMap(const std::string &path);
 
   [[nodiscard]] const ProcessorStats &stats() const { return stats_; }
   [[nodiscard]] const hpds::Pipeline &pipeline() const { return pipeline_; }

@@ -11,17 +11,28 @@
 //   ros.tf_timeout of wall time, then drops and counts), runs the shared FrameProcessor and publishes.
 // - Work is skipped when nobody listens: scan mode drops the frame (counted as no_subscribers) before converting;
 //   map mode still inserts it (the map must stay complete) but builds only the clouds that have subscribers.
-// - Destruction stops the worker after its current frame.
+// - Services (private, std_srvs/Trigger): ~save_map writes the map to ros.map_file, ~load_map replaces the map
+//   with that file's. Both run on the worker thread between two frames (a frame is never half-inserted when the
+//   map is saved or replaced) and take priority over queued frames; the caller waits for the result. Response:
+//   success with the path and the sample count, or success=false with the exact error (scan mode, ros.map_file
+//   unset, a missing/corrupt/truncated/incompatible file, a failed write). A failed load leaves the map untouched.
+// - ros.load_map_on_start (map mode): the constructor loads ros.map_file before subscribing. A missing file starts
+//   an empty map (ROS_WARN); any other load error throws std::runtime_error naming the file: the node must not
+//   start on an unreadable map (and, with ros.save_map_on_shutdown, overwrite it with an empty one).
+// - Destruction stops the worker after its current frame (queued frames are lost) and then, with
+//   ros.save_map_on_shutdown, saves the map to ros.map_file (a failure is logged: nothing else can be done).
 #pragma once
 
 #include <diagnostic_updater/diagnostic_updater.h>
 #include <ros/ros.h>
 #include <sensor_msgs/PointCloud2.h>
+#include <std_srvs/Trigger.h>
 #include <tf2_ros/buffer.h>
 #include <tf2_ros/transform_listener.h>
 
 #include <condition_variable>
 #include <deque>
+#include <future>
 #include <memory>
 #include <mutex>
 #include <thread>
@@ -37,7 +48,8 @@ namespace hpds_node {
 
 class HpdsServer {
  public:
-  /// `name` is the node or nodelet name, used by the diagnostics.
+  /// `name` is the node or nodelet name, used by the diagnostics. Throws std::invalid_argument for a bad parameter
+  /// and std::runtime_error for a map file that ros.load_map_on_start cannot load.
   HpdsServer(ros::NodeHandle nh, ros::NodeHandle private_nh, const std::string &name);
   ~HpdsServer();
   HpdsServer(const HpdsServer &) = delete;
@@ -55,6 +67,16 @@ class HpdsServer {
   void takeSnapshot(double frame_seconds);
   void diagnose(diagnostic_updater::DiagnosticStatusWrapper &status);
 
+  // Map persistence: a save or load request waiting for the worker.
+  struct MapCommand {
+    bool save = false;
+    std::promise<std::pair<bool, std::string>> done;  // (success, message)
+  };
+  bool onMapService(bool save, std_srvs::Trigger::Request &req, std_srvs::Trigger::Response &res);
+  /// Worker thread (or the constructor/destructor, when no worker runs): performs the save or load.
+  [[nodiscard]] std::pair<bool, std::string> runMapCommand(bool save);
+  void loadMapOnStart();
+
   ros::NodeHandle nh_, pnh_;
   NodeConfig config_;
   std::unique_ptr<FrameProcessor> processor_;  // worker thread only
@@ -65,6 +87,7 @@ class HpdsServer {
   ros::Publisher pub_output_, pub_new_samples_, pub_local_map_;
   std::vector<ros::Publisher> pub_levels_;
   ros::Subscriber sub_;
+  ros::ServiceServer srv_save_map_, srv_load_map_;
   diagnostic_updater::Updater updater_;
   ros::WallTimer diagnostics_timer_;
 
@@ -72,6 +95,7 @@ class HpdsServer {
   std::mutex queue_mutex_;
   std::condition_variable queue_cv_;
   std::deque<sensor_msgs::PointCloud2::ConstPtr> queue_;
+  std::deque<std::shared_ptr<MapCommand>> commands_;  // run before queue_; every one is answered
   bool stopping_ = false;
   std::uint64_t received_ = 0;  // guarded by queue_mutex_
   std::uint64_t overload_ = 0;  // guarded by queue_mutex_

@@ -27,6 +27,10 @@ struct RosConfig {
   double local_map_rate = 1.0;      ///< [Hz] map mode: ~local_map at most this often (frame stamps); 0 = never
   std::vector<int> publish_levels;  ///< levels D that get their own ~level_<D> topic (samples of level D only)
   int queue_size = 1;               ///< frames waiting to be processed; when full the oldest is dropped (counted)
+  // Map persistence (node only; `hpds replay` ignores these three).
+  std::string map_file;              ///< map mode: the file ~save_map writes and ~load_map reads
+  bool load_map_on_start = false;    ///< map mode: start from map_file (absent: empty map, warned; unreadable: no start)
+  bool save_map_on_shutdown = false;  ///< map mode: write the map to map_file when the node stops
 };
 
 struct NodeConfig {
@@ -47,7 +51,8 @@ void applyNodeConfigYaml(const std::string &yaml_text, NodeConfig &config, const
 [[nodiscard]] NodeConfig loadNodeConfigFile(const std::string &path);
 
 /// Throws std::invalid_argument naming the "ros.*" key for a bad value; publish_levels are checked against
-/// hierarchy.max_depth, fixed_frame must be set in map mode.
+/// hierarchy.max_depth, fixed_frame must be set in map mode, load_map_on_start / save_map_on_shutdown need map mode
+/// and a non-empty map_file.
 void validateRosConfig(const RosConfig &ros, const hpds::HpdsConfig &config);
 
 /// The `ros:` section with every key, e.g. for documentation or for logging what the node runs with.

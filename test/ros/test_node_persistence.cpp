@@ -1,0 +1,328 @@
+// rostest node: map persistence (issue 6). Synthetic lidar frames, published already in the fixed frame (so the
+// sensor pose is the identity and a FrameProcessor in this process, fed the same messages, is an exact reference
+// for what the node must publish).
+// - ~save_map / ~load_map on a running map-mode node: the saved file loads into a Pipeline with the node's frames
+//   and sample count; after more frames, ~load_map takes the node back: a frame sent after the load gives
+//   byte-identical ~output and ~new_samples to the reference, which has only seen the frames up to the save.
+//   Missing, corrupt and truncated files are refused with the reason and the node's map stays as it was; a save
+//   into a missing directory is refused with the reason.
+// - Both services answer success=false with a clear message in scan mode (a nodelet) and without ros/map_file.
+// - A restart: HpdsServers created in this process with ros/load_map_on_start and ros/save_map_on_shutdown
+//   continue each other's map exactly; one facing a corrupt file refuses to start.
+//
+// Parameters: ~target, ~input (its input topic), ~map_dir (created here), ~scan_target, ~nofile_target.
+#include <gtest/gtest.h>
+#include <std_srvs/Trigger.h>
+
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <iterator>
+
+#include "RosTestUtil.hpp"
+#include "hpds/HierarchyFile.hpp"
+#include "hpds/Pipeline.hpp"
+#include "hpds/SyntheticLidar.hpp"
+#include "hpds_node/FrameProcessor.hpp"
+#include "hpds_node/HpdsServer.hpp"
+
+namespace {
+
+namespace fs = std::filesystem;
+using hpds_node::FrameProcessor;
+using hpds_node::OutputRequest;
+using hpds_test::Collector;
+using sensor_msgs::PointCloud2;
+
+const std::string kFixed = "odom";
+
+hpds::SyntheticLidar makeLidar() {
+  hpds::SyntheticLidarConfig c;
+  c.beams = 16;
+  c.azimuth_steps = 600;
+  c.frames = 8;
+  c.speed = 2.0;
+  c.organized = false;
+  c.emit_no_returns = false;  // no (0,0,0) points: every point can be moved into the fixed frame
+  return hpds::SyntheticLidar(c);
+}
+
+// Frame i of the lidar moved into the fixed frame, stamped 100 + i s.
+PointCloud2::Ptr frameMsg(const hpds::SyntheticLidar &lidar, int i) {
+  hpds::SyntheticFrame f = lidar.frame(i);
+  hpds::PointBuffer &points = f.frame.points;
+  const hpds::PointLayout &l = points.layout();
+  const hpds::PointField *fx = l.find("x"), *fy = l.find("y"), *fz = l.find("z");
+  for (std::size_t k = 0; k < points.size(); ++k) {
+    std::uint8_t *r = points.record(k);
+    const Eigen::Vector3d p =
+        f.frame.sensor_to_fixed *
+        Eigen::Vector3d(hpds::readAsDouble(r, *fx), hpds::readAsDouble(r, *fy), hpds::readAsDouble(r, *fz));
+    hpds::writeFromDouble(r, *fx, p.x());
+    hpds::writeFromDouble(r, *fy, p.y());
+    hpds::writeFromDouble(r, *fz, p.z());
+  }
+  std_msgs::Header h;
+  h.frame_id = kFixed;
+  h.stamp = ros::Time(100 + i, 0);
+  auto msg = boost::make_shared<PointCloud2>();
+  hpds_node::toRosCloud(points, h, *msg);
+  return msg;
+}
+
+std_srvs::Trigger::Response call(const std::string &service) {
+  std_srvs::Trigger srv;
+  EXPECT_TRUE(ros::service::waitForService(service, ros::Duration(30.0))) << service;
+  EXPECT_TRUE(ros::service::call(service, srv)) << service << ": the call itself failed";
+  return srv.response;
+}
+
+bool contains(const std::string &text, const std::string &part) { return text.find(part) != std::string::npos; }
+
+std::vector<char> readBytes(const fs::path &p) {
+  std::ifstream in(p, std::ios::binary);
+  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+}
+
+void writeBytes(const fs::path &p, const std::vector<char> &bytes) {
+  std::ofstream out(p, std::ios::binary | std::ios::trunc);
+  out.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
+}
+
+fs::path mapDir() {
+  std::string dir = ros::NodeHandle("~").param<std::string>("map_dir", "");
+  if (dir.empty()) dir = (fs::temp_directory_path() / "hpds_test_persistence").string();
+  return dir;
+}
+
+// The node's outputs for one frame against the reference processor fed the same message.
+void expectSameAsReference(const PointCloud2 &out, const PointCloud2 &fresh, FrameProcessor &ref,
+                           const PointCloud2 &frame) {
+  const hpds_node::ProcessedFrame r = ref.process(frame, Eigen::Isometry3d::Identity(), OutputRequest::all());
+  ASSERT_TRUE(r.processed) << r.why;
+  EXPECT_GT(r.new_samples.width, 0u);
+  EXPECT_EQ(out.width, r.output.width);
+  EXPECT_TRUE(out.data == r.output.data) << "~output differs from the reference";
+  EXPECT_EQ(fresh.width, r.new_samples.width);
+  EXPECT_TRUE(fresh.data == r.new_samples.data) << "~new_samples differs from the reference";
+}
+
+class NodePersistence : public testing::Test {
+ protected:
+  void SetUp() override {
+    ros::NodeHandle pnh("~");
+    target_ = pnh.param<std::string>("target", "/hpds_persist_map");
+    input_ = pnh.param<std::string>("input", "/persist_points");
+    config_ = hpds_node::loadNodeConfigFromParams(ros::NodeHandle(target_));
+  }
+
+  std::string target_, input_;
+  hpds_node::NodeConfig config_;
+  ros::NodeHandle nh_;
+};
+
+TEST_F(NodePersistence, SaveAndLoadServicesOnARunningNode) {
+  ASSERT_EQ(config_.hpds.mode, hpds::Mode::Map);
+  const fs::path file = config_.ros.map_file;
+  ASSERT_FALSE(file.empty());
+  fs::remove_all(file.parent_path());
+
+  Collector<PointCloud2> output(nh_, target_ + "/output"), fresh(nh_, target_ + "/new_samples");
+  hpds_test::DiagnosticsReader diag(nh_, target_.substr(1));
+  ros::Publisher pub = nh_.advertise<PointCloud2>(input_, 8);
+  ASSERT_TRUE(hpds_test::waitFor(
+      [&] { return output.connected() && fresh.connected() && pub.getNumSubscribers() > 0; }, 30.0));
+  const hpds::SyntheticLidar lidar = makeLidar();
+  std::size_t sent = 0;
+  // Publishes frame i and returns the node's (~output, ~new_samples) for it.
+  auto send = [&](int i) -> std::pair<PointCloud2::ConstPtr, PointCloud2::ConstPtr> {
+    pub.publish(frameMsg(lidar, i));
+    ++sent;
+    const bool arrived = hpds_test::waitFor([&] { return output.size() >= sent && fresh.size() >= sent; }, 60.0);
+    EXPECT_TRUE(arrived) << "outputs of frame " << i << " did not arrive";
+    if (!arrived) return {};
+    return {output.messages()[sent - 1], fresh.messages()[sent - 1]};
+  };
+
+  // Nothing to load yet, and nowhere to save: both refused with the reason, naming the file.
+  auto r = call(target_ + "/load_map");
+  EXPECT_FALSE(r.success);
+  EXPECT_TRUE(contains(r.message, file.string() + ": file not found")) << r.message;
+  r = call(target_ + "/save_map");
+  EXPECT_FALSE(r.success);
+  EXPECT_TRUE(contains(r.message, file.string()) && contains(r.message, "cannot create a temporary file"))
+      << r.message;
+  fs::create_directories(file.parent_path());
+
+  // Frames 0..2, then save. The reference sees the same frames: the node's map is exactly the reference's.
+  FrameProcessor ref(config_);
+  for (int i = 0; i < 3; ++i) {
+    SCOPED_TRACE(i);
+    const auto [out, news] = send(i);
+    ASSERT_TRUE(out && news);
+    expectSameAsReference(*out, *news, ref, *frameMsg(lidar, i));
+  }
+  r = call(target_ + "/save_map");
+  ASSERT_TRUE(r.success) << r.message;
+  std::size_t reported = 0;
+  ASSERT_EQ(std::sscanf(r.message.c_str(), "saved %zu samples", &reported), 1) << r.message;
+  EXPECT_TRUE(contains(r.message, file.string())) << r.message;
+  EXPECT_TRUE(contains(r.message, "next frame index 3")) << r.message;
+  const std::size_t saved = ref.pipeline().hierarchy().sampleCount();
+  EXPECT_EQ(reported, saved);
+  ASSERT_TRUE(fs::is_regular_file(file));
+  {
+    hpds::Pipeline loaded(config_.hpds);
+    ASSERT_NO_THROW(hpds::loadMap(file.string(), loaded));
+    EXPECT_EQ(loaded.hierarchy().sampleCount(), reported);
+    EXPECT_EQ(loaded.framesProcessed(), 3u);
+  }
+  const std::vector<char> good = readBytes(file);
+
+  // Two more frames grow the node's map past the file's.
+  ASSERT_TRUE(send(3).first);
+  ASSERT_TRUE(send(4).first);
+  EXPECT_TRUE(hpds_test::waitFor(
+      [&] { return diag.value("frames processed") == 5.0 && diag.value("samples stored") > double(saved); }, 30.0))
+      << "samples stored: " << diag.value("samples stored") << ", saved: " << saved;
+
+  // ~load_map takes the node back to the file: the diagnostics show the file's count, and frame 3 sent again gives
+  // exactly what the reference (which stopped at the save) gives for it. Without the load, frame 3 would land on a
+  // map that already holds it and add nothing.
+  r = call(target_ + "/load_map");
+  ASSERT_TRUE(r.success) << r.message;
+  EXPECT_TRUE(contains(r.message, "loaded " + std::to_string(saved) + " samples")) << r.message;
+  EXPECT_TRUE(contains(r.message, file.string())) << r.message;
+  EXPECT_TRUE(hpds_test::waitFor([&] { return diag.value("samples stored") == double(saved); }, 30.0))
+      << "samples stored: " << diag.value("samples stored");
+  {
+    SCOPED_TRACE("frame 3 after the load");
+    const auto [out, news] = send(3);
+    ASSERT_TRUE(out && news);
+    expectSameAsReference(*out, *news, ref, *frameMsg(lidar, 3));
+  }
+
+  // Refused files: success=false with the file and the reason; the running map is untouched, which frame 4 shows
+  // (it continues exactly like the reference).
+  std::vector<char> corrupt = good;
+  corrupt[good.size() / 2] ^= 0x20;
+  const std::vector<char> truncated(good.begin(), good.begin() + static_cast<std::ptrdiff_t>(good.size() - 7));
+  for (const auto &[bytes, reason] : {std::pair{corrupt, std::string("corrupt sample data (checksum mismatch)")},
+                                      std::pair{truncated, std::string("truncated")}}) {
+    SCOPED_TRACE(reason);
+    writeBytes(file, bytes);
+    r = call(target_ + "/load_map");
+    EXPECT_FALSE(r.success);
+    EXPECT_TRUE(contains(r.message, file.string() + ": " + reason)) << r.message;
+    EXPECT_TRUE(contains(r.message, "unchanged")) << r.message;
+  }
+  {
+    SCOPED_TRACE("frame 4 after the refused loads");
+    const auto [out, news] = send(4);
+    ASSERT_TRUE(out && news);
+    expectSameAsReference(*out, *news, ref, *frameMsg(lidar, 4));
+  }
+
+  // A save now writes the node's current map (frames 0..2, 3, 4), again equal to the reference's.
+  r = call(target_ + "/save_map");
+  ASSERT_TRUE(r.success) << r.message;
+  hpds::Pipeline again(config_.hpds);
+  ASSERT_NO_THROW(hpds::loadMap(file.string(), again));
+  EXPECT_EQ(again.hierarchy().sampleCount(), ref.pipeline().hierarchy().sampleCount());
+  EXPECT_EQ(again.framesProcessed(), 5u);
+  EXPECT_EQ(output.size(), sent);
+}
+
+TEST(NodePersistenceRefused, ScanModeAndNoMapFile) {
+  ros::NodeHandle pnh("~");
+  const std::string scan = pnh.param<std::string>("scan_target", "/hpds_persist_scan");
+  const std::string nofile = pnh.param<std::string>("nofile_target", "/hpds_persist_nofile");
+  for (const char *service : {"/save_map", "/load_map"}) {
+    SCOPED_TRACE(service);
+    auto r = call(scan + service);
+    EXPECT_FALSE(r.success);
+    EXPECT_TRUE(contains(r.message, "scan mode") && contains(r.message, "need mode: map")) << r.message;
+    r = call(nofile + service);
+    EXPECT_FALSE(r.success);
+    EXPECT_TRUE(contains(r.message, nofile + "/ros/map_file is not set")) << r.message;
+  }
+}
+
+// ros/load_map_on_start + ros/save_map_on_shutdown: three lives of one node (HpdsServers created here, on the
+// private namespace `ns`), each continuing the previous one's map exactly.
+TEST(NodePersistenceRestart, ARestartLosesNothing) {
+  const std::string ns = "/hpds_restart";
+  const fs::path file = mapDir() / "restart.hpdsmap";
+  fs::create_directories(file.parent_path());
+  fs::remove(file);
+  ros::param::set(ns + "/mode", std::string("map"));
+  ros::param::set(ns + "/hierarchy/cell_size", 4.0);
+  ros::param::set(ns + "/hierarchy/max_depth", 6);
+  ros::param::set(ns + "/output/level", 4);
+  ros::param::set(ns + "/ros/fixed_frame", kFixed);
+  ros::param::set(ns + "/ros/local_map_rate", 0.0);
+  ros::param::set(ns + "/ros/queue_size", 8);
+  ros::param::set(ns + "/ros/map_file", file.string());
+  ros::param::set(ns + "/ros/load_map_on_start", true);
+  ros::param::set(ns + "/ros/save_map_on_shutdown", true);
+  const hpds_node::NodeConfig config = hpds_node::loadNodeConfigFromParams(ros::NodeHandle(ns));
+  ASSERT_TRUE(config.ros.load_map_on_start && config.ros.save_map_on_shutdown);
+  const hpds::SyntheticLidar lidar = makeLidar();
+  FrameProcessor ref(config);
+  ros::NodeHandle nh;
+
+  // One life: start (loading the file if any), frames first..last checked against the reference, stop (saving).
+  auto live = [&](int first, int last) {
+    auto server = std::make_unique<hpds_node::HpdsServer>(nh, ros::NodeHandle(ns), "hpds_restart");
+    Collector<PointCloud2> output(nh, ns + "/output"), fresh(nh, ns + "/new_samples");
+    ros::Publisher pub = nh.advertise<PointCloud2>(ns + "/input", 8);
+    ASSERT_TRUE(hpds_test::waitFor(
+        [&] { return output.connected() && fresh.connected() && pub.getNumSubscribers() > 0; }, 30.0));
+    for (int i = first; i <= last; ++i) {
+      SCOPED_TRACE(i);
+      pub.publish(frameMsg(lidar, i));
+      const std::size_t n = std::size_t(i - first + 1);
+      ASSERT_TRUE(hpds_test::waitFor([&] { return output.size() >= n && fresh.size() >= n; }, 60.0));
+      expectSameAsReference(*output.messages()[n - 1], *fresh.messages()[n - 1], ref, *frameMsg(lidar, i));
+    }
+    server.reset();  // shutdown: saves the map
+    ASSERT_TRUE(fs::is_regular_file(file));
+    hpds::Pipeline saved(config.hpds);
+    ASSERT_NO_THROW(hpds::loadMap(file.string(), saved));
+    EXPECT_EQ(saved.hierarchy().sampleCount(), ref.pipeline().hierarchy().sampleCount());
+    EXPECT_EQ(saved.framesProcessed(), std::uint32_t(last + 1));
+  };
+  {
+    SCOPED_TRACE("first life: no file yet, starts empty");
+    live(0, 1);
+  }
+  {
+    SCOPED_TRACE("second life: starts from the first one's map");
+    live(2, 3);
+  }
+
+  // A file that exists but does not load: the server refuses to start, names the file and the reason, and does
+  // not touch it (no save on the way out).
+  std::vector<char> bytes = readBytes(file);
+  bytes[bytes.size() / 2] ^= 0x01;
+  writeBytes(file, bytes);
+  try {
+    hpds_node::HpdsServer refused(nh, ros::NodeHandle(ns), "hpds_restart");
+    ADD_FAILURE() << "started on a corrupt map file";
+  } catch (const std::runtime_error &e) {
+    const std::string what = e.what();
+    EXPECT_TRUE(contains(what, "load_map_on_start")) << what;
+    EXPECT_TRUE(contains(what, file.string() + ": corrupt")) << what;
+  }
+  EXPECT_TRUE(readBytes(file) == bytes) << "the corrupt file was overwritten";
+}
+
+}  // namespace
+
+int main(int argc, char **argv) {
+  testing::InitGoogleTest(&argc, argv);
+  ros::init(argc, argv, "test_node_persistence");
+  ros::AsyncSpinner spinner(2);
+  spinner.start();
+  return RUN_ALL_TESTS();
+}
