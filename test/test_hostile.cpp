@@ -190,11 +190,12 @@ TEST(HostileCli, MissingXyzAndUnrepresentableFieldsAreRefused) {
   writeText(tmp / "list.ply", "ply\nformat ascii 1.0\nelement vertex 1\nproperty list uchar float x\nproperty float y\n"
                               "property float z\nend_header\n1 0.5 2 3\n");
   // Found by fuzz_pcd: a multi-element x was sampled by its first element, and the output then had no x at all.
+  // Refused on reading now, with the file and the field named.
   writeText(tmp / "x_count_2.pcd", "VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 2 1 1\nWIDTH 1\nHEIGHT 1\n"
                                    "POINTS 1\nDATA ascii\n1 2 3 4\n");
   const std::string out = " -o " + q(tmp / "o.ply");
   runCases({
-      {"sample " + q(tmp / "x_count_2.pcd") + out, 1, "x/y/z fields must have count 1"},
+      {"sample " + q(tmp / "x_count_2.pcd") + out, 1, "x_count_2.pcd: field 'x' has count 2"},
       {"sample " + q(tmp / "no_z.pcd") + out, 1, "no x/y/z fields"},
       {"sample " + q(tmp / "int64.pcd") + out, 1, "64-bit"},
       {"sample " + q(tmp / "list.ply") + out, 1, "list"},
@@ -347,6 +348,18 @@ TEST(HostileCli, ALoneColourChannelSurvivesSampleThenVerify) {
     const double v = readAsDouble(out.record(i), *red);
     EXPECT_TRUE(v == 200.0 || v == 100.0) << v;
   }
+}
+
+// Found by fuzz_pcd (second campaign): a PCD field name with a non-ASCII byte was sampled and written into the PLY
+// header, which the PLY reader refuses (non-ASCII header bytes make PCL misread it), so `hpds verify` failed on
+// `hpds sample`'s output. writePly now refuses such names itself, with a printable message.
+TEST(HostileCli, ANonAsciiFieldNameIsRefusedByThePlyWriter) {
+  const fs::path input = fs::path(HPDS_SOURCE_DIR) / "test" / "regressions" / "pcd" / "non_ascii_field_name.pcd";
+  const auto tmp = test::scratchDir("hostile_non_ascii");
+  std::string log;
+  EXPECT_EQ(hpds("sample " + q(input) + " -o " + q(tmp / "o.ply"), &log), 1) << log;
+  EXPECT_NE(log.find("field name 'intensit?' is not a valid PLY property name"), std::string::npos) << log;
+  EXPECT_FALSE(fs::exists(tmp / "o.ply"));
 }
 
 // Found by fuzz_ply: binary garbage in the header passed the reader's checks and then tripped an assert(false)
@@ -597,9 +610,21 @@ TEST(Regressions, EveryFuzzerCrashInputIsHandled) {
           try {
             p.addFrame(frameOf(cloud));
           } catch (const std::invalid_argument &) {
-            continue;  // the pipeline's documented refusal (e.g. x/y/z with count > 1)
+            continue;  // the pipeline's documented refusal
           }
           (void)p.makeCloud(p.outputSamples(), false);
+          // As the fuzzers do: what was read either is refused by writePly or reads back with its point count.
+          const std::string ply = (tmp / "roundtrip.ply").string();
+          try {
+            writePly(ply, cloud);
+          } catch (const std::runtime_error &) {
+            continue;
+          }
+          try {
+            EXPECT_EQ(readPointCloud(ply).size(), cloud.size());
+          } catch (const std::runtime_error &e) {
+            ADD_FAILURE() << "writePly wrote a file readPointCloud refuses: " << e.what();
+          }
         } else if (target == "poses") {
           (void)readKittiPoses(through(".txt"));
         } else if (target == "config_yaml") {

@@ -1010,6 +1010,25 @@ TEST(WritePointCloud, FieldCountsBeyondTheReadersLimitAreRefusedAtOnce) {
   EXPECT_NE(readPointCloud((dir / "ok.ply").string()).layout().find("f_999"), nullptr);
 }
 
+// The PLY readers refuse header bytes that are not printable ASCII; the writer refuses such names first (found by
+// fuzz_pcd: a PCD field name with a byte 0x8b was written into a PLY header nothing could read back).
+TEST(WritePointCloud, PlyRefusesPropertyNamesThatAreNotPrintableAscii) {
+  const ScratchDir scratch("io_write_names");
+  const fs::path &dir = scratch.path;
+  for (const std::string &bad : {std::string("intensit\x8b"), std::string("caf\xc3\xa9"), std::string("a b"),
+                                std::string("del\x7f"), std::string("")}) {
+    PointLayout layout;
+    layout.append("x", FieldType::Float32);
+    layout.append("y", FieldType::Float32);
+    layout.append("z", FieldType::Float32);
+    layout.append(bad, FieldType::UInt8);
+    SCOPED_TRACE(bad);
+    expectError([&] { writePly((dir / "n.ply").string(), PointBuffer(layout, 2)); }, "n.ply",
+                {"is not a valid PLY property name"});
+    EXPECT_FALSE(fs::exists(dir / "n.ply"));
+  }
+}
+
 TEST(BadInput, PoseFiles) {
   const ScratchDir scratch("io_bad_poses");
   const fs::path &dir = scratch.path;

@@ -42,11 +42,20 @@ const char *plyTypeName(FieldType type) {
   return nullptr;
 }
 
+// A PLY header is ASCII text, and the readers refuse any other byte in it (PCL's tokenizer misreads them): a name is
+// printable ASCII without spaces.
 bool isValidPropertyName(const std::string &name) {
   if (name.empty()) return false;
   for (unsigned char c : name)
-    if (c <= ' ' || c == 0x7f) return false;
+    if (c <= ' ' || c >= 0x7f) return false;
   return true;
+}
+
+// `name` with every byte outside printable ASCII shown as '?', for messages.
+std::string printable(std::string name) {
+  for (char &c : name)
+    if (static_cast<unsigned char>(c) < 0x20 || static_cast<unsigned char>(c) >= 0x7f) c = '?';
+  return name;
 }
 
 constexpr const char *kEndHeader = "end_header\n";
@@ -86,7 +95,8 @@ void writePly(const std::string &path, const PointBuffer &cloud) {
   std::size_t out_step = 0;
   for (const PointField &f : layout.fields) {
     if (!isValidPropertyName(f.name))
-      fail(path, "cannot write PLY: field name '" + f.name + "' is not a valid PLY property name");
+      fail(path, "cannot write PLY: field name '" + printable(f.name) +
+                     "' is not a valid PLY property name (printable ASCII without spaces)");
     const char *type = plyTypeName(f.type);
     const std::size_t elem = fieldTypeSize(f.type);
     for (std::uint32_t c = 0; c < f.count; ++c) {
