@@ -58,6 +58,13 @@ std::string bytesOf(const std::vector<T> &values) {
   return std::string(reinterpret_cast<const char *>(values.data()), values.size() * sizeof(T));
 }
 
+// x, y, z of `type`, in that order from offset 0.
+PointLayout xyzLayout(FieldType type = FieldType::Float32) {
+  PointLayout layout;
+  for (const char *axis : {"x", "y", "z"}) layout.append(axis, type);
+  return layout;
+}
+
 // Runs `fn`, which must throw std::runtime_error mentioning the path and every one of `parts`.
 void expectError(const std::function<void()> &fn, const std::string &path, std::vector<std::string> parts = {}) {
   try {
@@ -133,10 +140,7 @@ double extremeValue(FieldType t, int which) {
 
 // A cloud with every datatype, count > 1 fields, and padding gaps inside the record.
 PointBuffer makeAllTypesCloud(std::size_t n, std::uint32_t seed) {
-  PointLayout layout;
-  layout.append("x", FieldType::Float32);
-  layout.append("y", FieldType::Float32);
-  layout.append("z", FieldType::Float32);
+  PointLayout layout = xyzLayout();
   layout.point_step += 3;  // gap
   for (FieldType t : kAllTypes) {
     layout.append(std::string("v_") + fieldTypeName(t), t);
@@ -512,10 +516,7 @@ TEST(KittiBin, RoundTripConvertsAnyTypesAndDefaultsIntensity) {
     expectSameValues(src, *src.layout().find(name), back, *g);
   }
 
-  PointLayout xyz;
-  xyz.append("x", FieldType::Float32);
-  xyz.append("y", FieldType::Float32);
-  xyz.append("z", FieldType::Float32);
+  PointLayout xyz = xyzLayout();
   PointBuffer plain(xyz, 2);
   writeFromDouble(plain.record(1), xyz.fields[0], 4.0);
   const std::string plain_path = (dir / "plain.BIN").string();
@@ -837,10 +838,7 @@ TEST(BadInput, PlyProblems) {
     writeBytes(dir / name, content);
     expectError([&] { (void)readPointCloud((dir / name).string()); }, name, parts);
   };
-  PointLayout layout;
-  layout.append("x", FieldType::Float32);
-  layout.append("y", FieldType::Float32);
-  layout.append("z", FieldType::Float32);
+  PointLayout layout = xyzLayout();
   PointBuffer cloud(layout, 50);
   writePly((dir / "good.ply").string(), cloud);
   const std::string good = readBytes(dir / "good.ply");
@@ -983,10 +981,7 @@ TEST(WritePointCloud, FieldCountsBeyondTheReadersLimitAreRefusedAtOnce) {
   const ScratchDir scratch("io_write_count");
   const fs::path &dir = scratch.path;
   auto cloudWithCount = [](std::uint32_t count) {
-    PointLayout layout;
-    layout.append("x", FieldType::Float32);
-    layout.append("y", FieldType::Float32);
-    layout.append("z", FieldType::Float32);
+    PointLayout layout = xyzLayout();
     layout.append("f", FieldType::UInt8, count);
     return PointBuffer(layout, 0);
   };
@@ -1017,15 +1012,36 @@ TEST(WritePointCloud, PlyRefusesPropertyNamesThatAreNotPrintableAscii) {
   const fs::path &dir = scratch.path;
   for (const std::string &bad : {std::string("intensit\x8b"), std::string("caf\xc3\xa9"), std::string("a b"),
                                 std::string("del\x7f"), std::string("")}) {
-    PointLayout layout;
-    layout.append("x", FieldType::Float32);
-    layout.append("y", FieldType::Float32);
-    layout.append("z", FieldType::Float32);
+    PointLayout layout = xyzLayout();
     layout.append(bad, FieldType::UInt8);
     SCOPED_TRACE(bad);
     expectError([&] { writePly((dir / "n.ply").string(), PointBuffer(layout, 2)); }, "n.ply",
                 {"is not a valid PLY property name"});
     EXPECT_FALSE(fs::exists(dir / "n.ply"));
+  }
+}
+
+// A failed write removes the partial file, but never what a path only leads to: writing through a link to a full
+// device fails with "write failed", and both the link and the device are left alone.
+TEST(WritePointCloud, FailedWritesRemoveOnlyRegularFiles) {
+  if (!fs::exists("/dev/full")) GTEST_SKIP() << "no /dev/full";
+  const ScratchDir scratch("io_write_full");
+  const fs::path &dir = scratch.path;
+  PointLayout layout = xyzLayout();
+  const PointBuffer cloud(layout, 100);
+  const std::vector<std::pair<std::string, std::function<void(const std::string &)>>> writers = {
+      {"a.ply", [&](const std::string &p) { writePly(p, cloud); }},
+      {"a.pcd", [&](const std::string &p) { writePcd(p, cloud); }},
+      {"a.bin", [&](const std::string &p) { writeKittiBin(p, cloud); }},
+      {"poses.txt", [&](const std::string &p) { writeKittiPoses(p, {Eigen::Isometry3d::Identity()}); }},
+  };
+  for (const auto &[name, write] : writers) {
+    SCOPED_TRACE(name);
+    const fs::path link = dir / name;
+    fs::create_symlink("/dev/full", link);
+    expectError([&] { write(link.string()); }, name, {"write failed"});
+    EXPECT_TRUE(fs::is_symlink(link));
+    EXPECT_TRUE(fs::exists("/dev/full"));
   }
 }
 

@@ -32,4 +32,26 @@ using FilePtr = std::unique_ptr<std::FILE, FileCloser>;
 /// "not a regular file".
 void requireRegularFile(const std::string &path);
 
+/// A file being written by one of the writers. Failures throw via fail(): "cannot open for writing: <errno text>",
+/// "write failed: <errno text>". A file that is not completed by close() (a failed write, or an exception on the way)
+/// is removed, but only where the path itself is a regular file: a device (/dev/full) or a link is never deleted.
+class OutputFile {
+ public:
+  explicit OutputFile(std::string path);
+  ~OutputFile();
+  OutputFile(const OutputFile &) = delete;
+  OutputFile &operator=(const OutputFile &) = delete;
+
+  void write(const void *data, std::size_t bytes);
+  /// Flushes and closes; no write() after it.
+  void close();
+
+ private:
+  [[noreturn]] void abandon(int err);
+  void removePartial() const;
+
+  std::string path_;
+  FilePtr file_;
+};
+
 }  // namespace hpds::io_detail

@@ -64,15 +64,7 @@ void writeKittiBin(const std::string &path, const PointBuffer &cloud) {
   const PointField *fi = layout.find("intensity");
   if (!fx || !fy || !fz) fail(path, "cannot write KITTI .bin: the cloud has no x/y/z fields");
 
-  FilePtr file(std::fopen(path.c_str(), "wb"));
-  if (!file) fail(path, std::string("cannot open for writing: ") + std::strerror(errno));
-
-  auto abandon = [&](const std::string &what) {
-    const int err = errno;
-    file.reset();
-    std::remove(path.c_str());
-    fail(path, what + ": " + std::strerror(err));
-  };
+  io_detail::OutputFile file(path);
 
   // Converted in chunks so that memory stays bounded for huge clouds while fwrite calls stay few.
   constexpr std::size_t kChunkPoints = 1 << 16;
@@ -89,14 +81,9 @@ void writeKittiBin(const std::string &path, const PointBuffer &cloud) {
       chunk.push_back(static_cast<float>(readAsDouble(rec, *fz)));
       chunk.push_back(fi ? static_cast<float>(readAsDouble(rec, *fi)) : 0.0f);
     }
-    if (std::fwrite(chunk.data(), sizeof(float), chunk.size(), file.get()) != chunk.size()) abandon("write failed");
+    file.write(chunk.data(), chunk.size() * sizeof(float));
   }
-  if (std::fflush(file.get()) != 0) abandon("write failed");
-  if (std::fclose(file.release()) != 0) {
-    const int err = errno;
-    std::remove(path.c_str());
-    fail(path, std::string("write failed: ") + std::strerror(err));
-  }
+  file.close();
 }
 
 }  // namespace hpds

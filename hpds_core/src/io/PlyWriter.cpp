@@ -15,8 +15,7 @@ namespace hpds {
 namespace {
 
 using io_detail::fail;
-using io_detail::FilePtr;
-using io_detail::requireRegularFile;
+using io_detail::OutputFile;
 
 // The original PLY type names: every PLY reader knows them, while the sized aliases (int8, float32...) are an
 // extension some readers lack.
@@ -117,22 +116,13 @@ void writePly(const std::string &path, const PointBuffer &cloud) {
   }
   header += kEndHeader;
 
-  FilePtr file(std::fopen(path.c_str(), "wb"));
-  if (!file) fail(path, std::string("cannot open for writing: ") + std::strerror(errno));
-  auto abandon = [&](const char *what) {
-    const int err = errno;
-    file.reset();
-    std::remove(path.c_str());
-    fail(path, std::string(what) + ": " + std::strerror(err));
-  };
-
-  if (std::fwrite(header.data(), 1, header.size(), file.get()) != header.size()) abandon("write failed");
+  OutputFile file(path);
+  file.write(header.data(), header.size());
 
   const std::size_t n = cloud.size();
   if (spans.size() == 1 && spans[0].offset == 0 && spans[0].bytes == layout.point_step) {
     // Records without padding are already the PLY rows.
-    if (n && std::fwrite(cloud.bytes().data(), 1, cloud.bytes().size(), file.get()) != cloud.bytes().size())
-      abandon("write failed");
+    file.write(cloud.bytes().data(), cloud.bytes().size());
   } else if (out_step > 0) {
     constexpr std::size_t kChunkBytes = 1 << 20;
     const std::size_t points_per_chunk = std::max<std::size_t>(1, kChunkBytes / out_step);
@@ -145,15 +135,10 @@ void writePly(const std::string &path, const PointBuffer &cloud) {
         const std::uint8_t *rec = cloud.record(i);
         for (const Span &s : spans) chunk.insert(chunk.end(), rec + s.offset, rec + s.offset + s.bytes);
       }
-      if (std::fwrite(chunk.data(), 1, chunk.size(), file.get()) != chunk.size()) abandon("write failed");
+      file.write(chunk.data(), chunk.size());
     }
   }
-  if (std::fflush(file.get()) != 0) abandon("write failed");
-  if (std::fclose(file.release()) != 0) {
-    const int err = errno;
-    std::remove(path.c_str());
-    fail(path, std::string("write failed: ") + std::strerror(err));
-  }
+  file.close();
 }
 
 }  // namespace hpds

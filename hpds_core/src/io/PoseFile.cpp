@@ -122,16 +122,9 @@ void writeKittiPoses(const std::string &path, const std::vector<Eigen::Isometry3
     }
   }
 
-  std::FILE *file = std::fopen(path.c_str(), "wb");
-  if (!file) fail(path, std::string("cannot open for writing: ") + std::strerror(errno));
-  const bool wrote = std::fwrite(text.data(), 1, text.size(), file) == text.size();
-  int err = errno;
-  const bool closed = std::fclose(file) == 0;
-  if (!closed && wrote) err = errno;
-  if (!wrote || !closed) {
-    std::remove(path.c_str());
-    fail(path, std::string("write failed: ") + std::strerror(err));
-  }
+  io_detail::OutputFile file(path);
+  file.write(text.data(), text.size());
+  file.close();
 }
 
 }  // namespace hpds

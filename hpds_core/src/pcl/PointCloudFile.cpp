@@ -1025,29 +1025,36 @@ void restorePlyTypes(PointBuffer &cloud, const PlyHeader &h) {
   cloud = std::move(out);
 }
 
-PointBuffer readPcd(const std::string &path) {
-  const FileBytes file = openForReading(path);
-  const PcdHeader header = parsePcdHeader(path, file);
-  checkPcdBody(path, file, header);
-
+// Runs PCL's reader of `format` ("PCD" or "PLY") on a file the checks above have passed, quietly, with PCL's
+// failures (exceptions, negative results) turned into our errors, and copies the result into a PointBuffer.
+template <typename PclReader>
+PointBuffer readWithPcl(const std::string &path, const char *format) {
   pcl::PCLPointCloud2 pc;
   int result = -1;
   {
     QuietPcl quiet;
     try {
-      pcl::PCDReader reader;
+      PclReader reader;
       Eigen::Vector4f origin;
       Eigen::Quaternionf orientation;
       int version = 0;
       result = reader.read(path, pc, origin, orientation, version);
     } catch (const std::exception &e) {
-      fail(path, std::string("PCL's PCD reader failed: ") + e.what());
+      fail(path, std::string("PCL's ") + format + " reader failed: " + e.what());
     } catch (...) {
-      fail(path, "PCL's PCD reader failed with an unknown exception");
+      fail(path, std::string("PCL's ") + format + " reader failed with an unknown exception");
     }
   }
-  if (result < 0) fail(path, "PCL's PCD reader rejected the file (error " + std::to_string(result) + ")");
+  if (result < 0)
+    fail(path, std::string("PCL's ") + format + " reader rejected the file (error " + std::to_string(result) + ")");
   return fromPcl(path, pc);
+}
+
+PointBuffer readPcd(const std::string &path) {
+  const FileBytes file = openForReading(path);
+  const PcdHeader header = parsePcdHeader(path, file);
+  checkPcdBody(path, file, header);
+  return readWithPcl<pcl::PCDReader>(path, "PCD");
 }
 
 PointBuffer readPly(const std::string &path) {
@@ -1060,25 +1067,7 @@ PointBuffer readPly(const std::string &path) {
     checkPlyBinary(path, file, header);
   const PlyElement *vertex = findVertex(header);
   if (vertex && !pclPacksColours(*vertex)) return readPlyVertices(path, file, header);
-
-  pcl::PCLPointCloud2 pc;
-  int result = -1;
-  {
-    QuietPcl quiet;
-    try {
-      pcl::PLYReader reader;
-      Eigen::Vector4f origin;
-      Eigen::Quaternionf orientation;
-      int version = 0;
-      result = reader.read(path, pc, origin, orientation, version);
-    } catch (const std::exception &e) {
-      fail(path, std::string("PCL's PLY reader failed: ") + e.what());
-    } catch (...) {
-      fail(path, "PCL's PLY reader failed with an unknown exception");
-    }
-  }
-  if (result < 0) fail(path, "PCL's PLY reader rejected the file (error " + std::to_string(result) + ")");
-  PointBuffer cloud = fromPcl(path, pc);
+  PointBuffer cloud = readWithPcl<pcl::PLYReader>(path, "PLY");
   restorePlyTypes(cloud, header);
   return cloud;
 }
@@ -1183,19 +1172,10 @@ void writePcd(const std::string &path, const PointBuffer &cloud) {
   if (header.empty()) fail(path, "cannot write PCD: PCL could not describe the point layout");
   header += "DATA binary\n";
 
-  std::FILE *file = std::fopen(path.c_str(), "wb");
-  if (!file) fail(path, std::string("cannot open for writing: ") + std::strerror(errno));
-  bool ok = std::fwrite(header.data(), 1, header.size(), file) == header.size();
-  ok = ok && (pc.data.empty() || std::fwrite(pc.data.data(), 1, pc.data.size(), file) == pc.data.size());
-  int err = errno;
-  if (std::fclose(file) != 0 && ok) {
-    ok = false;
-    err = errno;
-  }
-  if (!ok) {
-    std::remove(path.c_str());
-    fail(path, std::string("write failed: ") + std::strerror(err));
-  }
+  io_detail::OutputFile file(path);
+  file.write(header.data(), header.size());
+  file.write(pc.data.data(), pc.data.size());
+  file.close();
 }
 
 void writePointCloud(const std::string &path, const PointBuffer &cloud) {
