@@ -22,10 +22,12 @@
 #include "hpds/PointRender.hpp"
 #include "hpds/SyntheticLidar.hpp"
 #include "hpds/io/PngWriter.hpp"
+#include "QualityBenchSupport.hpp"
 
 namespace {
 
 using namespace hpds;
+using bench::fmt;
 namespace fs = std::filesystem;
 
 struct Options {
@@ -35,12 +37,6 @@ struct Options {
   int level = 5;                // output level; the feature radius is 2 r_level, the pipeline's default
   double high_quantile = 0.9;  // "high-feature" = at or above this quantile of the input's values
 };
-
-std::string fmt(double v, int prec) {
-  char b[32];
-  std::snprintf(b, sizeof b, "%.*f", prec, v);
-  return b;
-}
 
 }  // namespace
 
@@ -80,31 +76,13 @@ int main(int argc, char **argv) {
     if (std::isfinite(best)) pick = std::clamp(static_cast<int>(std::lround(best + 1.0)), 0, lc.frames - 1);
   }
   const SyntheticFrame sf = lidar.frame(pick);
-  PointLayout layout;
-  layout.append("x", FieldType::Float32);
-  layout.append("y", FieldType::Float32);
-  layout.append("z", FieldType::Float32);
-  layout.append("gt", FieldType::UInt32);
-  Frame frame;
-  frame.points = PointBuffer(layout, 0);
   std::vector<double> xyz;
   std::vector<ObjectKind> kinds;
-  {
-    const PointBuffer &pts = sf.frame.points;
-    const PointField *fx = pts.layout().find("x"), *fy = pts.layout().find("y"), *fz = pts.layout().find("z");
-    std::vector<std::uint8_t> rec(layout.point_step);
-    for (std::size_t i = 0; i < pts.size(); ++i) {
-      if (sf.kinds[i] == ObjectKind::None) continue;
-      const double p[3] = {readAsDouble(pts.record(i), *fx), readAsDouble(pts.record(i), *fy),
-                           readAsDouble(pts.record(i), *fz)};
-      for (int a = 0; a < 3; ++a) writeFromDouble(rec.data(), layout.fields[static_cast<std::size_t>(a)], p[a]);
-      writeFromDouble(rec.data(), layout.fields[3], static_cast<double>(kinds.size()));
-      frame.points.pushBack(rec.data());
-      // The pipeline reads the float32 coordinates: the features here must see the same numbers.
-      for (double c : p) xyz.push_back(static_cast<float>(c));
-      kinds.push_back(sf.kinds[i]);
-    }
-  }
+  // The pipeline reads the float32 coordinates: the features here must see the same numbers.
+  Frame frame = bench::objectReturnsFrame(sf, 0, [&](std::size_t i, const Eigen::Vector3d &p) {
+    xyz.insert(xyz.end(), {p.x(), p.y(), p.z()});
+    kinds.push_back(sf.kinds[i]);
+  });
   const std::size_t n = kinds.size();
   const double radius = 2.0 * poissonRadius(o.cell_size, o.level);
   std::vector<std::uint32_t> all(n);

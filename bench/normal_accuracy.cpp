@@ -46,10 +46,12 @@
 #include "hpds/PointRender.hpp"
 #include "hpds/SyntheticLidar.hpp"
 #include "hpds/io/PngWriter.hpp"
+#include "QualityBenchSupport.hpp"
 
 namespace {
 
 using namespace hpds;
+using bench::fmt;
 namespace fs = std::filesystem;
 using Cloud = pcl::PointCloud<pcl::PointXYZ>;
 
@@ -127,35 +129,17 @@ std::vector<Scene> scenes(bool quick) {
 GroundTruth generate(const Scene &scene) {
   const SyntheticLidar lidar(scene.lidar);
   GroundTruth gt;
-  PointLayout layout;
-  layout.append("x", FieldType::Float32);
-  layout.append("y", FieldType::Float32);
-  layout.append("z", FieldType::Float32);
-  layout.append("gt", FieldType::UInt32);
   for (int f = 0; f < scene.lidar.frames; ++f) {
     const SyntheticFrame sf = lidar.frame(f);
-    const PointBuffer &pts = sf.frame.points;
-    const PointField *fx = pts.layout().find("x"), *fy = pts.layout().find("y"), *fz = pts.layout().find("z");
     const Eigen::Isometry3d T = sf.frame.sensor_to_fixed;
-    Frame out;
+    Frame out = bench::objectReturnsFrame(sf, static_cast<std::uint32_t>(gt.xyz.size()),
+                                          [&](std::size_t i, const Eigen::Vector3d &p) {
+                                            gt.xyz.push_back(T * p);
+                                            gt.normal.push_back((T.linear() * sf.normals[i].cast<double>()).normalized());
+                                            gt.kind.push_back(sf.kinds[i]);
+                                          });
     out.sensor_to_fixed = T;
     out.stamp = sf.frame.stamp;
-    out.points = PointBuffer(layout, 0);
-    std::vector<std::uint8_t> rec(layout.point_step);
-    for (std::size_t i = 0; i < pts.size(); ++i) {
-      if (sf.kinds[i] == ObjectKind::None) continue;
-      const Eigen::Vector3d p(readAsDouble(pts.record(i), *fx), readAsDouble(pts.record(i), *fy),
-                              readAsDouble(pts.record(i), *fz));
-      const auto index = static_cast<std::uint32_t>(gt.xyz.size());
-      for (int a = 0; a < 3; ++a) writeFromDouble(rec.data(), layout.fields[static_cast<std::size_t>(a)], p[a]);
-      writeFromDouble(rec.data(), layout.fields[3], index);
-      out.points.pushBack(rec.data());
-      // The sampler sees the float32 coordinates; the truth is indexed by the same rounded point.
-      const Eigen::Vector3d pf(static_cast<float>(p.x()), static_cast<float>(p.y()), static_cast<float>(p.z()));
-      gt.xyz.push_back(T * pf);
-      gt.normal.push_back((T.linear() * sf.normals[i].cast<double>()).normalized());
-      gt.kind.push_back(sf.kinds[i]);
-    }
     gt.frames.push_back(std::move(out));
   }
   gt.cloud->reserve(gt.xyz.size());
@@ -356,13 +340,6 @@ std::vector<Eigen::Vector3d> adaptiveNormals(const Cloud::Ptr &query, const Clou
     }
   }
   return out;
-}
-
-std::string fmt(double v, int prec = 2) {
-  if (!std::isfinite(v)) return "-";
-  char b[32];
-  std::snprintf(b, sizeof b, "%.*f", prec, v);
-  return b;
 }
 
 }  // namespace
