@@ -870,6 +870,18 @@ TEST(BadInput, PlyProblems) {
             std::string(12, '\0'),
         {"num_cols"});
   const std::string xyz_props = "property float x\nproperty float y\nproperty float z\n";
+  {
+    // PCL's header parse is quadratic in the properties (fuzz_cloud_conversion: a 24 s PLY round trip).
+    std::string many = "ply\nformat binary_little_endian 1.0\nelement vertex 1\n" + xyz_props;
+    for (int i = 3; i <= 8192; ++i) many += "property uchar p" + std::to_string(i) + "\n";
+    const auto t0 = std::chrono::steady_clock::now();
+    check("many_props.ply", many + "end_header\n" + std::string(12 + 8190, '\0'), {"more than 8192 properties"});
+    EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(), 1.0);
+    // 8192 is still read.
+    const std::string at_limit = many.substr(0, many.rfind("property uchar p8192\n"));
+    writeBytes(dir / "limit_props.ply", at_limit + "end_header\n" + std::string(12 + 8189, '\0'));
+    EXPECT_EQ(readPointCloud((dir / "limit_props.ply").string()).layout().fields.size(), 8192u);
+  }
   // Inputs that make PCL's PLY reader abort on an assertion (Debian builds keep them) when not caught beforehand.
   check("indented_obj_info.ply",
         "ply\nformat ascii 1.0\n obj_info num_cols 1\nelement vertex 1\n" + xyz_props + "end_header\n1 2 3\n",
@@ -994,12 +1006,16 @@ TEST(WritePointCloud, FieldCountsBeyondTheReadersLimitAreRefusedAtOnce) {
                 {"count 1048577"});
     EXPECT_FALSE(fs::exists(dir / name));
   }
-  // At the limit PCD writes and reads back; PLY (one header line per element) would outgrow the header limit readers
-  // apply, so it is refused too rather than written unreadable.
+  // At the limit PCD writes and reads back; PLY (one property per element) would pass the property limit readers
+  // apply, so it is refused too rather than written unreadable; so is a header beyond 1 MiB.
   writePcd((dir / "limit.pcd").string(), cloudWithCount(1u << 20));
   EXPECT_EQ(readPointCloud((dir / "limit.pcd").string()).layout().find("f")->count, 1u << 20);
   expectError([&] { writePly((dir / "limit.ply").string(), cloudWithCount(1u << 20)); }, "limit.ply",
-              {"header would exceed"});
+              {"more than 8192 properties"});
+  PointLayout long_name = xyzLayout();
+  long_name.append(std::string(1 << 20, 'n'), FieldType::UInt8);
+  expectError([&] { writePly((dir / "long.ply").string(), PointBuffer(long_name, 1)); }, "long.ply",
+              {"header would exceed 1048576 bytes"});
   // Below the header limit a vector field still round-trips through PLY as numbered properties.
   writePly((dir / "ok.ply").string(), cloudWithCount(1000));
   EXPECT_NE(readPointCloud((dir / "ok.ply").string()).layout().find("f_999"), nullptr);

@@ -101,6 +101,9 @@ void writePly(const std::string &path, const PointBuffer &cloud) {
     for (std::uint32_t c = 0; c < f.count; ++c) {
       const std::string name = f.count == 1 ? f.name : f.name + "_" + std::to_string(c);
       if (!names.insert(name).second) fail(path, "cannot write PLY: property name '" + name + "' would appear twice");
+      if (names.size() > io_detail::kMaxPlyProperties)
+        fail(path, "cannot write PLY: more than " + std::to_string(io_detail::kMaxPlyProperties) +
+                       " properties (fields with their counts), which readers refuse");
       header += std::string("property ") + type + " " + name + "\n";
       if (header.size() + std::strlen(kEndHeader) > io_detail::kMaxHeaderBytes)
         fail(path, "cannot write PLY: the header would exceed " + std::to_string(io_detail::kMaxHeaderBytes) +

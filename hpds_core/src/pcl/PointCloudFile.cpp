@@ -534,6 +534,7 @@ PlyHeader parsePlyHeader(const std::string &path, const FileBytes &file) {
   if (!magic || (*magic != "ply" && *magic != "ply\r")) fail(path, "not a PLY file (no 'ply' magic line)");
 
   bool have_format = false, done = false;
+  std::size_t properties = 0;
   while (!done) {
     bool complete = false;
     const auto line = lines.next(&complete);
@@ -578,6 +579,8 @@ PlyHeader parsePlyHeader(const std::string &path, const FileBytes &file) {
       h.elements.push_back({std::string(tok[1]), *count, {}});
     } else if (key == "property") {
       if (h.elements.empty()) lineError("property before any element");
+      if (++properties > io_detail::kMaxPlyProperties)
+        lineError("more than " + std::to_string(io_detail::kMaxPlyProperties) + " properties");
       PlyProperty prop;
       if (tok.size() == 5 && tok[1] == "list") {
         const auto size_type = plyType(tok[2]);

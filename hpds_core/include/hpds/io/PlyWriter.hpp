@@ -12,8 +12,8 @@
 //   written (readPointCloud reads such files itself).
 // - Errors: std::runtime_error whose message starts with the path: I/O failure, a field name that cannot be a PLY
 //   property name (empty, whitespace) or that collides once count > 1 fields are expanded, a field count above 2^20
-//   (refused at once, whatever the count: the time spent is bounded), or a header that would outgrow the 1 MiB the
-//   readers accept (too many properties). A failed write removes the partial file.
+//   (refused at once, whatever the count: the time spent is bounded), more than 8192 properties or a header beyond
+//   1 MiB (both refused by the readers). A failed write removes the partial file.
 // - Thread-safety: reentrant; concurrent calls on different paths are safe.
 #pragma once
 

@@ -15,8 +15,9 @@
 //   value a number of the declared type); so truncated, empty or garbage input raises an exception instead of
 //   crashing PCL, hanging or allocating gigabytes. Memory use is bounded by the file size (up to ~128x it for
 //   binary_compressed, LZF's maximum expansion).
-//   Constructs that PCL 1.13 mishandles are refused: PLY vertex list properties, indented obj_info lines; PCD binary
-//   data whose first bytes spell a header keyword.
+//   Constructs that PCL 1.13 mishandles are refused: PLY vertex list properties, indented obj_info lines, more than
+//   8192 PLY properties (PCL's header parse is quadratic in them); PCD binary data whose first bytes spell a header
+//   keyword.
 // - PLY conventions of PCL's reader apply: uchar red/green/blue(/alpha) become one packed "rgb" (float32) or "rgba"
 //   (uint32) field, nx/ny/nz become normal_x/normal_y/normal_z. A uchar "intensity", which PCL widens to float32, is
 //   given back its uint8 type.
