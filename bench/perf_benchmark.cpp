@@ -244,12 +244,13 @@ void benchStream(const Options &o) {
   HpdsConfig mc = scanConfig(o, 1);
   mc.mode = Mode::Map;
   mc.map.evict_distance = 60.0;
-  std::size_t samples = 0, bytes = 0;
+  std::size_t samples = 0, bytes = 0, scratch = 0;
   const double t_map = medianSeconds(reps, [&] {
     Pipeline p(mc);
     for (const auto &f : frames) p.addFrame(f);
     samples = p.hierarchy().sampleCount();
     bytes = p.hierarchy().memUsage();
+    scratch = p.memUsage() - bytes;
   });
   const double per_sample_point_data = static_cast<double>(frames[0].points.layout().point_step);
   std::ostringstream note;
@@ -258,7 +259,8 @@ void benchStream(const Options &o) {
   const double point_data = 3 * sizeof(double) + per_sample_point_data;
   note << lc.frames / t_map << " frames/s, " << samples << " samples, " << static_cast<double>(bytes) / samples
        << " B/sample = " << point_data << " B point data (xyz + record) + "
-       << static_cast<double>(bytes) / samples - point_data << " B hierarchy";
+       << static_cast<double>(bytes) / samples - point_data << " B hierarchy; per-frame scratch " << scratch / 1024
+       << " KiB on top";
   report(name, "map mode (evict 60 m)", t_map, "-", 0.0, note.str());
 }
 

@@ -116,8 +116,9 @@ SampleId Hierarchy::allocate() {
   if (level_.size() >= kNoSample) throw std::length_error("hierarchy: more than 2^32-1 sample slots");
   const SampleId id = static_cast<SampleId>(level_.size());
   if (level_.size() == level_.capacity()) {
-    // Grow by a quarter instead of doubling: per-sample arrays are most of a long-running map's memory.
-    const std::size_t cap = level_.size() + level_.size() / 4 + 1024;
+    // Grow by an eighth instead of doubling: per-sample arrays are most of a long-running map's memory, and a map
+    // with eviction reaches its size once (the copies stay amortised O(1) per sample).
+    const std::size_t cap = level_.size() + level_.size() / 8 + 1024;
     level_.reserve(cap);
     frame_.reserve(cap);
     view_.reserve(cap);
@@ -332,7 +333,11 @@ std::size_t Hierarchy::memUsage() const {
   for (const auto &g : grids_) bytes += g.memUsage();
   bytes += xyz_.capacity() * sizeof(double) + level_.capacity() + frame_.capacity() * sizeof(std::uint32_t) +
            view_.capacity() * sizeof(std::uint32_t) + records_.capacity() + free_ids_.capacity() * sizeof(SampleId);
-  bytes += finest_keys_.capacity() * sizeof(CellKey);
+  return bytes;
+}
+
+std::size_t Hierarchy::scratchBytes() const {
+  std::size_t bytes = finest_keys_.capacity() * sizeof(CellKey);
   for (const auto &p : pending_) bytes += p.capacity() * sizeof(std::uint64_t);
   return bytes;
 }

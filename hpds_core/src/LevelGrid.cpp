@@ -44,7 +44,7 @@ void LevelGrid::compactPool() {
   std::vector<SampleId> fresh;
   fresh.reserve(ids_.size() - free_ids_ + ids_.size() / 8);
   for (Block &b : slots_) {
-    const unsigned count = static_cast<unsigned>(__builtin_popcountll(b.mask));
+    const unsigned count = bitCount(b.mask);
     if (count < 2) continue;  // empty slot or an inline id
     const std::size_t base = fresh.size();
     fresh.insert(fresh.end(), ids_.begin() + b.base, ids_.begin() + b.base + count);
@@ -76,8 +76,8 @@ bool LevelGrid::insert(const CellKey &key, SampleId id) {
   }
   Block &b = slots_[i];
   if (b.mask & m) return false;
-  const unsigned count = static_cast<unsigned>(__builtin_popcountll(b.mask));
-  const unsigned rank = static_cast<unsigned>(__builtin_popcountll(b.mask & (m - 1)));
+  const unsigned count = bitCount(b.mask);
+  const unsigned rank = bitCount(b.mask & (m - 1));
   if (count == 1) {
     // Out of line: the inline id and the new one, in bit order.
     const std::uint32_t base = allocChunk(0);
@@ -114,8 +114,8 @@ bool LevelGrid::erase(const CellKey &key) {
   Block &b = slots_[i];
   const std::uint64_t m = std::uint64_t(1) << localBit(key.x, key.y, key.z);
   if (!(b.mask & m)) return false;
-  const unsigned count = static_cast<unsigned>(__builtin_popcountll(b.mask));
-  const unsigned rank = static_cast<unsigned>(__builtin_popcountll(b.mask & (m - 1)));
+  const unsigned count = bitCount(b.mask);
+  const unsigned rank = bitCount(b.mask & (m - 1));
   --size_;
   if (count == 1) {
     eraseSlot(i);

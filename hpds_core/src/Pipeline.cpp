@@ -141,7 +141,8 @@ FrameResult Pipeline::addFrame(const Frame &frame) {
 }
 
 std::size_t Pipeline::memUsage() const {
-  return hierarchy_.memUsage() + xyz_.capacity() * sizeof(double) + candidates_.capacity() * sizeof(std::uint32_t);
+  return hierarchy_.memUsage() + hierarchy_.scratchBytes() + xyz_.capacity() * sizeof(double) +
+         candidates_.capacity() * sizeof(std::uint32_t);
 }
 
 void Pipeline::replaceMap(Hierarchy &&map, std::uint32_t next_frame) {

@@ -119,8 +119,10 @@ class Hierarchy {
     for (int l = 0; l <= max_level; ++l) visitBall(l, q, radius, fn);
   }
 
-  /// Bytes held by grids and sample storage.
+  /// Bytes held by grids and sample storage (what the map costs between frames).
   [[nodiscard]] std::size_t memUsage() const;
+  /// Bytes of per-insert scratch (finest keys and level schedules, sized by the largest recent batch).
+  [[nodiscard]] std::size_t scratchBytes() const;
 
  private:
   bool keyAt(int level, const double q[3], CellKey &key) const;
