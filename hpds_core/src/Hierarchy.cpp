@@ -17,6 +17,7 @@ Hierarchy::Hierarchy(double cell_size, int max_depth) : cell_size_(cell_size), m
     edge_[d] = std::ldexp(cell_size, -d);  // exact: a power-of-two scaling
     inv_edge_[d] = 1.0 / edge_[d];
     radius_[d] = 0.5 * std::sqrt(3.0) * edge_[d];
+    radius2_[d] = radius_[d] * radius_[d];
   }
   grids_.resize(static_cast<std::size_t>(max_depth) + 1);
   pending_.resize(static_cast<std::size_t>(max_depth) + 1);
@@ -43,57 +44,67 @@ SampleId Hierarchy::sampleInCell(int level, const double xyz[3]) const {
   return grids_[level].find(k);
 }
 
-double Hierarchy::conflictAt(int level, const double q[3], const CellKey &k, double radius, bool skip_own) const {
+namespace {
+// Masks of the cells of a 4x4x4 block (bit x | y << 2 | z << 4) whose local coordinate along one axis lies in
+// [lo, hi], indexed [axis][lo * 4 + hi].
+struct BlockAxisMasks {
+  std::uint64_t m[3][16] = {};
+  BlockAxisMasks() {
+    for (int lo = 0; lo < 4; ++lo)
+      for (int hi = lo; hi < 4; ++hi)
+        for (unsigned bit = 0; bit < 64; ++bit) {
+          const int c[3] = {static_cast<int>(bit & 3), static_cast<int>((bit >> 2) & 3), static_cast<int>(bit >> 4)};
+          for (int a = 0; a < 3; ++a)
+            if (c[a] >= lo && c[a] <= hi) m[a][lo * 4 + hi] |= std::uint64_t(1) << bit;
+        }
+  }
+};
+const BlockAxisMasks kAxisMasks;
+}  // namespace
+
+double Hierarchy::conflictAt(int level, const double q[3], const CellKey &k, double radius, bool skip_own,
+                             const LevelGrid::Block *own_block, bool own_block_known) const {
   const LevelGrid &grid = grids_[level];
   if (grid.size() == 0) return -1.0;
   const double e = edge_[level];
   const double r2 = radius * radius;
   // radius <= sqrt(3)/2 * edge of this level or of a coarser one, so the ball never reaches past the 26 neighbours.
-  // A neighbour side is visited only when even the rounding-widened ball reaches it.
+  // A neighbour side is taken only when even the rounding-widened ball reaches it.
   const double reach = radius + pruneSlack(q, e);
   const double prune = reach * reach;
-  double g[3][3];
-  int lo[3], hi[3];
+  constexpr int sh = LevelGrid::kBlockShift;
   const std::int32_t kc[3] = {k.x, k.y, k.z};
+  std::int32_t c0[3], c1[3];
   for (int a = 0; a < 3; ++a) {
     const double below = offsetInCell(q[a], kc[a], e), above = e - below;
-    g[a][0] = below * below;
-    g[a][1] = 0.0;
-    g[a][2] = above * above;
-    lo[a] = g[a][0] <= prune ? -1 : 0;
-    hi[a] = g[a][2] <= prune ? 1 : 0;
+    c0[a] = kc[a] - (below * below <= prune ? 1 : 0);
+    c1[a] = kc[a] + (above * above <= prune ? 1 : 0);
   }
-  // The neighbourhood spans one or two blocks per axis; each block is hashed at most once, on first use, and an
-  // empty cell is answered by its block's mask.
-  constexpr int sh = LevelGrid::kBlockShift;
-  const std::int32_t b0[3] = {(k.x + lo[0]) >> sh, (k.y + lo[1]) >> sh, (k.z + lo[2]) >> sh};
-  const LevelGrid::Block *blocks[8];
-  unsigned fetched = 0;
-  for (int dx = lo[0]; dx <= hi[0]; ++dx) {
-    const double gx2 = g[0][dx + 1];
-    const std::int32_t cx = k.x + dx;
-    const int ox = (cx >> sh) - b0[0];
-    for (int dy = lo[1]; dy <= hi[1]; ++dy) {
-      const double gxy2 = gx2 + g[1][dy + 1];
-      if (gxy2 > prune) continue;
-      const std::int32_t cy = k.y + dy;
-      const int oxy = ox | (((cy >> sh) - b0[1]) << 1);
-      for (int dz = lo[2]; dz <= hi[2]; ++dz) {
-        if (gxy2 + g[2][dz + 1] > prune) continue;
-        if (skip_own && (dx | dy | dz) == 0) continue;
-        const std::int32_t cz = k.z + dz;
-        const int slot = oxy | (((cz >> sh) - b0[2]) << 2);
-        if (!(fetched & (1u << slot))) {
-          blocks[slot] = grid.findBlock(cx >> sh, cy >> sh, cz >> sh);
-          fetched |= 1u << slot;
+  // The window of candidate cells covers one or two blocks per axis. Each block is hashed once (the caller may
+  // pass q's own block, already looked up), and only its occupied cells inside the window are read: corner cells
+  // the ball misses cost a distance test only when occupied.
+  const std::int32_t own[3] = {k.x >> sh, k.y >> sh, k.z >> sh};
+  const std::uint64_t own_bit = std::uint64_t(1) << LevelGrid::localBit(k.x, k.y, k.z);
+  for (std::int32_t bz = c0[2] >> sh; bz <= (c1[2] >> sh); ++bz) {
+    const int zl = std::max(c0[2] - bz * 4, 0), zh = std::min(c1[2] - bz * 4, 3);
+    const std::uint64_t zm = kAxisMasks.m[2][zl * 4 + zh];
+    for (std::int32_t by = c0[1] >> sh; by <= (c1[1] >> sh); ++by) {
+      const int yl = std::max(c0[1] - by * 4, 0), yh = std::min(c1[1] - by * 4, 3);
+      const std::uint64_t yzm = zm & kAxisMasks.m[1][yl * 4 + yh];
+      for (std::int32_t bx = c0[0] >> sh; bx <= (c1[0] >> sh); ++bx) {
+        const int xl = std::max(c0[0] - bx * 4, 0), xh = std::min(c1[0] - bx * 4, 3);
+        const bool is_own = bx == own[0] && by == own[1] && bz == own[2];
+        const LevelGrid::Block *b = is_own && own_block_known ? own_block : grid.findBlock(bx, by, bz);
+        if (!b) continue;
+        std::uint64_t bits = b->mask & yzm & kAxisMasks.m[0][xl * 4 + xh];
+        if (is_own && skip_own) bits &= ~own_bit;
+        for (; bits != 0; bits &= bits - 1) {
+          const SampleId s = grid.idAt(*b, static_cast<unsigned>(__builtin_ctzll(bits)));
+          const double *p = position(s);
+          const double ddx = p[0] - q[0], ddy = p[1] - q[1], ddz = p[2] - q[2];
+          const double d2 = ddx * ddx + ddy * ddy + ddz * ddz;
+          if (d2 < r2) return d2;
         }
-        if (!blocks[slot]) continue;
-        const SampleId s = grid.idAt(*blocks[slot], LevelGrid::localBit(cx, cy, cz));
-        if (s == kNoSample) continue;
-        const double *p = position(s);
-        const double ddx = p[0] - q[0], ddy = p[1] - q[1], ddz = p[2] - q[2];
-        const double d2 = ddx * ddx + ddy * ddy + ddz * ddz;
-        if (d2 < r2) return d2;
       }
     }
   }
@@ -103,7 +114,7 @@ double Hierarchy::conflictAt(int level, const double q[3], const CellKey &k, dou
 int Hierarchy::nextLevelAfterConflict(int level, double d2) const {
   int next = level + 1;
   // Same comparison as conflictAt (d2 < r*r), so a skipped level is one that certainly rejects.
-  while (next <= max_depth_ && d2 < radius_[next] * radius_[next]) ++next;
+  while (next <= max_depth_ && d2 < radius2_[next]) ++next;
   return next;
 }
 
@@ -184,7 +195,9 @@ InsertResult Hierarchy::insert(const InsertBatch &batch) {
         const CellKey key = coarsen(finest, d);
         int next = d + 1;
         bool ok = true;
-        const SampleId occupant = grids_[d].find(key);
+        constexpr int sh = LevelGrid::kBlockShift;
+        const LevelGrid::Block *own = grids_[d].findBlock(key.x >> sh, key.y >> sh, key.z >> sh);
+        const SampleId occupant = own ? grids_[d].idAt(*own, LevelGrid::localBit(key.x, key.y, key.z)) : kNoSample;
         if (occupant != kNoSample) {
           const double *p = position(occupant);
           const double ddx = p[0] - q[0], ddy = p[1] - q[1], ddz = p[2] - q[2];
@@ -192,7 +205,8 @@ InsertResult Hierarchy::insert(const InsertBatch &batch) {
           next = nextLevelAfterConflict(d, ddx * ddx + ddy * ddy + ddz * ddz);
         }
         for (int l = d; ok && l >= 0; --l) {
-          const double d2 = conflictAt(l, q, l == d ? key : coarsen(finest, l), rd, /*skip_own=*/l == d);
+          const double d2 = l == d ? conflictAt(l, q, key, rd, /*skip_own=*/true, own, /*own_block_known=*/true)
+                                   : conflictAt(l, q, coarsen(finest, l), rd, false);
           if (d2 >= 0.0) {
             ok = false;
             next = nextLevelAfterConflict(d, d2);

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstring>
 #include <stdexcept>
 
 #include "hpds/FrameGridIndex.hpp"
@@ -72,9 +73,18 @@ FrameResult Pipeline::addFrame(const Frame &frame) {
   const Eigen::Vector3d t = frame.sensor_to_fixed.translation();
   const double min_r2 = config_.input.min_range * config_.input.min_range;
   const double max_r2 = config_.input.max_range > 0.0 ? config_.input.max_range * config_.input.max_range : INFINITY;
+  // Drivers almost always send float32 x/y/z: read those directly instead of through the per-type switch.
+  const bool f32 = fx->type == FieldType::Float32 && fy->type == FieldType::Float32 && fz->type == FieldType::Float32;
+  const auto loadF32 = [](const std::uint8_t *p) {
+    float v;
+    std::memcpy(&v, p, sizeof v);
+    return static_cast<double>(v);
+  };
   for (std::size_t i = 0; i < n; ++i) {
     const std::uint8_t *rec = pts.record(i);
-    const double x = readAsDouble(rec, *fx), y = readAsDouble(rec, *fy), z = readAsDouble(rec, *fz);
+    const double x = f32 ? loadF32(rec + fx->offset) : readAsDouble(rec, *fx);
+    const double y = f32 ? loadF32(rec + fy->offset) : readAsDouble(rec, *fy);
+    const double z = f32 ? loadF32(rec + fz->offset) : readAsDouble(rec, *fz);
     if (!std::isfinite(x) || !std::isfinite(y) || !std::isfinite(z)) {
       ++c.skipped_invalid;
       continue;
@@ -88,14 +98,16 @@ FrameResult Pipeline::addFrame(const Frame &frame) {
       ++c.skipped_range;
       continue;
     }
-    const Eigen::Vector3d w = R * Eigen::Vector3d(x, y, z) + t;
-    if (!w.allFinite()) {  // a finite point can overflow through a huge pose
+    const double wx = R(0, 0) * x + R(0, 1) * y + R(0, 2) * z + t.x();
+    const double wy = R(1, 0) * x + R(1, 1) * y + R(1, 2) * z + t.y();
+    const double wz = R(2, 0) * x + R(2, 1) * y + R(2, 2) * z + t.z();
+    if (!std::isfinite(wx) || !std::isfinite(wy) || !std::isfinite(wz)) {  // a finite point can overflow through a huge pose
       ++c.skipped_invalid;
       continue;
     }
-    xyz_[3 * i] = w.x();
-    xyz_[3 * i + 1] = w.y();
-    xyz_[3 * i + 2] = w.z();
+    xyz_[3 * i] = wx;
+    xyz_[3 * i + 1] = wy;
+    xyz_[3 * i + 2] = wz;
     candidates_.push_back(static_cast<std::uint32_t>(i));
   }
 

@@ -128,7 +128,9 @@ class Hierarchy {
   bool keyAt(int level, const double q[3], CellKey &key) const;
   /// Squared distance to some sample of `level` strictly within `radius` of q (skipping q's own cell when
   /// skip_own), or a negative value when there is none. `key` is q's cell at `level`.
-  double conflictAt(int level, const double q[3], const CellKey &key, double radius, bool skip_own) const;
+  /// `own_block` is key's block when the caller already looked it up (own_block_known; nullptr = no such block).
+  double conflictAt(int level, const double q[3], const CellKey &key, double radius, bool skip_own,
+                    const LevelGrid::Block *own_block = nullptr, bool own_block_known = false) const;
   /// q's cell at `level` from its finest-level cell: nested power-of-two cells make this an exact shift.
   [[nodiscard]] CellKey coarsen(const CellKey &finest, int level) const {
     const int shift = max_depth_ - level;
@@ -147,6 +149,7 @@ class Hierarchy {
   std::array<double, kMaxDepthLimit + 1> edge_{};
   std::array<double, kMaxDepthLimit + 1> inv_edge_{};
   std::array<double, kMaxDepthLimit + 1> radius_{};
+  std::array<double, kMaxDepthLimit + 1> radius2_{};
   std::vector<LevelGrid> grids_;
 
   PointLayout record_layout_;
