@@ -362,6 +362,23 @@ TEST(HostileCli, ANonAsciiFieldNameIsRefusedByThePlyWriter) {
   EXPECT_FALSE(fs::exists(tmp / "o.ply"));
 }
 
+// Found by fuzz_ply (second campaign): obj_info lines after the vertex element still set the size PCL allocates
+// for, unchecked: num_cols 299999999999 (wrapped to 3.6e9 points) made it allocate 36 GB, and a size below the vertex
+// count makes it write past the cloud, which Debian's PCL turns into assert(false), SIGABRT. Run in a subprocess.
+TEST(HostileCli, ObjInfoAfterTheVertexElementIsChecked) {
+  const auto tmp = test::scratchDir("hostile_obj_info");
+  writeText(tmp / "small.ply", "ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\n"
+                               "property float z\nobj_info num_cols 2\nend_header\n1 2 3\n4 5 6\n7 8 9\n1 1 1\n");
+  std::string log;
+  EXPECT_EQ(hpds("sample " + q(tmp / "small.ply") + " -o " + q(tmp / "o.ply"), &log), 1) << log;
+  EXPECT_NE(log.find("obj_info num_cols/num_rows make the cloud 2 x 1 points, but element vertex has 4"),
+            std::string::npos)
+      << log;
+  const fs::path input = fs::path(HPDS_SOURCE_DIR) / "test" / "regressions" / "ply" / "obj_info_after_vertex.ply";
+  EXPECT_EQ(hpds("sample " + q(input) + " -o " + q(tmp / "o.ply"), &log), 1) << log;
+  EXPECT_NE(log.find("3647256575 x 1"), std::string::npos) << log;
+}
+
 // Found by fuzz_ply: binary garbage in the header passed the reader's checks and then tripped an assert(false)
 // inside PCL's PLYReader (ply_io.cpp:298), so `hpds sample` died with SIGABRT. Non-ASCII header bytes are now
 // refused first. Run in a subprocess, so a regression shows as a failed exit code, not a dead test binary.

@@ -870,6 +870,30 @@ TEST(BadInput, PlyProblems) {
             std::string(12, '\0'),
         {"num_cols"});
   const std::string xyz_props = "property float x\nproperty float y\nproperty float z\n";
+  // fuzz_ply: obj_info after the vertex element still resizes PCL's cloud (num_cols 299999999999 wraps to 3.6e9
+  // points: a 36 GB allocation); a size other than the vertex count is refused wherever obj_info stands.
+  const std::string four = std::string(48, '\0');
+  check("obj_info_after_vertex.ply",
+        "ply\nformat binary_little_endian 1.0\nelement vertex 4\n" + xyz_props + "obj_info num_cols 1000\nend_header\n" +
+            four,
+        {"num_cols", "1000 x 1", "element vertex has 4"});
+  check("obj_info_rows_after_vertex.ply",
+        "ply\nformat binary_little_endian 1.0\nobj_info num_cols 2\nelement vertex 4\n" + xyz_props +
+            "obj_info num_rows 3\nend_header\n" + four,
+        {"4 x 3"});
+  check("obj_info_wraps.ply",
+        "ply\nformat binary_little_endian 1.0\nelement vertex 4\n" + xyz_props +
+            "obj_info num_cols 299999999999\nend_header\n" + four,
+        {"3647256575 x 1"});
+  // What PCL leaves alone is fine: a lone num_cols before the vertex (reset to count x 1), a complete pair after it,
+  // an obj_info value PCL does not split off (carriage return inside the line).
+  for (const std::string &info : {std::string("obj_info num_cols 7\nelement vertex 4\n") + xyz_props,
+                                  std::string("element vertex 4\n") + xyz_props + "obj_info num_cols 2\nobj_info num_rows 2\n",
+                                  std::string("element vertex 4\n") + xyz_props + "obj_info num_cols\r9\n"}) {
+    writeBytes(dir / "obj_ok.ply", "ply\nformat binary_little_endian 1.0\n" + info + "end_header\n" + four);
+    const PointBuffer c = readPointCloud((dir / "obj_ok.ply").string());
+    EXPECT_EQ(c.size(), 4u) << info;
+  }
   {
     // PCL's header parse is quadratic in the properties (fuzz_cloud_conversion: a 24 s PLY round trip).
     std::string many = "ply\nformat binary_little_endian 1.0\nelement vertex 1\n" + xyz_props;

@@ -76,6 +76,20 @@ std::string quote(std::string_view text) {
 
 bool isSpace(char c) { return c == ' ' || c == '\t' || c == '\r' || c == '\n' || c == '\v' || c == '\f'; }
 
+// Tokens separated by runs of spaces and tabs, as boost::split(..., is_any_of("\t "), token_compress_on) gives them
+// for a line that does not start with a separator.
+std::vector<std::string_view> splitSpaceTab(std::string_view line) {
+  std::vector<std::string_view> tokens;
+  std::size_t i = 0;
+  while (i < line.size()) {
+    const std::size_t start = i;
+    while (i < line.size() && line[i] != ' ' && line[i] != '\t') ++i;
+    tokens.push_back(line.substr(start, i - start));
+    while (i < line.size() && (line[i] == ' ' || line[i] == '\t')) ++i;
+  }
+  return tokens;
+}
+
 std::vector<std::string_view> splitWhitespace(std::string_view line) {
   std::vector<std::string_view> tokens;
   std::size_t i = 0;
@@ -456,7 +470,10 @@ struct PlyHeader {
   PlyFormat format = PlyFormat::Ascii;
   std::vector<PlyElement> elements;
   std::uint64_t data_offset = 0;
-  std::int64_t obj_cols = 0, obj_rows = 0;  ///< obj_info num_cols/num_rows as PCL's atoi reads them
+  /// The cloud size PCL's reader will allocate for, replayed in header order: obj_info num_cols/num_rows set width and
+  /// height (atoi, wrapped to 32 bits) wherever they stand; the vertex element sets count x 1 unless both are
+  /// non-zero by then.
+  std::uint32_t pcl_width = 0, pcl_height = 0;
 };
 
 std::optional<FieldType> plyType(std::string_view name) {
@@ -483,13 +500,15 @@ std::optional<FieldType> plyType(std::string_view name) {
   return std::nullopt;
 }
 
-// atoi as PCL applies it to obj_info values: leading integer, 0 when there is none.
+// atoi as glibc applies it to obj_info values: strtol's leading integer (0 when there is none, saturated to the
+// 64-bit range), which the caller wraps to 32 bits as PCL's int-to-uint32 assignment does.
 std::int64_t atoiLike(std::string_view token) {
   std::int64_t value = 0;
   const char *begin = token.data();
   if (!token.empty() && token.front() == '+') ++begin;
   const auto res = std::from_chars(begin, token.data() + token.size(), value);
-  if (res.ec == std::errc::result_out_of_range) return std::numeric_limits<std::int64_t>::max();
+  if (res.ec == std::errc::result_out_of_range)
+    return *begin == '-' ? std::numeric_limits<std::int64_t>::min() : std::numeric_limits<std::int64_t>::max();
   return res.ec == std::errc() ? value : 0;
 }
 
@@ -568,8 +587,10 @@ PlyHeader parsePlyHeader(const std::string &path, const FileBytes &file) {
     } else if (key == "obj_info") {
       // PCL asserts (aborting the process) when the raw line does not start with the keyword.
       if (line->substr(0, 8) != "obj_info") lineError("obj_info must start the line");
-      if (tok.size() >= 3 && tok[1] == "num_cols") h.obj_cols = atoiLike(tok[2]);
-      if (tok.size() >= 3 && tok[1] == "num_rows") h.obj_rows = atoiLike(tok[2]);
+      // PCL splits this line on spaces and tabs only (boost::split), not on other white space.
+      const auto st = splitSpaceTab(*line);
+      if (st.size() >= 3 && st[1] == "num_cols") h.pcl_width = static_cast<std::uint32_t>(atoiLike(st[2]));
+      if (st.size() >= 3 && st[1] == "num_rows") h.pcl_height = static_cast<std::uint32_t>(atoiLike(st[2]));
     } else if (key == "element") {
       if (tok.size() != 3) lineError("expected 'element <name> <count>'");
       const auto count = parseInteger<std::uint64_t>(tok[2]);
@@ -577,6 +598,10 @@ PlyHeader parsePlyHeader(const std::string &path, const FileBytes &file) {
       for (const auto &e : h.elements)
         if (e.name == tok[1]) lineError("element '" + std::string(tok[1]) + "' declared twice");
       h.elements.push_back({std::string(tok[1]), *count, {}});
+      if (tok[1] == "vertex" && (h.pcl_width == 0 || h.pcl_height == 0)) {
+        h.pcl_width = static_cast<std::uint32_t>(*count);
+        h.pcl_height = 1;
+      }
     } else if (key == "property") {
       if (h.elements.empty()) lineError("property before any element");
       if (++properties > io_detail::kMaxPlyProperties)
@@ -633,17 +658,15 @@ const PlyElement *findVertex(const PlyHeader &h) {
   return nullptr;
 }
 
+// PCL allocates width x height points and then writes one per vertex: a size that differs from the vertex count
+// (obj_info num_cols/num_rows, also after the vertex element, as fuzz_ply found) makes it allocate what the file
+// does not justify (num_cols 299999999999 wraps to 3.6e9 points) or write past the cloud.
 void checkPlyObjInfo(const std::string &path, const PlyHeader &h) {
   const PlyElement *vertex = findVertex(h);
-  // PCL sizes the cloud from num_cols x num_rows (wrapped to 32 bits) when both are non-zero, not from the count.
-  const auto cols = static_cast<std::uint32_t>(h.obj_cols);
-  const auto rows = static_cast<std::uint32_t>(h.obj_rows);
-  if (cols != 0 && rows != 0) {
-    const std::uint64_t n = vertex ? vertex->count : 0;
-    if (std::uint64_t(cols) * rows != n || h.obj_cols < 0 || h.obj_rows < 0)
-      fail(path, "bad PLY header: obj_info num_cols " + std::to_string(h.obj_cols) + " x num_rows " +
-                     std::to_string(h.obj_rows) + " does not match element vertex " + std::to_string(n));
-  }
+  if (!vertex) return;  // nothing is allocated per point without one
+  if (std::uint64_t(h.pcl_width) * h.pcl_height != vertex->count)
+    fail(path, "bad PLY header: obj_info num_cols/num_rows make the cloud " + std::to_string(h.pcl_width) + " x " +
+                   std::to_string(h.pcl_height) + " points, but element vertex has " + std::to_string(vertex->count));
 }
 
 void checkPlyBinary(const std::string &path, const FileBytes &file, const PlyHeader &h) {
@@ -894,9 +917,7 @@ PointBuffer readPlyVertices(const std::string &path, const FileBytes &file, cons
       }
   }
 
-  const auto cols = static_cast<std::uint32_t>(h.obj_cols);
-  const auto rows = static_cast<std::uint32_t>(h.obj_rows);
-  if (cols != 0 && rows != 0 && std::uint64_t(cols) * rows == n) cloud.setOrganization(cols, rows);
+  if (std::uint64_t(h.pcl_width) * h.pcl_height == n) cloud.setOrganization(h.pcl_width, h.pcl_height);
   return cloud;
 }
 
