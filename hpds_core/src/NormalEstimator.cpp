@@ -3,13 +3,11 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
-#include <memory>
-#include <numeric>
 #include <utility>
 
-#include "hpds/FrameGridIndex.hpp"
 #include "hpds/LocalPca.hpp"
 #include "hpds/ParallelFor.hpp"
+#include "BallGrid.hpp"
 #include "RefinedNormals.hpp"
 
 namespace hpds {
@@ -27,12 +25,35 @@ NormalParams normalParamsFor(const HpdsConfig &config, int level) {
   return p;
 }
 
-namespace {
 SampleNormal invalidNormal() {
   const float nan = std::numeric_limits<float>::quiet_NaN();
   return SampleNormal{{nan, nan, nan}, nan, false};
 }
 
+SampleNormal unorientedNormal(const LocalPca &pca) {
+  if (!pca.valid) return invalidNormal();
+  return SampleNormal{{static_cast<float>(pca.normal[0]), static_cast<float>(pca.normal[1]),
+                       static_cast<float>(pca.normal[2])},
+                      static_cast<float>(pca.surfaceVariation()), true};
+}
+
+void orientTowardViewpoints(const Hierarchy &h, const std::vector<SampleId> &ids, std::vector<SampleNormal> &normals,
+                            int threads) {
+  // ~20 ns per sample: a thread only pays for itself from tens of thousands.
+  parallelFor(ids.size(), threads, [&](std::size_t b, std::size_t e) {
+    for (std::size_t i = b; i < e; ++i) {
+      SampleNormal &n = normals[i];
+      if (!n.valid) continue;
+      const std::array<float, 3> v = h.toViewpoint(ids[i]);
+      // On the float normal: it can decide otherwise than the double one only for a normal within ~1e-7 rad of
+      // perpendicular to the view, where either side is as right.
+      const double dot = double(n.normal[0]) * v[0] + double(n.normal[1]) * v[1] + double(n.normal[2]) * v[2];
+      if (dot < 0.0) n.normal[0] = -n.normal[0], n.normal[1] = -n.normal[1], n.normal[2] = -n.normal[2];
+    }
+  }, /*grain=*/std::size_t(1) << 15);
+}
+
+namespace {
 void gather(const Hierarchy &h, const double *q, double radius, int level,
             std::vector<std::pair<double, SampleId>> &out) {
   out.clear();
@@ -46,81 +67,80 @@ std::vector<SampleNormal> estimateNormals(const Hierarchy &h, const std::vector<
   std::vector<SampleNormal> result(ids.size(), invalidNormal());
   if (ids.empty()) return result;
   const int level = std::min(params.level, h.maxDepth());
-  const double max_radius = 2.0 * h.cellSize();
 
-  // Fixed radius: the union samples of levels 0..level near the queried ids are bucketed once into cells of edge
-  // `radius` (a grid neighbourhood over the hierarchy's samples, contiguous in memory), so a query reads 27
-  // buckets instead of walking every level's cells through the hash.
-  std::vector<double> xyz;
-  std::vector<std::uint32_t> self;  // index of ids[i] in xyz
-  std::unique_ptr<FrameGridIndex> index;
+  // Normals are stored unoriented and turned toward the viewpoints at the end (orientTowardViewpoints).
+  auto store = [&](std::size_t i, const PcaAccumulator &acc) { result[i] = unorientedNormal(acc.solveNormal()); };
+
   if (params.radius > 0.0) {
+    // Fixed radius: the union samples of levels 0..level near the queried ids and the queries, both sorted by cell
+    // once (BallGrid); queries of one cell share the search of their 27 cells, and each is one pass over them.
     double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
-    for (SampleId id : ids)
-      for (int a = 0; a < 3; ++a) {
-        lo[a] = std::min(lo[a], h.position(id)[a] - params.radius);
-        hi[a] = std::max(hi[a], h.position(id)[a] + params.radius);
-      }
-    std::vector<SampleId> inside;
-    for (SampleId id : h.samplesUpTo(level)) {
+    for (SampleId id : ids) {
       const double *p = h.position(id);
-      if (p[0] >= lo[0] && p[0] <= hi[0] && p[1] >= lo[1] && p[1] <= hi[1] && p[2] >= lo[2] && p[2] <= hi[2])
-        inside.push_back(id);
+      for (int a = 0; a < 3; ++a) {
+        lo[a] = std::min(lo[a], p[a] - params.radius);
+        hi[a] = std::max(hi[a], p[a] + params.radius);
+      }
     }
-    // Centres: a queried sample of the union is found in `inside` (ascending ids); one of a finer level is not a
-    // neighbour of anything, so it gets a centre slot after the indexed points.
-    self.resize(ids.size());
-    std::size_t extra = 0;
-    for (std::size_t i = 0; i < ids.size(); ++i) {
-      const auto it = std::lower_bound(inside.begin(), inside.end(), ids[i]);
-      self[i] = (it != inside.end() && *it == ids[i]) ? static_cast<std::uint32_t>(it - inside.begin())
-                                                      : static_cast<std::uint32_t>(inside.size() + extra++);
-    }
-    xyz.reserve(3 * (inside.size() + extra));
-    for (SampleId id : inside) xyz.insert(xyz.end(), h.position(id), h.position(id) + 3);
-    for (std::size_t i = 0; i < ids.size(); ++i)
-      if (self[i] >= inside.size()) xyz.insert(xyz.end(), h.position(ids[i]), h.position(ids[i]) + 3);
-    std::vector<std::uint32_t> all(inside.size());
-    std::iota(all.begin(), all.end(), 0u);
-    index = std::make_unique<FrameGridIndex>(xyz.data(), all, params.radius);
+    // Candidates in increasing id order (ties of the k nearest resolve by this index).
+    std::vector<SampleId> inside = h.samplesUpTo(level);
+    inside.erase(std::remove_if(inside.begin(), inside.end(),
+                                [&](SampleId id) {
+                                  const double *p = h.position(id);
+                                  return !(p[0] >= lo[0] && p[0] <= hi[0] && p[1] >= lo[1] && p[1] <= hi[1] &&
+                                           p[2] >= lo[2] && p[2] <= hi[2]);
+                                }),
+                 inside.end());
+    // Usually the queries are exactly the candidates (all output samples): then one sort serves both.
+    const double *base = h.position(0);
+    const PointSet points{base, inside.data(), inside.size()};
+    const BallGrid grid(points, inside == ids ? points : PointSet{base, ids.data(), ids.size()}, params.radius);
+    const std::size_t k = params.k > 0 ? static_cast<std::size_t>(params.k) : 0;
+    const std::size_t min_n = static_cast<std::size_t>(std::max(params.min_neighbors, 0));
+    parallelFor(grid.cellCount(), params.threads, [&](std::size_t b, std::size_t e) {
+      std::vector<std::pair<double, std::uint32_t>> nb;
+      grid.visit(b, e, [&](std::size_t i, const BallView &v) {
+        if (v.count < min_n || v.count < 3) return;
+        PcaAccumulator acc(v.q);
+        if (k == 0 || v.count <= k) {
+          // Every neighbour: the sums straight from the scan, no neighbour list.
+          for (std::size_t t = 0; t < v.count; ++t) acc.add(&v.xyz[3 * std::size_t(v.inside[t])]);
+        } else {
+          // (distance, index) pairs: ties resolve by index, so the neighbourhood is deterministic.
+          nb.clear();
+          for (std::size_t t = 0; t < v.count; ++t) nb.emplace_back(v.d2[t], v.point[v.inside[t]]);
+          std::nth_element(nb.begin(), nb.begin() + static_cast<std::ptrdiff_t>(k), nb.end());
+          if (k < min_n) return;
+          for (std::size_t t = 0; t < k; ++t) acc.add(h.position(inside[nb[t].second]));
+        }
+        store(i, acc);
+      }, std::max<std::size_t>(min_n, 3));
+    }, /*grain=*/1024);  // ~0.4 us per cell: a thread per ~0.4 ms of work at least
+    orientTowardViewpoints(h, ids, result, params.threads);
+    return result;
   }
 
+  // Adaptive radius (k nearest, no radius): grow the ball over the level grids until k are found.
+  const double max_radius = 2.0 * h.cellSize();
   parallelFor(ids.size(), params.threads, [&](std::size_t b, std::size_t e) {
     std::vector<std::pair<double, SampleId>> nb;
     for (std::size_t i = b; i < e; ++i) {
-      const SampleId id = ids[i];
-      const double *q = h.position(id);
-      nb.clear();
-      if (index) {
-        index->forEachNeighbor(self[i], [&](std::uint32_t j) {
-          const double *p = &xyz[3 * std::size_t(j)];
-          const double dx = p[0] - q[0], dy = p[1] - q[1], dz = p[2] - q[2];
-          nb.emplace_back(dx * dx + dy * dy + dz * dz, static_cast<SampleId>(j));
-        });
-      } else {
-        for (double r = 2.0 * h.radius(level);; r *= 2.0) {
-          gather(h, q, r, level, nb);
-          if (static_cast<int>(nb.size()) >= params.k || r >= max_radius) break;
-        }
+      const double *q = h.position(ids[i]);
+      for (double r = 2.0 * h.radius(level);; r *= 2.0) {
+        gather(h, q, r, level, nb);
+        if (static_cast<int>(nb.size()) >= params.k || r >= max_radius) break;
       }
       if (params.k > 0 && nb.size() > static_cast<std::size_t>(params.k)) {
-        // (distance, index) pairs: ties resolve by index, so the neighbourhood is deterministic.
         std::nth_element(nb.begin(), nb.begin() + params.k, nb.end());
         nb.resize(static_cast<std::size_t>(params.k));
       }
       if (static_cast<int>(nb.size()) < params.min_neighbors) continue;
       PcaAccumulator acc(q);
-      for (const auto &n : nb) acc.add(index ? &xyz[3 * std::size_t(n.second)] : h.position(n.second));
-      const LocalPca pca = acc.solve(/*accurate=*/false);
-      if (!pca.valid) continue;
-      const std::array<float, 3> v = h.toViewpoint(id);
-      const double dot = pca.normal[0] * v[0] + pca.normal[1] * v[1] + pca.normal[2] * v[2];
-      const double s = dot < 0.0 ? -1.0 : 1.0;
-      result[i] = SampleNormal{{static_cast<float>(s * pca.normal[0]), static_cast<float>(s * pca.normal[1]),
-                                static_cast<float>(s * pca.normal[2])},
-                               static_cast<float>(pca.surfaceVariation()), true};
+      for (const auto &n : nb) acc.add(h.position(n.second));
+      store(i, acc);
     }
   });
+  orientTowardViewpoints(h, ids, result, params.threads);
   return result;
 }
 

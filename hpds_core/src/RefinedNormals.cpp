@@ -9,20 +9,18 @@
 
 #include <algorithm>
 #include <cmath>
-#include <limits>
-#include <memory>
+#include <cstdint>
 #include <utility>
 
-#include "hpds/FrameGridIndex.hpp"
 #include "hpds/LocalPca.hpp"
 #include "hpds/ParallelFor.hpp"
+#include "BallGrid.hpp"
 
 namespace hpds {
 
 std::vector<SampleNormal> estimateNormalsRefined(const Hierarchy &h, const std::vector<SampleId> &ids,
                                                  const NormalParams &params) {
-  const float nan = std::numeric_limits<float>::quiet_NaN();
-  std::vector<SampleNormal> result(ids.size(), SampleNormal{{nan, nan, nan}, nan, false});
+  std::vector<SampleNormal> result(ids.size(), invalidNormal());
   if (ids.empty()) return result;
   const int level = std::min(params.level, h.maxDepth());
   const int finest = std::min(level + std::max(0, params.neighborhood_level_offset), h.maxDepth());
@@ -30,8 +28,8 @@ std::vector<SampleNormal> estimateNormalsRefined(const Hierarchy &h, const std::
   const double growth = std::max(1.0, params.max_growth);
   const double base = params.radius > 0.0 ? params.radius : 2.5 * h.radius(level);
 
-  // Points: samples of levels 0..finest near the queried ids (a map may hold far more than a query needs), then the
-  // queried ids themselves as centre slots, as in estimateNormals.
+  // Points: samples of levels 0..finest near the queried ids (a map may hold far more than a query needs), and
+  // those of levels 0..level for k-NN footprints.
   const double margin = std::min(max_radius, base * growth * 4.0);
   double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
   for (SampleId id : ids)
@@ -39,99 +37,125 @@ std::vector<SampleNormal> estimateNormalsRefined(const Hierarchy &h, const std::
       lo[a] = std::min(lo[a], h.position(id)[a] - margin);
       hi[a] = std::max(hi[a], h.position(id)[a] + margin);
     }
-  std::vector<double> xyz;
-  std::vector<std::uint32_t> indexed, indexed_coarse;  // levels 0..finest, and 0..level for k-NN footprints
-  for (SampleId id : h.samplesUpTo(finest)) {
-    const double *p = h.position(id);
-    if (p[0] < lo[0] || p[0] > hi[0] || p[1] < lo[1] || p[1] > hi[1] || p[2] < lo[2] || p[2] > hi[2]) continue;
-    const auto j = static_cast<std::uint32_t>(xyz.size() / 3);
-    indexed.push_back(j);
-    if (h.level(id) <= level) indexed_coarse.push_back(j);
-    xyz.insert(xyz.end(), p, p + 3);
-  }
-  const std::size_t centres = xyz.size() / 3;
-  for (SampleId id : ids) xyz.insert(xyz.end(), h.position(id), h.position(id) + 3);
+  std::vector<SampleId> fine = h.samplesUpTo(finest), coarse;
+  fine.erase(std::remove_if(fine.begin(), fine.end(),
+                            [&](SampleId id) {
+                              const double *p = h.position(id);
+                              return p[0] < lo[0] || p[0] > hi[0] || p[1] < lo[1] || p[1] > hi[1] || p[2] < lo[2] ||
+                                     p[2] > hi[2];
+                            }),
+             fine.end());
+  if (params.k > 0)
+    for (SampleId id : fine)
+      if (h.level(id) <= level) coarse.push_back(id);
+  const double *hbase = h.position(0);
+  const PointSet fine_set{hbase, fine.data(), fine.size()}, coarse_set{hbase, coarse.data(), coarse.size()};
 
-  // One bucket grid per doubling of the base radius, so a grown query still reads only 27 buckets; the coarse ones
-  // find k-NN footprints without walking the level grids cell by cell (slow where samples are sparse).
-  std::vector<std::unique_ptr<FrameGridIndex>> grids, coarse_grids;
+  // Search radii: one per doubling of the base radius up to twice the level-0 cell edge. A footprint rho is searched
+  // with the smallest of them >= rho, all queries of one radius at once (BallGrid), round after round: a query
+  // whose footprint doubles waits for the next round. Each query's result depends only on its own neighbourhoods.
+  std::vector<double> radii;
   for (double r = base;; r *= 2.0) {
-    grids.push_back(std::make_unique<FrameGridIndex>(xyz.data(), indexed, r));
-    if (params.k > 0) coarse_grids.push_back(std::make_unique<FrameGridIndex>(xyz.data(), indexed_coarse, r));
+    radii.push_back(r);
     if (r >= max_radius) break;
   }
   auto gridFor = [&](double rho) {
     std::size_t g = 0;
-    double r = base;
-    while (r < rho && g + 1 < grids.size()) r *= 2.0, ++g;
+    while (radii[g] < rho && g + 1 < radii.size()) ++g;
     return g;
   };
+  // Calls fn(i, view, scratch) for the queries ids[subset[...]] with their neighbours of `points` within `radius`.
+  auto sweep = [&](const PointSet &points, const std::vector<std::uint32_t> &subset, double radius, auto &&fn) {
+    std::vector<SampleId> qids(subset.size());
+    for (std::size_t t = 0; t < subset.size(); ++t) qids[t] = ids[subset[t]];
+    const BallGrid grid(points, PointSet{hbase, qids.data(), qids.size()}, radius);
+    parallelFor(grid.cellCount(), params.threads, [&](std::size_t b, std::size_t e) {
+      std::vector<double> scratch;
+      grid.visit(b, e, [&](std::size_t t, const BallView &v) { fn(subset[t], v, scratch); });
+    });
+  };
+  std::vector<std::uint32_t> pending(ids.size());
+  for (std::size_t i = 0; i < ids.size(); ++i) pending[i] = static_cast<std::uint32_t>(i);
+  std::vector<std::uint8_t> again(ids.size(), 0);
+  auto keepPending = [&] {
+    pending.erase(std::remove_if(pending.begin(), pending.end(), [&](std::uint32_t i) { return !again[i]; }),
+                  pending.end());
+  };
 
-  parallelFor(ids.size(), params.threads, [&](std::size_t b, std::size_t e) {
-    std::vector<double> dist_scratch;
-    for (std::size_t i = b; i < e; ++i) {
-      const SampleId id = ids[i];
-      const double *q = h.position(id);
-      const auto centre = static_cast<std::uint32_t>(centres + i);
-      // 1. Footprint at the output level: the radius, or the k-th nearest sample of levels 0..level within it.
-      double rho = params.radius > 0.0 ? params.radius : max_radius;
-      if (params.k > 0) {
-        std::vector<double> &d2s = dist_scratch;
-        double r = base;
-        for (std::size_t g = 0; g < coarse_grids.size(); ++g, r *= 2.0) {
-          d2s.clear();
-          coarse_grids[g]->forEachNeighbor(centre, [&](std::uint32_t j) {
-            const double *p = &xyz[3 * std::size_t(j)];
-            const double dx = p[0] - q[0], dy = p[1] - q[1], dz = p[2] - q[2];
-            d2s.push_back(dx * dx + dy * dy + dz * dz);
-          });
-          if (static_cast<int>(d2s.size()) >= params.k || (params.radius > 0.0 && r >= params.radius)) break;
-        }
-        if (d2s.size() >= static_cast<std::size_t>(params.k)) {
-          std::nth_element(d2s.begin(), d2s.begin() + (params.k - 1), d2s.end());
+  // 1. Footprint at the output level: the radius, or the k-th nearest sample of levels 0..level within it.
+  std::vector<double> rho(ids.size(), params.radius > 0.0 ? params.radius : max_radius);
+  if (params.k > 0) {
+    const std::size_t k = static_cast<std::size_t>(params.k);
+    for (std::size_t g = 0; g < radii.size() && !pending.empty(); ++g) {
+      const bool last = g + 1 == radii.size();
+      sweep(coarse_set, pending, radii[g], [&](std::uint32_t i, const BallView &v, std::vector<double> &d2s) {
+        const bool enough = v.count >= k;
+        again[i] = 0;
+        if (enough) {
+          d2s.assign(v.d2, v.d2 + v.count);
+          std::nth_element(d2s.begin(), d2s.begin() + static_cast<std::ptrdiff_t>(k - 1), d2s.end());
           // Just past the k-th distance, so that neighbour itself is inside the strict ball.
-          rho = std::min(rho, std::sqrt(d2s[static_cast<std::size_t>(params.k - 1)]) * (1.0 + 1e-9) + 1e-12);
+          rho[i] = std::min(rho[i], std::sqrt(d2s[k - 1]) * (1.0 + 1e-9) + 1e-12);
+        } else if (params.radius > 0.0 && radii[g] >= params.radius) {
+          rho[i] = std::min(rho[i], radii[g]);
+        } else if (last) {
+          rho[i] = std::min(rho[i], 2.0 * radii[g]);  // every radius tried: the footprint stays the search limit
         } else {
-          rho = std::min(rho, r);
+          again[i] = 1;
         }
-      }
-      const double limit = std::min(max_radius, rho * growth);
-      // 2. Every sample of levels 0..finest inside the footprint. A line-like result grows the footprint; a grown
-      //    neighbourhood is only taken if it resolves the line and is flat (RMS distance to its plane <=
-      //    max_plane_rms * radius): a ball reaching from a scan line on the ground into a wall would average two
-      //    surfaces, and a longer piece of the same line is no better than the first.
-      LocalPca chosen;
-      bool have = false;
-      for (;;) {
-        const FrameGridIndex &grid = *grids[gridFor(rho)];
-        const double r2 = rho * rho;
-        PcaAccumulator acc(q);
-        grid.forEachNeighbor(centre, [&](std::uint32_t j) {
-          const double *p = &xyz[3 * std::size_t(j)];
-          const double dx = p[0] - q[0], dy = p[1] - q[1], dz = p[2] - q[2];
-          if (dx * dx + dy * dy + dz * dz < r2) acc.add(p);
-        });
-        const LocalPca pca = acc.solve(/*accurate=*/false);
-        const bool enough = static_cast<int>(acc.count()) >= params.min_neighbors && pca.valid;
-        const bool flat = pca.l0 <= params.max_plane_rms * params.max_plane_rms * r2;
-        const bool not_line = pca.l1 >= params.line_ratio * pca.l2;
-        if (enough && (!have || (flat && not_line))) {
-          chosen = pca;
-          have = true;
-          if (not_line) break;
-        }
-        if ((have && !flat) || rho * 2.0 > limit * (1.0 + 1e-12)) break;
-        rho *= 2.0;
-      }
-      if (!have) continue;
-      const std::array<float, 3> v = h.toViewpoint(id);
-      const double dot = chosen.normal[0] * v[0] + chosen.normal[1] * v[1] + chosen.normal[2] * v[2];
-      const double s = dot < 0.0 ? -1.0 : 1.0;
-      result[i] = SampleNormal{{static_cast<float>(s * chosen.normal[0]), static_cast<float>(s * chosen.normal[1]),
-                                static_cast<float>(s * chosen.normal[2])},
-                               static_cast<float>(chosen.surfaceVariation()), true};
+      });
+      keepPending();
     }
-  });
+    // Queries outside every search grid (far outliers) saw no callback: their footprint stays as initialised.
+    pending.resize(ids.size());
+    for (std::size_t i = 0; i < ids.size(); ++i) pending[i] = static_cast<std::uint32_t>(i);
+  }
+
+  // 2. Every sample of levels 0..finest inside the footprint. A line-like result grows the footprint; a grown
+  //    neighbourhood is only taken if it resolves the line and is flat (RMS distance to its plane <=
+  //    max_plane_rms * radius): a ball reaching from a scan line on the ground into a wall would average two
+  //    surfaces, and a longer piece of the same line is no better than the first.
+  std::vector<double> limit(ids.size());
+  for (std::size_t i = 0; i < ids.size(); ++i) limit[i] = std::min(max_radius, rho[i] * growth);
+  std::vector<LocalPca> chosen(ids.size());
+  std::vector<std::uint8_t> have(ids.size(), 0);
+  std::vector<std::uint32_t> round;
+  while (!pending.empty()) {
+    std::size_t g = radii.size();
+    for (std::uint32_t i : pending) g = std::min(g, gridFor(rho[i]));
+    round.clear();
+    double radius = radii[g];
+    for (std::uint32_t i : pending)
+      if (gridFor(rho[i]) == g) {
+        round.push_back(i);
+        radius = std::max(radius, rho[i]);
+        again[i] = 0;
+      } else {
+        again[i] = 1;  // a later round
+      }
+    sweep(fine_set, round, radius, [&](std::uint32_t i, const BallView &v, std::vector<double> &) {
+      const double r2 = rho[i] * rho[i];
+      PcaAccumulator acc(v.q);
+      for (std::size_t t = 0; t < v.count; ++t)
+        if (v.d2[t] < r2) acc.add(&v.xyz[3 * std::size_t(v.inside[t])]);
+      const LocalPca pca = acc.solveNormal();
+      const bool enough = static_cast<int>(acc.count()) >= params.min_neighbors && pca.valid;
+      const bool flat = pca.l0 <= params.max_plane_rms * params.max_plane_rms * r2;
+      const bool not_line = pca.l1 >= params.line_ratio * pca.l2;
+      if (enough && (!have[i] || (flat && not_line))) {
+        chosen[i] = pca;
+        have[i] = 1;
+        if (not_line) return;
+      }
+      if ((have[i] && !flat) || rho[i] * 2.0 > limit[i] * (1.0 + 1e-12)) return;
+      rho[i] *= 2.0;
+      again[i] = 1;
+    });
+    keepPending();
+  }
+  for (std::size_t i = 0; i < ids.size(); ++i)
+    if (have[i]) result[i] = unorientedNormal(chosen[i]);
+  orientTowardViewpoints(h, ids, result, params.threads);
   return result;
 }
 

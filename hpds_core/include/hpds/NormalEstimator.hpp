@@ -1,9 +1,11 @@
 // Normals and curvature of hierarchy samples by local PCA, with neighbourhoods taken from the hierarchy itself.
 //
 // Contract
-// - Neighbours of a sample are the samples of levels 0..`level` within `radius` (the level grids are walked
-//   directly), and with k > 0 the k nearest of those; with radius = 0 the radius grows from 2 r_level until k are
-//   found (or it reaches twice the level-0 cell edge).
+// - Neighbours of a sample are the samples of levels 0..`level` within `radius`, and with k > 0 the k nearest of
+//   those; with radius = 0 the radius grows from 2 r_level until k are found (or it reaches twice the level-0 cell
+//   edge). A fixed radius is searched for all ids at once (samples and queries sorted by cell once, the queries of
+//   a cell sharing one search); radius 0 walks the level grids per sample.
+// - PCA by LocalPca's solveNormal (eigenvalues and normal agree with an iterative eigensolver to ~1e-15).
 // - The normal is oriented toward the viewpoint of the frame that contributed the sample.
 // - Fewer than `min_neighbors` neighbours (the sample included) or a degenerate neighbourhood gives valid = false
 //   and NaN normal/curvature (PCL's convention for "not estimated"); never a garbage direction marked valid.

@@ -1,0 +1,193 @@
+#include "BallGrid.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <utility>
+
+namespace hpds {
+
+namespace {
+constexpr std::int64_t kAxisCells = std::int64_t(1) << 21;
+
+inline void prefetch(const void *p) {
+#if defined(__GNUC__)
+  __builtin_prefetch(p);
+#else
+  (void)p;
+#endif
+}
+
+int bitWidth(std::uint64_t v) {
+  int b = 0;
+  while (v) ++b, v >>= 1;
+  return b;
+}
+
+/// Calls emit(key, i) for the elements of `set` with a cell (keyOf true), by ascending (key, i). Keys below 2^32
+/// (the usual case: up to 2^32 cells in the bounding box) are radix sorted packed with the index into one word;
+/// larger ones fall back to a comparison sort.
+template <typename KeyOf, typename Emit>
+void forEachSorted(const PointSet &set, const KeyOf &keyOf, int key_bits, Emit &&emit) {
+  if (key_bits <= 32) {
+    std::vector<std::uint64_t> v(set.size), tmp;
+    std::size_t kept = 0;
+    for (std::size_t i = 0; i < set.size; ++i) {
+      std::uint64_t key;
+      if (keyOf(set.at(i), key)) v[kept++] = key << 32 | i;
+    }
+    v.resize(kept);
+    // Stable LSD passes over the key's digits (the index, in the low word, is already ascending).
+    const int passes = std::max(1, (key_bits + 10) / 11), width = (key_bits + passes - 1) / passes;
+    const std::size_t buckets = std::size_t(1) << width;
+    std::vector<std::uint32_t> count(buckets * passes, 0);
+    for (const std::uint64_t x : v)
+      for (int p = 0; p < passes; ++p) ++count[p * buckets + ((x >> (32 + p * width)) & (buckets - 1))];
+    tmp.resize(kept);
+    for (int p = 0; p < passes; ++p) {
+      std::uint32_t *c = &count[p * buckets];
+      if (kept == 0 || *std::max_element(c, c + buckets) == kept) continue;  // one digit value: nothing moves
+      std::uint32_t sum = 0;
+      for (std::size_t b = 0; b < buckets; ++b) sum += std::exchange(c[b], sum);
+      for (const std::uint64_t x : v) tmp[c[(x >> (32 + p * width)) & (buckets - 1)]++] = x;
+      v.swap(tmp);
+    }
+    // The caller reads each element's position in this (spatial) order, scattered in memory: fetch ahead.
+    constexpr std::size_t kAhead = 8;
+    for (std::size_t t = 0; t < kept; ++t) {
+      if (t + kAhead < kept) prefetch(set.at(static_cast<std::uint32_t>(v[t + kAhead])));
+      emit(v[t] >> 32, static_cast<std::uint32_t>(v[t]));
+    }
+  } else {
+    std::vector<std::pair<std::uint64_t, std::uint32_t>> v;
+    v.reserve(set.size);
+    for (std::size_t i = 0; i < set.size; ++i) {
+      std::uint64_t key;
+      if (keyOf(set.at(i), key)) v.emplace_back(key, static_cast<std::uint32_t>(i));
+    }
+    std::sort(v.begin(), v.end());
+    for (const auto &[key, i] : v) emit(key, i);
+  }
+}
+}  // namespace
+
+BallGrid::BallGrid(const PointSet &points, const PointSet &queries, double radius) : r2_(radius * radius) {
+  if (!(radius > 0.0) || !std::isfinite(radius) || queries.size == 0) return;
+  same_ = points == queries;
+  // Cells a hair wider than the radius, so that round-off in the cell computation cannot put a point within the
+  // radius two cells away from the query's.
+  const double edge = radius * (1.0 + 1e-8), inv = 1.0 / edge;
+  double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+  auto extend = [&](const PointSet &set) {
+    for (std::size_t i = 0; i < set.size; ++i) {
+      const double *p = set.at(i);
+      if (!(std::isfinite(p[0]) && std::isfinite(p[1]) && std::isfinite(p[2]))) continue;
+      for (int a = 0; a < 3; ++a) lo[a] = std::min(lo[a], p[a]), hi[a] = std::max(hi[a], p[a]);
+    }
+  };
+  extend(points);
+  if (!same_) extend(queries);
+  if (!(lo[0] <= hi[0])) return;  // nothing finite
+  // Two cells of margin below and one above: every cell c of a point has c - 1 >= 0 and c + 1 < dims, so the 27
+  // neighbours of a cell are plain key offsets. Keys are linear, x-major and z fastest.
+  double origin[3], limit[3];
+  std::uint64_t dims[3];
+  for (int a = 0; a < 3; ++a) {
+    origin[a] = lo[a] - 2.0 * edge;
+    const double top = std::floor((hi[a] - origin[a]) * inv) + 2.0;  // largest cell + 2
+    dims[a] = static_cast<std::uint64_t>(std::min(top, static_cast<double>(kAxisCells)));
+    limit[a] = static_cast<double>(dims[a] - 1);
+  }
+  const std::uint64_t stride_y = dims[2], stride_x = dims[1] * dims[2];
+  const int key_bits = bitWidth(dims[0] * stride_x - 1);
+  // Far outliers (beyond 2^21 cells) and non-finite coordinates have no cell. Positive, so truncation is floor.
+  auto keyOf = [&](const double *p, std::uint64_t &key) {
+    const double fx = (p[0] - origin[0]) * inv, fy = (p[1] - origin[1]) * inv, fz = (p[2] - origin[2]) * inv;
+    if (!(fx >= 1.0 && fx < limit[0] && fy >= 1.0 && fy < limit[1] && fz >= 1.0 && fz < limit[2])) return false;
+    key = static_cast<std::uint64_t>(fx) * stride_x + static_cast<std::uint64_t>(fy) * stride_y +
+          static_cast<std::uint64_t>(fz);
+    return true;
+  };
+  int col = 0;
+  for (std::int64_t dx = -1; dx <= 1; ++dx)
+    for (std::int64_t dy = -1; dy <= 1; ++dy)
+      column_offset_[col++] = static_cast<std::uint64_t>(dx * std::int64_t(stride_x) + dy * std::int64_t(stride_y) - 1);
+
+  pos_.resize(3 * points.size);
+  pidx_.resize(points.size);
+  std::size_t slot = 0;
+  forEachSorted(points, keyOf, key_bits, [&](std::uint64_t key, std::uint32_t i) {
+    if (ckey_.empty() || key != ckey_.back()) {
+      ckey_.push_back(key);
+      cstart_.push_back(static_cast<std::uint32_t>(slot));
+    }
+    const double *p = points.at(i);
+    double *o = &pos_[3 * slot];
+    o[0] = p[0], o[1] = p[1], o[2] = p[2];
+    pidx_[slot++] = i;
+  });
+  pos_.resize(3 * slot);
+  pidx_.resize(slot);
+  cstart_.push_back(static_cast<std::uint32_t>(slot));
+  cells_ = ckey_.size();
+  ckey_.insert(ckey_.end(), 3, ~std::uint64_t(0));  // sentinels: above any key (keys stay below 2^63)
+
+  if (same_) {
+    qorder_ = pidx_.data();
+    qcell_key_ = ckey_.data();
+    qcell_start_ = cstart_.data();
+    qcells_ = cells_;
+    return;
+  }
+  qorder_own_.resize(queries.size);
+  qpos_.resize(3 * queries.size);
+  slot = 0;
+  forEachSorted(queries, keyOf, key_bits, [&](std::uint64_t key, std::uint32_t i) {
+    if (qkey_own_.empty() || key != qkey_own_.back()) {
+      qkey_own_.push_back(key);
+      qstart_own_.push_back(static_cast<std::uint32_t>(slot));
+    }
+    const double *p = queries.at(i);
+    double *o = &qpos_[3 * slot];
+    o[0] = p[0], o[1] = p[1], o[2] = p[2];
+    qorder_own_[slot++] = i;
+  });
+  qorder_own_.resize(slot);
+  qpos_.resize(3 * slot);
+  qstart_own_.push_back(static_cast<std::uint32_t>(slot));
+  qorder_ = qorder_own_.data();
+  qcell_key_ = qkey_own_.data();
+  qcell_start_ = qstart_own_.data();
+  qcells_ = qkey_own_.size();
+}
+
+void BallGrid::initCursors(std::size_t c, std::size_t cursor[9]) const {
+  const std::uint64_t *ckey = ckey_.data();
+  for (int col = 0; col < 9; ++col)
+    cursor[col] = static_cast<std::size_t>(std::lower_bound(ckey, ckey + cells_, qcell_key_[c] + column_offset_[col]) - ckey);
+}
+
+std::size_t BallGrid::columns(std::size_t c, std::size_t cursor[9], std::uint32_t b[9], std::uint32_t e[9]) const {
+  const std::uint64_t key = qcell_key_[c];
+  const std::uint64_t *ckey = ckey_.data();  // followed by 3 sentinels, so ckey[cur + 2] is readable
+  std::size_t total = 0;
+  for (int col = 0; col < 9; ++col) {
+    const std::uint64_t lo = key + column_offset_[col], hi = lo + 2;
+    std::size_t cur = cursor[col];
+    // Forward: usually 0..2 cells (branch-free), else a few more steps or a binary search over a long gap.
+    cur += ckey[cur] < lo ? 1 : 0;
+    cur += ckey[cur] < lo ? 1 : 0;
+    if (ckey[cur] < lo) {
+      if (ckey[cur + 2] < lo) cur = static_cast<std::size_t>(std::lower_bound(ckey + cur + 2, ckey + cells_, lo) - ckey);
+      while (ckey[cur] < lo) ++cur;
+    }
+    cursor[col] = cur;
+    // The column's cells lo..hi are among the next 3 keys (sorted, distinct).
+    const std::size_t end = cur + (ckey[cur] <= hi ? 1 : 0) + (ckey[cur + 1] <= hi ? 1 : 0) + (ckey[cur + 2] <= hi ? 1 : 0);
+    b[col] = cstart_[cur];
+    e[col] = cstart_[end];
+    total += e[col] - b[col];
+  }
+  return total;
+}
+
+}  // namespace hpds

@@ -1,0 +1,124 @@
+// BallGrid: the fixed-radius neighbourhoods of many query positions at once (normal estimation).
+//
+// Contract
+// - Built from a point set, a query set (each: 3 doubles per element, read during construction only) and a radius
+//   R. A query's neighbours are the points at squared distance ax*ax + ay*ay + az*az < R*R, the axis differences
+//   taken in double as point - query: the same test, bit for bit, as FrameGridIndex.
+// - Neighbours are visited in a fixed order (the 27 cells of edge ~R around the query's cell by x, then y, then z;
+//   a cell's points by increasing index), so anything computed from them is independent of how the queries are
+//   split among threads.
+// - Points or queries more than 2^21 cells from the data's bounding-box corner on some axis are left out (no
+//   neighbours / never visited), as in FrameGridIndex. Const; visit() may run concurrently on disjoint ranges.
+//
+// Why it is fast: points and queries are both sorted by a linear cell key (x-major, z fastest; LSD radix sort, no
+// hashing). Queries of one cell share the search for the 27 cells around it, which are 9 contiguous runs of the
+// sorted points (the 3 cells along z of an (x, y) column are adjacent keys) found by 9 cursors that only move
+// forward as the query cells ascend. A query is then one pass over those runs, sequential in memory, with a
+// branch-free distance test; its position is read from a sorted copy, never from scattered memory.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <vector>
+
+namespace hpds {
+
+/// Positions of a point set: element i is at base + 3 * index[i] (index null: base + 3 * i).
+struct PointSet {
+  const double *base = nullptr;
+  const std::uint32_t *index = nullptr;
+  std::size_t size = 0;
+  [[nodiscard]] const double *at(std::size_t i) const { return base + 3 * std::size_t(index ? index[i] : i); }
+  [[nodiscard]] bool operator==(const PointSet &o) const {
+    return base == o.base && index == o.index && size == o.size;
+  }
+};
+
+/// One query's neighbourhood, valid only during the callback. Points are addressed by their slot in the grid's
+/// cell-sorted arrays.
+struct BallView {
+  const double *q;              ///< the query position (3 doubles)
+  const double *xyz;            ///< positions of all grid points by slot (3 doubles each, absolute)
+  const std::uint32_t *point;   ///< point index (element of the point set) by slot
+  const std::uint32_t *inside;  ///< slots of the points strictly within the radius, in visiting order
+  const double *d2;             ///< d2[t]: squared distance of neighbour inside[t] to the query
+  std::size_t count;            ///< number of neighbours
+};
+
+class BallGrid {
+ public:
+  /// `queries` may be the very same set as `points` (same base, index and size): then one sort serves both.
+  BallGrid(const PointSet &points, const PointSet &queries, double radius);
+
+  /// Number of distinct query cells; visit() takes ranges of them (parallelFor over [0, cellCount())).
+  [[nodiscard]] std::size_t cellCount() const { return qcell_start_ ? qcells_ : 0; }
+
+  /// Calls fn(query_index, const BallView &) for every query of cells [begin, end), sequentially, with scratch
+  /// local to the call. Queries of a cell whose 27 cells hold fewer than `min_count` points are skipped (they
+  /// cannot have that many neighbours).
+  template <typename Fn>
+  void visit(std::size_t begin, std::size_t end, Fn &&fn, std::size_t min_count = 0) const;
+
+ private:
+  /// Slot ranges [b[col], e[col]) of the 9 (x, y) columns of 3 cells around query cell c, and their total size;
+  /// the cursors only move forward over ascending query cells.
+  std::size_t columns(std::size_t c, std::size_t cursor[9], std::uint32_t b[9], std::uint32_t e[9]) const;
+  void initCursors(std::size_t c, std::size_t cursor[9]) const;
+
+  double r2_ = 0.0;
+  std::uint64_t column_offset_[9] = {};  // key offset of the (dx, dy) columns' dz = -1 cell
+  // Points sorted by cell: positions and point index by slot; distinct cells (keys, then 3 sentinels) with
+  // the slot of their first point (cells_ + 1 entries).
+  std::vector<double> pos_;  // 3 per slot: a candidate's coordinates share a cache line
+  std::vector<std::uint32_t> pidx_;
+  std::vector<std::uint64_t> ckey_;
+  std::vector<std::uint32_t> cstart_;
+  std::size_t cells_ = 0;
+  // Queries sorted by cell (the point arrays themselves when the sets are the same): query index and position
+  // by sorted position, distinct query cells with their first sorted position.
+  bool same_ = false;
+  std::vector<std::uint32_t> qorder_own_;
+  std::vector<double> qpos_;
+  std::vector<std::uint64_t> qkey_own_;
+  std::vector<std::uint32_t> qstart_own_;
+  const std::uint32_t *qorder_ = nullptr;
+  const std::uint64_t *qcell_key_ = nullptr;
+  const std::uint32_t *qcell_start_ = nullptr;
+  std::size_t qcells_ = 0;
+};
+
+template <typename Fn>
+void BallGrid::visit(std::size_t begin, std::size_t end, Fn &&fn, std::size_t min_count) const {
+  if (begin >= end) return;
+  std::vector<std::uint32_t> inside;
+  std::vector<double> d2;
+  std::size_t cursor[9];
+  initCursors(begin, cursor);
+  const double r2 = r2_;
+  const double *pos = pos_.data();
+  for (std::size_t c = begin; c < end; ++c) {
+    std::uint32_t rb[9], re[9];
+    const std::size_t total = columns(c, cursor, rb, re);
+    if (total < min_count) continue;
+    if (inside.size() < total) inside.resize(2 * total), d2.resize(2 * total);
+    std::uint32_t *in = inside.data();
+    double *dd = d2.data();
+    for (std::uint32_t k = qcell_start_[c]; k < qcell_start_[c + 1]; ++k) {
+      const double *q = same_ ? &pos[3 * std::size_t(k)] : &qpos_[3 * std::size_t(k)];
+      const double qx = q[0], qy = q[1], qz = q[2];
+      std::size_t m = 0;
+      for (int col = 0; col < 9; ++col)
+        for (std::uint32_t j = rb[col]; j < re[col]; ++j) {
+          const double *p = pos + 3 * std::size_t(j);
+          const double ax = p[0] - qx, ay = p[1] - qy, az = p[2] - qz;
+          const double d = ax * ax + ay * ay + az * az;
+          in[m] = j;  // branch-free compaction: the slot is kept only if the test passes
+          dd[m] = d;
+          m += d < r2 ? 1 : 0;
+        }
+      fn(std::size_t(qorder_[k]), BallView{q, pos, pidx_.data(), in, dd, m});
+    }
+  }
+}
+
+}  // namespace hpds

@@ -1,0 +1,274 @@
+// The pieces behind the fast normal estimator: BallGrid (all fixed-radius neighbourhoods at once) against brute
+// force, PcaAccumulator::solveNormal against Eigen's iterative solver, and estimateNormals with query sets that are
+// not the candidate set (subsets, duplicates, unsorted ids, finer-level samples).
+#include <gtest/gtest.h>
+
+#include <Eigen/Eigenvalues>
+#include <algorithm>
+#include <cmath>
+#include <numeric>
+#include <random>
+#include <vector>
+
+#include "../hpds_core/src/BallGrid.hpp"
+#include "hpds/Hierarchy.hpp"
+#include "hpds/LocalPca.hpp"
+#include "hpds/NormalEstimator.hpp"
+#include "hpds/ParallelFor.hpp"
+
+namespace hpds {
+namespace {
+
+struct Found {
+  std::vector<std::uint32_t> points;  // point indices, visiting order
+  std::vector<double> d2;
+  int calls = 0;
+};
+
+/// Every query's neighbourhood through BallGrid, visiting the query cells in `chunks` ranges.
+std::vector<Found> viaGrid(const PointSet &points, const PointSet &queries, double radius, std::size_t chunks) {
+  std::vector<Found> out(queries.size);
+  const BallGrid grid(points, queries, radius);
+  const std::size_t n = grid.cellCount(), step = std::max<std::size_t>(1, (n + chunks - 1) / chunks);
+  for (std::size_t b = 0; b < n; b += step)
+    grid.visit(b, std::min(n, b + step), [&](std::size_t i, const BallView &v) {
+      Found &f = out[i];
+      ++f.calls;
+      for (int a = 0; a < 3; ++a) EXPECT_EQ(v.q[a], queries.at(i)[a]);
+      for (std::size_t t = 0; t < v.count; ++t) {
+        const std::uint32_t slot = v.inside[t];
+        f.points.push_back(v.point[slot]);
+        f.d2.push_back(v.d2[t]);
+        for (int a = 0; a < 3; ++a) EXPECT_EQ(v.xyz[3 * std::size_t(slot) + a], points.at(v.point[slot])[a]);
+      }
+    });
+  return out;
+}
+
+std::vector<std::uint32_t> bruteForce(const PointSet &points, const double *q, double radius) {
+  std::vector<std::uint32_t> out;
+  for (std::size_t j = 0; j < points.size; ++j) {
+    const double *p = points.at(j);
+    const double ax = p[0] - q[0], ay = p[1] - q[1], az = p[2] - q[2];
+    if (ax * ax + ay * ay + az * az < radius * radius) out.push_back(static_cast<std::uint32_t>(j));
+  }
+  return out;
+}
+
+TEST(BallGrid, MatchesBruteForceForPointsAndForeignQueries) {
+  std::mt19937_64 rng(11);
+  std::uniform_real_distribution<double> u(-3.0, 3.0);
+  std::normal_distribution<double> g(0.0, 0.05);
+  std::vector<double> xyz;
+  // A plane with noise, a dense blob, duplicates, and points exactly on cell-sized offsets (ties with the radius).
+  for (int i = 0; i < 3000; ++i) xyz.insert(xyz.end(), {1000.0 + u(rng), -2000.0 + u(rng), 50.0 + g(rng)});
+  for (int i = 0; i < 1000; ++i) xyz.insert(xyz.end(), {1001.0 + g(rng), -2001.0 + g(rng), 51.0 + g(rng)});
+  for (int i = 0; i < 50; ++i) xyz.insert(xyz.end(), {xyz[3 * i], xyz[3 * i + 1], xyz[3 * i + 2]});
+  const double radius = 0.25;
+  for (int i = 0; i < 20; ++i) xyz.insert(xyz.end(), {1000.0 + i * radius, -2000.0, 50.0});
+  const std::size_t n = xyz.size() / 3;
+  const PointSet all{xyz.data(), nullptr, n};
+
+  // Queries = points (one sort serves both).
+  for (std::size_t chunks : {1, 7}) {
+    const auto found = viaGrid(all, all, radius, chunks);
+    for (std::size_t i = 0; i < n; ++i) {
+      ASSERT_EQ(found[i].calls, 1);
+      std::vector<std::uint32_t> got = found[i].points;
+      std::sort(got.begin(), got.end());
+      ASSERT_EQ(got, bruteForce(all, all.at(i), radius)) << "query " << i;
+    }
+  }
+
+  // A subset of the points as an index list, against foreign queries (some far from every point, some repeated).
+  std::vector<std::uint32_t> subset;
+  for (std::uint32_t i = 0; i < n; i += 3) subset.push_back(i);
+  const PointSet some{xyz.data(), subset.data(), subset.size()};
+  std::vector<double> qxyz;
+  for (int i = 0; i < 500; ++i) qxyz.insert(qxyz.end(), {1000.0 + u(rng), -2000.0 + u(rng), 50.0 + 2.0 * g(rng)});
+  qxyz.insert(qxyz.end(), {1100.0, -2000.0, 50.0});  // alone
+  qxyz.insert(qxyz.end(), {qxyz[0], qxyz[1], qxyz[2]});
+  const PointSet queries{qxyz.data(), nullptr, qxyz.size() / 3};
+  const auto once = viaGrid(some, queries, radius, 1), split = viaGrid(some, queries, radius, 5);
+  for (std::size_t i = 0; i < queries.size; ++i) {
+    ASSERT_EQ(once[i].calls, 1);
+    // Same visiting order whatever the chunks: results built from it do not depend on the thread count.
+    ASSERT_EQ(once[i].points, split[i].points);
+    std::vector<std::uint32_t> got = once[i].points;
+    std::sort(got.begin(), got.end());
+    ASSERT_EQ(got, bruteForce(some, queries.at(i), radius)) << "query " << i;
+    for (std::size_t t = 0; t < once[i].points.size(); ++t) {
+      const double *p = some.at(once[i].points[t]), *q = queries.at(i);
+      const double ax = p[0] - q[0], ay = p[1] - q[1], az = p[2] - q[2];
+      EXPECT_EQ(once[i].d2[t], ax * ax + ay * ay + az * az);
+    }
+  }
+  EXPECT_TRUE(once[queries.size - 2].points.empty());
+  EXPECT_EQ(once[0].points, once[queries.size - 1].points);
+}
+
+TEST(BallGrid, EmptyDegenerateAndOutOfRangeInputs) {
+  const std::vector<double> one = {1.0, 2.0, 3.0};
+  // No points: every query is visited with no neighbours.
+  const auto none = viaGrid(PointSet{one.data(), nullptr, 0}, PointSet{one.data(), nullptr, 1}, 0.5, 1);
+  ASSERT_EQ(none[0].calls, 1);
+  EXPECT_TRUE(none[0].points.empty());
+  // No queries, or a radius that is not positive and finite: nothing to visit.
+  EXPECT_EQ(BallGrid(PointSet{one.data(), nullptr, 1}, PointSet{}, 0.5).cellCount(), 0u);
+  for (double r : {0.0, -1.0, double(NAN), double(INFINITY)})
+    EXPECT_EQ(BallGrid(PointSet{one.data(), nullptr, 1}, PointSet{one.data(), nullptr, 1}, r).cellCount(), 0u);
+  // All points at one position.
+  const std::vector<double> same = {5.0, 5.0, 5.0, 5.0, 5.0, 5.0, 5.0, 5.0, 5.0};
+  const auto found = viaGrid(PointSet{same.data(), nullptr, 3}, PointSet{same.data(), nullptr, 3}, 0.1, 1);
+  for (const auto &f : found) EXPECT_EQ(f.points.size(), 3u);
+  // A point 10^9 radii away: beyond 2^21 cells, left out, while the others still find each other; a non-finite
+  // query is never visited.
+  std::vector<double> far = {0.0, 0.0, 0.0, 0.05, 0.0, 0.0, 1e8, 0.0, 0.0};
+  const auto res = viaGrid(PointSet{far.data(), nullptr, 3}, PointSet{far.data(), nullptr, 3}, 0.1, 1);
+  EXPECT_EQ(res[0].points.size(), 2u);
+  EXPECT_EQ(res[1].points.size(), 2u);
+  EXPECT_TRUE(res[2].points.empty());
+  const std::vector<double> bad = {NAN, 0.0, 0.0};
+  const auto nan_query = viaGrid(PointSet{far.data(), nullptr, 2}, PointSet{bad.data(), nullptr, 1}, 0.1, 1);
+  EXPECT_EQ(nan_query[0].calls, 0);
+}
+
+// ---------------------------------------------------------------- solveNormal
+
+LocalPca iterative(const std::vector<std::array<double, 3>> &pts) {
+  PcaAccumulator acc(pts[0].data());
+  for (const auto &p : pts) acc.add(p.data());
+  return acc.solve(/*accurate=*/true);
+}
+
+TEST(SolveNormal, AgreesWithTheIterativeSolver) {
+  std::mt19937_64 rng(5);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  std::normal_distribution<double> g(0.0, 1.0);
+  int compared = 0;
+  for (double noise : {0.0, 1e-4, 1e-2, 0.3, 1.0})
+    for (double elongation : {1.0, 0.1, 0.01})
+      for (int t = 0; t < 400; ++t) {
+        Eigen::Vector3d n(g(rng), g(rng), g(rng));
+        n.normalize();
+        const Eigen::Vector3d e1 = n.unitOrthogonal(), e2 = n.cross(e1);
+        const Eigen::Vector3d origin(5000.0 * u(rng), 5000.0 * u(rng), 100.0 * u(rng));
+        std::vector<std::array<double, 3>> pts;
+        const int count = 3 + t % 40;
+        for (int i = 0; i < count; ++i) {
+          const Eigen::Vector3d p =
+              origin + 0.3 * (u(rng) * e1 + elongation * u(rng) * e2 + noise * g(rng) * n);
+          pts.push_back({p.x(), p.y(), p.z()});
+        }
+        PcaAccumulator acc(pts[0].data());
+        for (const auto &p : pts) acc.add(p.data());
+        const LocalPca fast = acc.solveNormal(), ref = acc.solve(true);
+        const double trace = ref.l0 + ref.l1 + ref.l2;
+        ASSERT_GT(trace, 0.0);
+        EXPECT_NEAR(fast.l0, ref.l0, 1e-12 * trace);
+        EXPECT_NEAR(fast.l1, ref.l1, 1e-12 * trace);
+        EXPECT_NEAR(fast.l2, ref.l2, 1e-12 * trace);
+        EXPECT_NEAR(fast.surfaceVariation(), ref.surfaceVariation(), 1e-12);
+        if ((ref.l1 - ref.l0) < 1e-6 * trace) continue;  // the normal is not defined to better than round-off
+        ASSERT_EQ(fast.valid, ref.valid);
+        const double dot = std::fabs(fast.normal[0] * ref.normal[0] + fast.normal[1] * ref.normal[1] +
+                                     fast.normal[2] * ref.normal[2]);
+        EXPECT_NEAR(dot, 1.0, 1e-12);
+        EXPECT_NEAR(std::sqrt(fast.normal[0] * fast.normal[0] + fast.normal[1] * fast.normal[1] +
+                              fast.normal[2] * fast.normal[2]),
+                    1.0, 1e-14);
+        ++compared;
+      }
+  EXPECT_GT(compared, 5000);
+}
+
+TEST(SolveNormal, DegenerateNeighbourhoodsAreInvalid) {
+  const std::vector<std::array<double, 3>> line = {{0, 0, 0}, {1, 1, 1}, {2, 2, 2}, {3, 3, 3}};
+  const std::vector<std::array<double, 3>> point = {{7, 7, 7}, {7, 7, 7}, {7, 7, 7}};
+  for (const auto *pts : {&line, &point}) {
+    PcaAccumulator acc((*pts)[0].data());
+    for (const auto &p : *pts) acc.add(p.data());
+    EXPECT_FALSE(acc.solveNormal().valid);
+  }
+  PcaAccumulator two(line[0].data());
+  two.add(line[0].data());
+  two.add(line[1].data());
+  EXPECT_FALSE(two.solveNormal().valid);
+  // Isotropic (all eigenvalues equal): valid, any unit normal.
+  const std::vector<std::array<double, 3>> cube = {{1, 0, 0}, {-1, 0, 0}, {0, 1, 0}, {0, -1, 0}, {0, 0, 1}, {0, 0, -1}};
+  PcaAccumulator iso(cube[0].data());
+  for (const auto &p : cube) iso.add(p.data());
+  const LocalPca s = iso.solveNormal();
+  EXPECT_TRUE(s.valid);
+  EXPECT_NEAR(s.surfaceVariation(), 1.0 / 3.0, 1e-12);
+  EXPECT_NEAR(std::sqrt(s.normal[0] * s.normal[0] + s.normal[1] * s.normal[1] + s.normal[2] * s.normal[2]), 1.0, 1e-12);
+  EXPECT_TRUE(iterative(cube).valid);
+}
+
+// ---------------------------------------------------------------- estimateNormals with foreign query sets
+
+TEST(Normals, QueriesNeedNotBeTheCandidateSet) {
+  std::mt19937_64 rng(9);
+  std::uniform_real_distribution<double> u(0.0, 3.0);
+  std::normal_distribution<double> g(0.0, 0.005);
+  std::vector<double> xyz;
+  for (int i = 0; i < 30000; ++i) {
+    const double x = u(rng), y = u(rng);
+    xyz.insert(xyz.end(), {x, y, 0.2 * x + (y > 1.5 ? 0.3 * y : 0.0) + g(rng)});
+  }
+  Hierarchy h(1.0, 6);
+  std::vector<std::uint32_t> order(xyz.size() / 3);
+  std::iota(order.begin(), order.end(), 0u);
+  std::shuffle(order.begin(), order.end(), rng);
+  InsertBatch b;
+  b.xyz = xyz.data();
+  b.size = xyz.size() / 3;
+  b.order = order.data();
+  b.order_size = order.size();
+  b.viewpoint[2] = 10.0;
+  (void)h.insert(b);
+  const int level = 4;
+  NormalParams params;
+  params.level = level;
+  params.radius = 2.5 * h.radius(level);
+  const std::vector<SampleId> candidates = h.samplesUpTo(level);
+  // Unsorted, repeated, a subset, and samples of finer levels (queried but never neighbours).
+  std::vector<SampleId> ids(candidates.begin(), candidates.begin() + candidates.size() / 2);
+  std::shuffle(ids.begin(), ids.end(), rng);
+  ids.push_back(ids.front());
+  for (SampleId id : h.samplesUpTo(6))
+    if (h.level(id) > level && ids.size() < candidates.size()) ids.push_back(id);
+  for (const int threads : {1, 3}) {
+    params.threads = threads;
+    const auto normals = estimateNormals(h, ids, params);
+    ASSERT_EQ(normals.size(), ids.size());
+    std::size_t valid = 0;
+    for (std::size_t i = 0; i < ids.size(); i += 5) {
+      const double *q = h.position(ids[i]);
+      PcaAccumulator acc(q);
+      for (SampleId o : candidates) {
+        const double *p = h.position(o);
+        const double ax = p[0] - q[0], ay = p[1] - q[1], az = p[2] - q[2];
+        if (ax * ax + ay * ay + az * az < params.radius * params.radius) acc.add(p);
+      }
+      const LocalPca ref = acc.solve(true);
+      if (static_cast<int>(acc.count()) < params.min_neighbors || !ref.valid) {
+        EXPECT_FALSE(normals[i].valid);
+        continue;
+      }
+      ASSERT_TRUE(normals[i].valid) << i;
+      ++valid;
+      const double dot = normals[i].normal[0] * ref.normal[0] + normals[i].normal[1] * ref.normal[1] +
+                         normals[i].normal[2] * ref.normal[2];
+      EXPECT_GT(std::fabs(dot), 1.0 - 1e-6);
+      EXPECT_NEAR(normals[i].curvature, ref.surfaceVariation(), 1e-6);
+      const std::array<float, 3> v = h.toViewpoint(ids[i]);
+      EXPECT_GE(normals[i].normal[0] * v[0] + normals[i].normal[1] * v[1] + normals[i].normal[2] * v[2], 0.0f)
+          << "must face the viewpoint";
+    }
+    EXPECT_GT(valid, 200u);
+  }
+}
+
+}  // namespace
+}  // namespace hpds
