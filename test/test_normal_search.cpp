@@ -128,6 +128,14 @@ TEST(BallGrid, EmptyDegenerateAndOutOfRangeInputs) {
   EXPECT_EQ(res[0].points.size(), 2u);
   EXPECT_EQ(res[1].points.size(), 2u);
   EXPECT_TRUE(res[2].points.empty());
+  // Spread over more than 2^32 cells (keys beyond 32 bits: the comparison-sort path): pairs still find each other.
+  std::vector<double> spread;
+  for (int i = 0; i < 50; ++i) {
+    const double c = 1000.0 * i;
+    spread.insert(spread.end(), {c, -c, 0.5 * c, c + 0.03, -c, 0.5 * c - 0.04});
+  }
+  const PointSet sp{spread.data(), nullptr, spread.size() / 3};
+  for (const auto &f : viaGrid(sp, sp, 0.1, 3)) EXPECT_EQ(f.points.size(), 2u);
   const std::vector<double> bad = {NAN, 0.0, 0.0};
   const auto nan_query = viaGrid(PointSet{far.data(), nullptr, 2}, PointSet{bad.data(), nullptr, 1}, 0.1, 1);
   EXPECT_EQ(nan_query[0].calls, 0);
