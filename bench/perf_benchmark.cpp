@@ -38,6 +38,7 @@ struct Options {
   int level = 5;             // output level D
   double cell_size = 4.0;    // level-0 edge, as the default config
   std::size_t stream_points = 5'000'000;
+  std::string only;  // "frames" or "stream": one half of the table (e.g. the thread row on an otherwise idle machine)
 };
 
 /// Median wall time of `repeats` runs after one warm-up run.
@@ -288,14 +289,17 @@ int main(int argc, char **argv) {
     else if (k == "--repeats") o.repeats = std::stoi(v);
     else if (k == "--level") o.level = std::stoi(v);
     else if (k == "--stream-points") o.stream_points = std::stoull(v);
+    else if (k == "--only" && (v == "frames" || v == "stream")) o.only = v;
     else {
-      std::cerr << "usage: perf_benchmark [--data DIR] [--json FILE] [--repeats N] [--level D] [--stream-points N]\n";
+      std::cerr << "usage: perf_benchmark [--data DIR] [--json FILE] [--repeats N] [--level D] [--stream-points N] "
+                   "[--only frames|stream]\n";
       return 2;
     }
   }
   std::printf("hpds performance vs PCL, level D = %d (c_D = %.4g m, r_D = %.4g m), median of %d runs after warm-up\n",
               o.level, cellEdge(o.cell_size, o.level), poissonRadius(o.cell_size, o.level), o.repeats);
-  if (std::filesystem::is_directory(o.data_dir)) {
+  if (o.only == "stream") {
+  } else if (std::filesystem::is_directory(o.data_dir)) {
     for (const char *name : {"hdl32_a.pcd", "velodyne_vlp16.pcd", "hesai_ot128.pcd", "velodyne_vls128.pcd"}) {
       const auto path = std::filesystem::path(o.data_dir) / name;
       if (!std::filesystem::exists(path)) continue;
@@ -306,7 +310,7 @@ int main(int argc, char **argv) {
   } else {
     std::printf("(%s absent: real frames skipped)\n", o.data_dir.c_str());
   }
-  benchStream(o);
+  if (o.only != "frames") benchStream(o);
   writeJson(o.json);
   std::printf("wrote %s\n", o.json.c_str());
   return 0;
