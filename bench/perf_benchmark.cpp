@@ -298,17 +298,18 @@ int main(int argc, char **argv) {
   }
   std::printf("hpds performance vs PCL, level D = %d (c_D = %.4g m, r_D = %.4g m), median of %d runs after warm-up\n",
               o.level, cellEdge(o.cell_size, o.level), poissonRadius(o.cell_size, o.level), o.repeats);
-  if (o.only == "stream") {
-  } else if (std::filesystem::is_directory(o.data_dir)) {
-    for (const char *name : {"hdl32_a.pcd", "velodyne_vlp16.pcd", "hesai_ot128.pcd", "velodyne_vls128.pcd"}) {
-      const auto path = std::filesystem::path(o.data_dir) / name;
-      if (!std::filesystem::exists(path)) continue;
-      Frame f;
-      f.points = readPointCloud(path.string());
-      benchFrame(o, name, f);
+  if (o.only != "stream") {
+    if (std::filesystem::is_directory(o.data_dir)) {
+      for (const char *name : {"hdl32_a.pcd", "velodyne_vlp16.pcd", "hesai_ot128.pcd", "velodyne_vls128.pcd"}) {
+        const auto path = std::filesystem::path(o.data_dir) / name;
+        if (!std::filesystem::exists(path)) continue;
+        Frame f;
+        f.points = readPointCloud(path.string());
+        benchFrame(o, name, f);
+      }
+    } else {
+      std::printf("(%s absent: real frames skipped)\n", o.data_dir.c_str());
     }
-  } else {
-    std::printf("(%s absent: real frames skipped)\n", o.data_dir.c_str());
   }
   if (o.only != "frames") benchStream(o);
   writeJson(o.json);

@@ -68,6 +68,30 @@ void forEachSorted(const PointSet &set, const KeyOf &keyOf, int key_bits, Emit &
     for (const auto &[key, i] : v) emit(key, i);
   }
 }
+
+/// The elements of `set` that have a cell, sorted by cell: positions and element index by slot, the distinct cell
+/// keys and the slot each starts at (one more entry than keys, closing the last cell).
+template <typename KeyOf>
+void sortIntoCells(const PointSet &set, const KeyOf &keyOf, int key_bits, std::vector<double> &pos,
+                   std::vector<std::uint32_t> &index, std::vector<std::uint64_t> &keys,
+                   std::vector<std::uint32_t> &starts) {
+  pos.resize(3 * set.size);
+  index.resize(set.size);
+  std::size_t slot = 0;
+  forEachSorted(set, keyOf, key_bits, [&](std::uint64_t key, std::uint32_t i) {
+    if (keys.empty() || key != keys.back()) {
+      keys.push_back(key);
+      starts.push_back(static_cast<std::uint32_t>(slot));
+    }
+    const double *p = set.at(i);
+    double *o = &pos[3 * slot];
+    o[0] = p[0], o[1] = p[1], o[2] = p[2];
+    index[slot++] = i;
+  });
+  pos.resize(3 * slot);
+  index.resize(slot);
+  starts.push_back(static_cast<std::uint32_t>(slot));
+}
 }  // namespace
 
 BallGrid::BallGrid(const PointSet &points, const PointSet &queries, double radius) : r2_(radius * radius) {
@@ -112,22 +136,7 @@ BallGrid::BallGrid(const PointSet &points, const PointSet &queries, double radiu
     for (std::int64_t dy = -1; dy <= 1; ++dy)
       column_offset_[col++] = static_cast<std::uint64_t>(dx * std::int64_t(stride_x) + dy * std::int64_t(stride_y) - 1);
 
-  pos_.resize(3 * points.size);
-  pidx_.resize(points.size);
-  std::size_t slot = 0;
-  forEachSorted(points, keyOf, key_bits, [&](std::uint64_t key, std::uint32_t i) {
-    if (ckey_.empty() || key != ckey_.back()) {
-      ckey_.push_back(key);
-      cstart_.push_back(static_cast<std::uint32_t>(slot));
-    }
-    const double *p = points.at(i);
-    double *o = &pos_[3 * slot];
-    o[0] = p[0], o[1] = p[1], o[2] = p[2];
-    pidx_[slot++] = i;
-  });
-  pos_.resize(3 * slot);
-  pidx_.resize(slot);
-  cstart_.push_back(static_cast<std::uint32_t>(slot));
+  sortIntoCells(points, keyOf, key_bits, pos_, pidx_, ckey_, cstart_);
   cells_ = ckey_.size();
   ckey_.insert(ckey_.end(), 3, ~std::uint64_t(0));  // sentinels: above any key (keys stay below 2^63)
 
@@ -138,22 +147,7 @@ BallGrid::BallGrid(const PointSet &points, const PointSet &queries, double radiu
     qcells_ = cells_;
     return;
   }
-  qorder_own_.resize(queries.size);
-  qpos_.resize(3 * queries.size);
-  slot = 0;
-  forEachSorted(queries, keyOf, key_bits, [&](std::uint64_t key, std::uint32_t i) {
-    if (qkey_own_.empty() || key != qkey_own_.back()) {
-      qkey_own_.push_back(key);
-      qstart_own_.push_back(static_cast<std::uint32_t>(slot));
-    }
-    const double *p = queries.at(i);
-    double *o = &qpos_[3 * slot];
-    o[0] = p[0], o[1] = p[1], o[2] = p[2];
-    qorder_own_[slot++] = i;
-  });
-  qorder_own_.resize(slot);
-  qpos_.resize(3 * slot);
-  qstart_own_.push_back(static_cast<std::uint32_t>(slot));
+  sortIntoCells(queries, keyOf, key_bits, qpos_, qorder_own_, qkey_own_, qstart_own_);
   qorder_ = qorder_own_.data();
   qcell_key_ = qkey_own_.data();
   qcell_start_ = qstart_own_.data();

@@ -86,8 +86,7 @@ class LevelGrid {
 
   /// Occupied cells.
   [[nodiscard]] std::size_t size() const { return size_; }
-  /// Occupied blocks and hash slots for blocks (a full scan visits every slot).
-  [[nodiscard]] std::size_t blockCount() const { return blocks_; }
+  /// Hash slots for blocks (a full scan visits every slot).
   [[nodiscard]] std::size_t capacity() const { return slots_.size(); }
   [[nodiscard]] std::size_t memUsage() const;
 

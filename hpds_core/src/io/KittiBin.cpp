@@ -21,8 +21,6 @@ using io_detail::requireRegularFile;
 
 constexpr std::size_t kRecordBytes = 16;
 
-
-
 PointLayout kittiLayout() {
   PointLayout layout;
   layout.append("x", FieldType::Float32);
