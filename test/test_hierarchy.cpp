@@ -320,6 +320,35 @@ INSTANTIATE_TEST_SUITE_P(
                       Case{"stream_planar", 0.7, 6, 300, 1, 3}, Case{"stream_scanlines", 1.3, 6, 300, 2, 3}),
     [](const ::testing::TestParamInfo<Case> &param_info) { return std::string(param_info.param.name); });
 
+// The insertion remembers, per small cell, a nearby sample to try first; cells whose coordinates agree in their low
+// bits share that memory. Three copies of a dense cloud, 2^19 level-1 cells apart (so every level's cells alias),
+// interleaved in one batch: a remembered sample from another copy must never decide a point.
+TEST(Hierarchy, AliasedWitnessSlotsNeverDecideAPoint) {
+  std::mt19937_64 rng(77);
+  const double cell = 1.0, offset = std::ldexp(0.5 * cell, 19);  // 2^19 cells of level 1, i.e. 2^(18+l) of level l
+  const std::vector<double> base = scanLineCloud(rng, 300, 2.0);
+  std::vector<double> xyz;
+  for (int copy = 0; copy < 3; ++copy)
+    for (std::size_t i = 0; i < base.size(); i += 3)
+      xyz.insert(xyz.end(), {base[i] + copy * offset, base[i + 1], base[i + 2]});
+  const auto order = shuffledOrder(xyz.size() / 3, rng);
+  Hierarchy h(cell, 6);
+  ReferenceHierarchy ref{cell, 6, {}, 0};
+  const InsertResult r = insertAll(h, xyz, order);
+  ref.insert(xyz, order, 0);
+  ASSERT_EQ(r.out_of_range, 0u);
+  ASSERT_EQ(h.sampleCount(), ref.samples.size());
+  EXPECT_EQ(r.dropped_depth, ref.dropped);
+  std::map<std::tuple<double, double, double>, int> ref_levels;
+  for (const auto &s : ref.samples) ref_levels[{s.p[0], s.p[1], s.p[2]}] = s.level;
+  for (SampleId id : h.samplesUpTo(6)) {
+    const double *p = h.position(id);
+    const auto it = ref_levels.find({p[0], p[1], p[2]});
+    ASSERT_NE(it, ref_levels.end());
+    EXPECT_EQ(it->second, h.level(id));
+  }
+}
+
 TEST(Hierarchy, DuplicatePointsGoToOneSampleAndDropTheRest) {
   Hierarchy h(1.0, 4);
   std::vector<double> xyz;

@@ -20,7 +20,7 @@ Hierarchy::Hierarchy(double cell_size, int max_depth) : cell_size_(cell_size), m
     radius2_[d] = radius_[d] * radius_[d];
   }
   grids_.resize(static_cast<std::size_t>(max_depth) + 1);
-  pending_.resize(static_cast<std::size_t>(max_depth) + 1);
+  pending_.resize(static_cast<std::size_t>(max_depth) + 2);  // [max_depth + 1]: dropped, so rejection never branches
 }
 
 void Hierarchy::setRecordLayout(const PointLayout &layout) {
@@ -63,7 +63,7 @@ const BlockAxisMasks kAxisMasks;
 }  // namespace
 
 double Hierarchy::conflictAt(int level, const double q[3], const CellKey &k, double radius, bool skip_own,
-                             const LevelGrid::Block *own_block, bool own_block_known) const {
+                             SampleId &witness, const LevelGrid::Block *own_block, bool own_block_known) const {
   const LevelGrid &grid = grids_[level];
   if (grid.size() == 0) return -1.0;
   const double e = edge_[level];
@@ -103,7 +103,10 @@ double Hierarchy::conflictAt(int level, const double q[3], const CellKey &k, dou
           const double *p = position(s);
           const double ddx = p[0] - q[0], ddy = p[1] - q[1], ddz = p[2] - q[2];
           const double d2 = ddx * ddx + ddy * ddy + ddz * ddz;
-          if (d2 < r2) return d2;
+          if (d2 < r2) {
+            witness = s;
+            return d2;
+          }
         }
       }
     }
@@ -112,9 +115,11 @@ double Hierarchy::conflictAt(int level, const double q[3], const CellKey &k, dou
 }
 
 int Hierarchy::nextLevelAfterConflict(int level, double d2) const {
+  // Same comparison as conflictAt (d2 < r*r), so a skipped level is one that certainly rejects. Radii shrink with
+  // the level, so counting the levels that still reject gives the first that does not, without a data-dependent
+  // loop exit (a mispredicted branch per rejection otherwise).
   int next = level + 1;
-  // Same comparison as conflictAt (d2 < r*r), so a skipped level is one that certainly rejects.
-  while (next <= max_depth_ && d2 < radius2_[next]) ++next;
+  for (int l = level + 1; l <= max_depth_; ++l) next += d2 < radius2_[l] ? 1 : 0;
   return next;
 }
 
@@ -183,18 +188,57 @@ InsertResult Hierarchy::insert(const InsertBatch &batch) {
     }
   }
 
+  // Witness cache: points that are close to each other are mostly rejected by the same nearby sample, so the
+  // sample that last decided a point is tried first for the points near it (one distance test instead of a grid
+  // walk). A hit is a genuine conflict whatever the slot held, so a stale or colliding slot costs only a miss.
+  std::size_t slots = 1024;
+  while (slots < n / 2 && slots < (std::size_t(1) << 17)) slots <<= 1;
+  witness_.assign(slots, WitnessSlot{});
+  const int slot_shift = 64 - __builtin_ctzll(slots);
+
   for (int d = 0; d <= max_depth_; ++d) {
-    const double rd = radius_[d];
+    const double rd = radius_[d], rd2 = radius2_[d];
+    const int group_level = std::min(d + kWitnessGroupOffset, max_depth_);
     const std::vector<std::uint64_t> &todo = pending_[d];
+    // A pass visits its points in rank order, i.e. at random places: a cursor running a few points ahead
+    // prefetches each one's position and witness slot so the loads overlap.
+    std::size_t ahead_w = 0;
+    std::uint64_t ahead_bits = words ? todo[0] : 0;
+    auto prefetchAhead = [&]() {
+      while (ahead_bits == 0) {
+        if (++ahead_w >= words) return;
+        ahead_bits = todo[ahead_w];
+      }
+      const std::uint32_t r = static_cast<std::uint32_t>(ahead_w * 64 + static_cast<std::size_t>(__builtin_ctzll(ahead_bits)));
+      ahead_bits &= ahead_bits - 1;
+      __builtin_prefetch(batch.xyz + 3 * std::size_t(batch.order[r]));
+      __builtin_prefetch(&witness_[witnessHash(coarsen(finest_keys_[r], group_level), d) >> slot_shift]);
+    };
+    for (int i = 0; i < kPrefetchDistance; ++i) prefetchAhead();
     for (std::size_t w = 0; w < words; ++w) {
       for (std::uint64_t bits = todo[w]; bits != 0; bits &= bits - 1) {
+        prefetchAhead();
         const std::uint32_t rank = static_cast<std::uint32_t>(w * 64 + static_cast<std::size_t>(__builtin_ctzll(bits)));
         const std::uint32_t pi = batch.order[rank];
         const double *q = batch.xyz + 3 * std::size_t(pi);
         const CellKey &finest = finest_keys_[rank];
+        const std::uint64_t h = witnessHash(coarsen(finest, group_level), d);
+        WitnessSlot &slot = witness_[h >> slot_shift];
+        {
+          // An empty slot holds (0,0,0) with tag 0: the distance is computed anyway and ignored, one branch less.
+          const double ddx = slot.xyz[0] - q[0], ddy = slot.xyz[1] - q[1], ddz = slot.xyz[2] - q[2];
+          const double d2 = ddx * ddx + ddy * ddy + ddz * ddz;
+          if ((slot.tag == h) & (d2 < rd2)) {
+            pending_[nextLevelAfterConflict(d, d2)][rank >> 6] |= std::uint64_t(1) << (rank & 63);
+            continue;
+          }
+        }
+        // From here on the point may be accepted: start fetching its record while the neighbourhood is checked.
+        if (batch.records) __builtin_prefetch(batch.records + std::size_t(pi) * batch.record_step);
         const CellKey key = coarsen(finest, d);
         int next = d + 1;
         bool ok = true;
+        SampleId witness = kNoSample;
         constexpr int sh = LevelGrid::kBlockShift;
         const LevelGrid::Block *own = grids_[d].findBlock(key.x >> sh, key.y >> sh, key.z >> sh);
         const SampleId occupant = own ? grids_[d].idAt(*own, LevelGrid::localBit(key.x, key.y, key.z)) : kNoSample;
@@ -202,11 +246,12 @@ InsertResult Hierarchy::insert(const InsertBatch &batch) {
           const double *p = position(occupant);
           const double ddx = p[0] - q[0], ddy = p[1] - q[1], ddz = p[2] - q[2];
           ok = false;
+          witness = occupant;
           next = nextLevelAfterConflict(d, ddx * ddx + ddy * ddy + ddz * ddz);
         }
-        for (int l = d; ok && l >= 0; --l) {
-          const double d2 = l == d ? conflictAt(l, q, key, rd, /*skip_own=*/true, own, /*own_block_known=*/true)
-                                   : conflictAt(l, q, coarsen(finest, l), rd, false);
+        if (ok) {
+          double d2 = conflictAt(d, q, key, rd, /*skip_own=*/true, witness, own, /*own_block_known=*/true);
+          for (int l = d - 1; d2 < 0.0 && l >= 0; --l) d2 = conflictAt(l, q, coarsen(finest, l), rd, false, witness);
           if (d2 >= 0.0) {
             ok = false;
             next = nextLevelAfterConflict(d, d2);
@@ -214,9 +259,11 @@ InsertResult Hierarchy::insert(const InsertBatch &batch) {
         }
         if (ok) {
           // Samples of finer levels (earlier batches) keep their own, smaller radius. A conflict at level l rules
-          // out every level <= l, so the point continues at l + 1 (or later, as above).
+          // out every level <= l, so the point continues at l + 1 (or later, as above). Such a sample is no
+          // witness for level d, so it is not cached.
+          SampleId finer = kNoSample;
           for (int l = finest_populated; l > d; --l) {
-            const double d2 = conflictAt(l, q, coarsen(finest, l), radius_[l], false);
+            const double d2 = conflictAt(l, q, coarsen(finest, l), radius_[l], false, finer);
             if (d2 >= 0.0) {
               ok = false;
               next = std::max(l + 1, nextLevelAfterConflict(d, d2));
@@ -237,14 +284,15 @@ InsertResult Hierarchy::insert(const InsertBatch &batch) {
           ++live_;
           ++result.accepted_per_level[d];
           result.accepted.push_back(id);
-        } else if (next > max_depth_) {
-          ++result.dropped_depth;
+          slot.remember(h, q);
         } else {
-          pending_[next][rank >> 6] |= std::uint64_t(1) << (rank & 63);
+          if (witness != kNoSample) slot.remember(h, position(witness));
+          pending_[std::min(next, max_depth_ + 1)][rank >> 6] |= std::uint64_t(1) << (rank & 63);
         }
       }
     }
   }
+  for (const std::uint64_t word : pending_[max_depth_ + 1]) result.dropped_depth += LevelGrid::bitCount(word);
   return result;
 }
 
@@ -318,6 +366,7 @@ void Hierarchy::shrink() {
   records_.shrink_to_fit();
   free_ids_.shrink_to_fit();
   std::vector<CellKey>().swap(finest_keys_);  // `= {}` would keep the capacity
+  std::vector<WitnessSlot>().swap(witness_);
   for (auto &p : pending_) std::vector<std::uint64_t>().swap(p);
 }
 
@@ -351,7 +400,7 @@ std::size_t Hierarchy::memUsage() const {
 }
 
 std::size_t Hierarchy::scratchBytes() const {
-  std::size_t bytes = finest_keys_.capacity() * sizeof(CellKey);
+  std::size_t bytes = finest_keys_.capacity() * sizeof(CellKey) + witness_.capacity() * sizeof(WitnessSlot);
   for (const auto &p : pending_) bytes += p.capacity() * sizeof(std::uint64_t);
   return bytes;
 }

@@ -129,7 +129,8 @@ class Hierarchy {
   /// Squared distance to some sample of `level` strictly within `radius` of q (skipping q's own cell when
   /// skip_own), or a negative value when there is none. `key` is q's cell at `level`.
   /// `own_block` is key's block when the caller already looked it up (own_block_known; nullptr = no such block).
-  double conflictAt(int level, const double q[3], const CellKey &key, double radius, bool skip_own,
+  /// `witness` receives the conflicting sample.
+  double conflictAt(int level, const double q[3], const CellKey &key, double radius, bool skip_own, SampleId &witness,
                     const LevelGrid::Block *own_block = nullptr, bool own_block_known = false) const;
   /// q's cell at `level` from its finest-level cell: nested power-of-two cells make this an exact shift.
   [[nodiscard]] CellKey coarsen(const CellKey &finest, int level) const {
@@ -139,6 +140,20 @@ class Hierarchy {
   /// First level after `level` whose radius no longer rules out a point at squared distance d2 from a sample
   /// of levels <= level: every level in between would reject the point for that same sample.
   int nextLevelAfterConflict(int level, double d2) const;
+  /// Witness-cache slots are keyed by a cell this many levels finer than the level being tried.
+  static constexpr int kWitnessGroupOffset = 1;
+  /// Points a pass looks ahead to prefetch.
+  static constexpr int kPrefetchDistance = 8;
+  /// Slot hash of (cell, level). Keys that agree in the low 19 bits of each coordinate share a hash: harmless,
+  /// since a slot is only a hint that is verified by its distance.
+  static std::uint64_t witnessHash(const CellKey &k, int level) {
+    constexpr std::uint64_t m = (std::uint64_t(1) << 19) - 1;
+    const std::uint64_t packed = (static_cast<std::uint64_t>(static_cast<std::uint32_t>(k.x)) & m) |
+                                 (static_cast<std::uint64_t>(static_cast<std::uint32_t>(k.y)) & m) << 19 |
+                                 (static_cast<std::uint64_t>(static_cast<std::uint32_t>(k.z)) & m) << 38 |
+                                 static_cast<std::uint64_t>(level) << 57;  // level <= 21 fits the top 7 bits
+    return (packed * 0x9E3779B97F4A7C15ull) | 1;  // never 0, the empty slot's tag; the slot index is the top bits
+  }
   template <typename Fn>
   void visitBall(int level, const double q[3], double radius, Fn &fn) const;
   SampleId allocate();
@@ -165,6 +180,20 @@ class Hierarchy {
   // level, a bitset of the ranks still to try there (scanning it yields rank order without sorting).
   std::vector<CellKey> finest_keys_;
   std::vector<std::vector<std::uint64_t>> pending_;
+  // Per-insert cache of rejection witnesses: slot = hash of (level, a finer cell around the point), holding the
+  // position of a sample of that level or coarser that recently rejected or was accepted near there. The position
+  // is kept in the slot so a hit needs no further load. Tag 0 marks an empty slot (a hash of 0 is only a miss).
+  struct WitnessSlot {
+    double xyz[3] = {0.0, 0.0, 0.0};
+    std::uint64_t tag = 0;
+    void remember(std::uint64_t h, const double *p) {
+      xyz[0] = p[0];
+      xyz[1] = p[1];
+      xyz[2] = p[2];
+      tag = h;
+    }
+  };
+  std::vector<WitnessSlot> witness_;
 };
 
 template <typename Fn>
