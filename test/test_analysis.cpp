@@ -277,6 +277,22 @@ TEST(PlanarPatch, FindsTheGroundUnderObjects) {
   EXPECT_FALSE(findPlanarPatch({}, 4.0, 0.05).found);
 }
 
+// A square holding more points only because a wall stands on it must lose to a square with more ground: counting
+// all points made the choice between near-tied squares depend on the sampling (and so on its seed).
+TEST(PlanarPatch, MostPointsOnThePlaneWinNotMostPoints) {
+  std::mt19937_64 rng(5);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  std::vector<Eigen::Vector3d> pts;
+  for (int i = 0; i < 1000; ++i) pts.emplace_back(4 * u(rng), 4 * u(rng), 0.002 * (u(rng) - 0.5));  // clean ground
+  for (int i = 0; i < 950; ++i) pts.emplace_back(20 + 4 * u(rng), 4 * u(rng), 0.002 * (u(rng) - 0.5));
+  for (int i = 0; i < 150; ++i) pts.emplace_back(22.0 + 0.01 * u(rng), 4 * u(rng), 0.5 + 2 * u(rng));  // a wall
+  const PlanarPatch patch = findPlanarPatch(pts, 4.0, 0.05);
+  ASSERT_TRUE(patch.found);
+  EXPECT_NEAR(patch.center.x(), 2.0, 1e-9);
+  EXPECT_NEAR(patch.center.y(), 2.0, 1e-9);
+  EXPECT_EQ(patch.inliers, 1000u);
+}
+
 // ------------------------------------------------------------------------------------------------ baselines
 
 TEST(GridSubsampling, OnePointPerOccupiedCell) {

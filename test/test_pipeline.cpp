@@ -460,6 +460,20 @@ TEST(Normals, AccurateOnPlanarSceneAgainstGroundTruth) {
 
 // ---------------------------------------------------------------- insertion orders
 
+// Every order of a small set must come out equally often (a biased index draw or an off-by-one in the swap loop
+// shows up as a skewed count).
+TEST(InsertionOrder, RandomOrdersAreUniform) {
+  std::map<std::vector<std::uint32_t>, int> seen;
+  const int trials = 60000;
+  for (int t = 0; t < trials; ++t) {
+    std::vector<std::uint32_t> v = {0, 1, 2, 3};
+    seededShuffle(v, 1000003ull * static_cast<std::uint64_t>(t) + 17);
+    ++seen[v];
+  }
+  ASSERT_EQ(seen.size(), 24u);
+  for (const auto &kv : seen) EXPECT_NEAR(kv.second, trials / 24.0, 0.08 * trials / 24.0);
+}
+
 TEST(InsertionOrder, RandomIsAPermutationAndSeedDependent) {
   std::vector<std::uint32_t> a(1000);
   std::iota(a.begin(), a.end(), 0u);

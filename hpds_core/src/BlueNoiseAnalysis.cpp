@@ -324,12 +324,14 @@ PlanarPatch findPlanarPatch(const std::vector<Eigen::Vector3d> &points, double s
     std::size_t inl = 0;
     for (const auto &p : in) inl += std::abs((p - fit.centroid).dot(fit.normal)) <= inlier_distance ? 1 : 0;
     if (inl < static_cast<std::size_t>(0.8 * static_cast<double>(in.size()))) continue;
+    // The most points on the plane wins, not the most points: counting everything would prefer a square that
+    // also holds a curb or a wall, and near-ties between such squares would let sampling noise choose.
+    if (best.found && inl <= best.inliers) continue;
     best.center = Eigen::Vector2d(x0 + half, y0 + half);
     best.size = size;
     best.plane = fit;
     best.inliers = inl;
     best.found = true;
-    return best;
   }
   return best;
 }

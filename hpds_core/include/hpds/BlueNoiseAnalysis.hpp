@@ -94,9 +94,9 @@ struct PlanarPatch {
 };
 
 /// The square xy patch of edge `size` holding the most points that lie on one near-horizontal plane: candidates on a
-/// grid of step size/2 are ranked by count; the first whose plane fit is within `max_tilt_deg` of horizontal and
-/// keeps >= 80 % of its points within `inlier_distance` wins. Meant for lidar ground, which is where the densest flat
-/// region of a street scan is.
+/// grid of step size/2 (the 64 most populated) qualify when their plane fit is within `max_tilt_deg` of horizontal
+/// and keeps >= 80 % of their points within `inlier_distance`; the one with the most such inliers wins (ties: the
+/// more populated, then the lower cell index). Meant for lidar ground, the densest flat region of a street scan.
 [[nodiscard]] PlanarPatch findPlanarPatch(const std::vector<Eigen::Vector3d> &points, double size,
                                           double inlier_distance, double max_tilt_deg = 15.0);
 
