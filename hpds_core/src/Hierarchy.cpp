@@ -201,94 +201,102 @@ InsertResult Hierarchy::insert(const InsertBatch &batch) {
     const int group_level = std::min(d + kWitnessGroupOffset, max_depth_);
     const std::vector<std::uint64_t> &todo = pending_[d];
     // A pass visits its points in rank order, i.e. at random places: a cursor running a few points ahead
-    // prefetches each one's position and witness slot so the loads overlap.
-    std::size_t ahead_w = 0;
+    // prefetches each one's position and witness slot so the loads overlap, and hands its slot hash on.
+    struct Ahead {
+      std::uint32_t rank;
+      std::uint64_t hash;
+    };
+    Ahead ring[kPrefetchDistance + 1];
+    std::size_t head = 0, tail = 0, ahead_w = 0;
     std::uint64_t ahead_bits = words ? todo[0] : 0;
-    auto prefetchAhead = [&]() {
+    auto pushAhead = [&]() {
       while (ahead_bits == 0) {
         if (++ahead_w >= words) return;
         ahead_bits = todo[ahead_w];
       }
       const std::uint32_t r = static_cast<std::uint32_t>(ahead_w * 64 + static_cast<std::size_t>(__builtin_ctzll(ahead_bits)));
       ahead_bits &= ahead_bits - 1;
+      const std::uint64_t hr = witnessHash(coarsen(finest_keys_[r], group_level), d);
       __builtin_prefetch(batch.xyz + 3 * std::size_t(batch.order[r]));
-      __builtin_prefetch(&witness_[witnessHash(coarsen(finest_keys_[r], group_level), d) >> slot_shift]);
+      __builtin_prefetch(&witness_[hr >> slot_shift]);
+      ring[head] = Ahead{r, hr};
+      head = head == kPrefetchDistance ? 0 : head + 1;
     };
-    for (int i = 0; i < kPrefetchDistance; ++i) prefetchAhead();
-    for (std::size_t w = 0; w < words; ++w) {
-      for (std::uint64_t bits = todo[w]; bits != 0; bits &= bits - 1) {
-        prefetchAhead();
-        const std::uint32_t rank = static_cast<std::uint32_t>(w * 64 + static_cast<std::size_t>(__builtin_ctzll(bits)));
-        const std::uint32_t pi = batch.order[rank];
-        const double *q = batch.xyz + 3 * std::size_t(pi);
-        const CellKey &finest = finest_keys_[rank];
-        const std::uint64_t h = witnessHash(coarsen(finest, group_level), d);
-        WitnessSlot &slot = witness_[h >> slot_shift];
-        {
-          // An empty slot holds (0,0,0) with tag 0: the distance is computed anyway and ignored, one branch less.
-          const double ddx = slot.xyz[0] - q[0], ddy = slot.xyz[1] - q[1], ddz = slot.xyz[2] - q[2];
-          const double d2 = ddx * ddx + ddy * ddy + ddz * ddz;
-          if ((slot.tag == h) & (d2 < rd2)) {
-            pending_[nextLevelAfterConflict(d, d2)][rank >> 6] |= std::uint64_t(1) << (rank & 63);
-            continue;
-          }
+    for (int i = 0; i < kPrefetchDistance; ++i) pushAhead();
+    while (tail != head) {
+      const Ahead cur = ring[tail];
+      tail = tail == kPrefetchDistance ? 0 : tail + 1;
+      pushAhead();
+      const std::uint32_t rank = cur.rank;
+      const std::uint32_t pi = batch.order[rank];
+      const double *q = batch.xyz + 3 * std::size_t(pi);
+      const CellKey &finest = finest_keys_[rank];
+      const std::uint64_t h = cur.hash;
+      WitnessSlot &slot = witness_[h >> slot_shift];
+      {
+        // An empty slot holds (0,0,0) with tag 0: the distance is computed anyway and ignored, one branch less.
+        const double ddx = slot.xyz[0] - q[0], ddy = slot.xyz[1] - q[1], ddz = slot.xyz[2] - q[2];
+        const double d2 = ddx * ddx + ddy * ddy + ddz * ddz;
+        if ((slot.tag == h) & (d2 < rd2)) {
+          pending_[nextLevelAfterConflict(d, d2)][rank >> 6] |= std::uint64_t(1) << (rank & 63);
+          continue;
         }
-        // From here on the point may be accepted: start fetching its record while the neighbourhood is checked.
-        if (batch.records) __builtin_prefetch(batch.records + std::size_t(pi) * batch.record_step);
-        const CellKey key = coarsen(finest, d);
-        int next = d + 1;
-        bool ok = true;
-        SampleId witness = kNoSample;
-        constexpr int sh = LevelGrid::kBlockShift;
-        const LevelGrid::Block *own = grids_[d].findBlock(key.x >> sh, key.y >> sh, key.z >> sh);
-        const SampleId occupant = own ? grids_[d].idAt(*own, LevelGrid::localBit(key.x, key.y, key.z)) : kNoSample;
-        if (occupant != kNoSample) {
-          const double *p = position(occupant);
-          const double ddx = p[0] - q[0], ddy = p[1] - q[1], ddz = p[2] - q[2];
+      }
+      // From here on the point may be accepted: start fetching its record while the neighbourhood is checked.
+      if (batch.records) __builtin_prefetch(batch.records + std::size_t(pi) * batch.record_step);
+      const CellKey key = coarsen(finest, d);
+      int next = d + 1;
+      bool ok = true;
+      SampleId witness = kNoSample;
+      constexpr int sh = LevelGrid::kBlockShift;
+      const LevelGrid::Block *own = grids_[d].findBlock(key.x >> sh, key.y >> sh, key.z >> sh);
+      const SampleId occupant = own ? grids_[d].idAt(*own, LevelGrid::localBit(key.x, key.y, key.z)) : kNoSample;
+      if (occupant != kNoSample) {
+        const double *p = position(occupant);
+        const double ddx = p[0] - q[0], ddy = p[1] - q[1], ddz = p[2] - q[2];
+        ok = false;
+        witness = occupant;
+        next = nextLevelAfterConflict(d, ddx * ddx + ddy * ddy + ddz * ddz);
+      }
+      if (ok) {
+        double d2 = conflictAt(d, q, key, rd, /*skip_own=*/true, witness, own, /*own_block_known=*/true);
+        for (int l = d - 1; d2 < 0.0 && l >= 0; --l) d2 = conflictAt(l, q, coarsen(finest, l), rd, false, witness);
+        if (d2 >= 0.0) {
           ok = false;
-          witness = occupant;
-          next = nextLevelAfterConflict(d, ddx * ddx + ddy * ddy + ddz * ddz);
+          next = nextLevelAfterConflict(d, d2);
         }
-        if (ok) {
-          double d2 = conflictAt(d, q, key, rd, /*skip_own=*/true, witness, own, /*own_block_known=*/true);
-          for (int l = d - 1; d2 < 0.0 && l >= 0; --l) d2 = conflictAt(l, q, coarsen(finest, l), rd, false, witness);
+      }
+      if (ok) {
+        // Samples of finer levels (earlier batches) keep their own, smaller radius. A conflict at level l rules
+        // out every level <= l, so the point continues at l + 1 (or later, as above). Such a sample is no
+        // witness for level d, so it is not cached.
+        SampleId finer = kNoSample;
+        for (int l = finest_populated; l > d; --l) {
+          const double d2 = conflictAt(l, q, coarsen(finest, l), radius_[l], false, finer);
           if (d2 >= 0.0) {
             ok = false;
-            next = nextLevelAfterConflict(d, d2);
+            next = std::max(l + 1, nextLevelAfterConflict(d, d2));
+            break;
           }
         }
-        if (ok) {
-          // Samples of finer levels (earlier batches) keep their own, smaller radius. A conflict at level l rules
-          // out every level <= l, so the point continues at l + 1 (or later, as above). Such a sample is no
-          // witness for level d, so it is not cached.
-          SampleId finer = kNoSample;
-          for (int l = finest_populated; l > d; --l) {
-            const double d2 = conflictAt(l, q, coarsen(finest, l), radius_[l], false, finer);
-            if (d2 >= 0.0) {
-              ok = false;
-              next = std::max(l + 1, nextLevelAfterConflict(d, d2));
-              break;
-            }
-          }
-        }
-        if (ok) {
-          const SampleId id = allocate();
-          std::memcpy(&xyz_[3 * std::size_t(id)], q, 3 * sizeof(double));
-          level_[id] = static_cast<std::uint8_t>(d);
-          frame_[id] = batch.frame_index;
-          view_[id] = encodeViewDirection(batch.viewpoint[0] - q[0], batch.viewpoint[1] - q[1], batch.viewpoint[2] - q[2]);
-          if (batch.records && record_layout_.point_step)
-            std::memcpy(&records_[std::size_t(id) * record_layout_.point_step], batch.records + pi * batch.record_step,
-                        record_layout_.point_step);
-          grids_[d].insert(key, id);
-          ++live_;
-          ++result.accepted_per_level[d];
-          result.accepted.push_back(id);
-          slot.remember(h, q);
-        } else {
-          if (witness != kNoSample) slot.remember(h, position(witness));
-          pending_[std::min(next, max_depth_ + 1)][rank >> 6] |= std::uint64_t(1) << (rank & 63);
-        }
+      }
+      if (ok) {
+        const SampleId id = allocate();
+        std::memcpy(&xyz_[3 * std::size_t(id)], q, 3 * sizeof(double));
+        level_[id] = static_cast<std::uint8_t>(d);
+        frame_[id] = batch.frame_index;
+        view_[id] = encodeViewDirection(batch.viewpoint[0] - q[0], batch.viewpoint[1] - q[1], batch.viewpoint[2] - q[2]);
+        if (batch.records && record_layout_.point_step)
+          std::memcpy(&records_[std::size_t(id) * record_layout_.point_step], batch.records + pi * batch.record_step,
+                      record_layout_.point_step);
+        grids_[d].insert(key, id);
+        ++live_;
+        ++result.accepted_per_level[d];
+        result.accepted.push_back(id);
+        slot.remember(h, q);
+      } else {
+        if (witness != kNoSample) slot.remember(h, position(witness));
+        pending_[std::min(next, max_depth_ + 1)][rank >> 6] |= std::uint64_t(1) << (rank & 63);
       }
     }
   }
