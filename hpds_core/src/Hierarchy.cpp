@@ -182,7 +182,7 @@ InsertResult Hierarchy::insert(const InsertBatch &batch) {
     const double *q = batch.xyz + 3 * std::size_t(batch.order[rank]);
     if (inCellRange(q[0], ief) && inCellRange(q[1], ief) && inCellRange(q[2], ief)) {
       finest_keys_[rank] = CellKey{exactCellCoord(q[0], ef, ief), exactCellCoord(q[1], ef, ief), exactCellCoord(q[2], ef, ief)};
-      pending_[0][rank >> 6] |= std::uint64_t(1) << (rank & 63);
+      schedule(0, rank);
     } else {
       ++result.out_of_range;
     }
@@ -241,7 +241,7 @@ InsertResult Hierarchy::insert(const InsertBatch &batch) {
         const double ddx = slot.xyz[0] - q[0], ddy = slot.xyz[1] - q[1], ddz = slot.xyz[2] - q[2];
         const double d2 = ddx * ddx + ddy * ddy + ddz * ddz;
         if ((slot.tag == h) & (d2 < rd2)) {
-          pending_[nextLevelAfterConflict(d, d2)][rank >> 6] |= std::uint64_t(1) << (rank & 63);
+          schedule(nextLevelAfterConflict(d, d2), rank);
           continue;
         }
       }
@@ -299,7 +299,7 @@ InsertResult Hierarchy::insert(const InsertBatch &batch) {
         slot.remember(h, q);
       } else {
         if (witness != kNoSample) slot.remember(h, position(witness));
-        pending_[std::min(next, max_depth_ + 1)][rank >> 6] |= std::uint64_t(1) << (rank & 63);
+        schedule(next, rank);
       }
     }
   }

@@ -140,6 +140,8 @@ class Hierarchy {
   /// First level after `level` whose radius no longer rules out a point at squared distance d2 from a sample
   /// of levels <= level: every level in between would reject the point for that same sample.
   int nextLevelAfterConflict(int level, double d2) const;
+  /// Puts the point of `rank` on the schedule of `level`; level max_depth + 1 (at most) means dropped.
+  void schedule(int level, std::uint32_t rank) { pending_[level][rank >> 6] |= std::uint64_t(1) << (rank & 63); }
   /// Witness-cache slots are keyed by a cell this many levels finer than the level being tried.
   static constexpr int kWitnessGroupOffset = 1;
   /// Points a pass looks ahead to prefetch.
