@@ -27,6 +27,7 @@
 #include "hpds/Pipeline.hpp"
 #include "hpds/ScanFrames.hpp"
 #include "hpds/SyntheticLidar.hpp"
+#include "hpds/io/PclCloud.hpp"
 #include "hpds/io/PointCloudFile.hpp"
 
 namespace {
@@ -70,27 +71,6 @@ pcl::PointCloud<pcl::PointXYZ>::Ptr toPcl(const PointBuffer &b) {
   }
   c->width = static_cast<std::uint32_t>(c->size());
   c->height = 1;
-  return c;
-}
-
-/// The frame as a driver publishes it, every field included: the PCL side of the node's per-frame path starts here,
-/// as pcl_conversions hands a sensor_msgs/PointCloud2 over as a pcl::PCLPointCloud2.
-pcl::PCLPointCloud2 toPcl2(const PointBuffer &b) {
-  pcl::PCLPointCloud2 c;
-  c.height = 1;
-  c.width = static_cast<std::uint32_t>(b.size());
-  c.point_step = b.layout().point_step;
-  c.row_step = c.point_step * c.width;
-  c.is_dense = false;
-  for (const PointField &f : b.layout().fields) {
-    pcl::PCLPointField pf;
-    pf.name = f.name;
-    pf.offset = f.offset;
-    pf.datatype = static_cast<std::uint8_t>(f.type);  // numbered as in PointCloud2 on both sides
-    pf.count = f.count;
-    c.fields.push_back(pf);
-  }
-  c.data = b.bytes();
   return c;
 }
 
@@ -215,7 +195,8 @@ void benchFrame(const Options &o, const std::string &name, const Frame &frame) {
     const std::vector<std::uint8_t> msg_data(out.bytes());  // ...and the cloud's bytes out
     sink += msg_data.size();
   });
-  const pcl::PCLPointCloud2 msg = toPcl2(frame.points);
+  // The frame as a driver publishes it, every field included, as pcl_conversions hands it to PCL.
+  const pcl::PCLPointCloud2 msg = toPclCloud2(frame.points);
   const double t_path_pcl = medianSeconds(o.repeats, [&] {
     pcl::PointCloud<pcl::PointXYZ>::Ptr in(new pcl::PointCloud<pcl::PointXYZ>);
     pcl::fromPCLPointCloud2(msg, *in);

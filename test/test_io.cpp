@@ -449,6 +449,31 @@ TEST(PcdRoundTrip, FieldsOutOfOffsetOrderAndEmptyCloud) {
   EXPECT_NE(empty.layout().find("ring"), nullptr);
 }
 
+// A PointBuffer may give two fields the same bytes (a uint32 view of x); PCL cannot, so toPclCloud2 repacks each
+// field into its own bytes: the PCD keeps every field with its value and type, x's bits in the alias.
+TEST(PcdRoundTrip, AliasingFieldsAreRepackedWithTheirValues) {
+  const ScratchDir scratch("io_pcd_alias");
+  PointLayout layout;
+  layout.fields = {{"x", 0, FieldType::Float32, 1},
+                   {"y", 4, FieldType::Float32, 1},
+                   {"z", 8, FieldType::Float32, 1},
+                   {"x_bits", 0, FieldType::UInt32, 1}};
+  layout.point_step = 12;
+  PointBuffer src(layout, 3);
+  for (std::size_t i = 0; i < 3; ++i)
+    for (int a = 0; a < 3; ++a) writeFromDouble(src.record(i), layout.fields[a], 1.5 * double(i) + a);
+  const std::string path = (scratch.path / "alias.pcd").string();
+  writePcd(path, src);
+  const PointBuffer back = readPointCloud(path);
+  EXPECT_EQ(back.layout().point_step, 16u);
+  for (const PointField &f : layout.fields) {
+    const PointField *g = back.layout().find(f.name);
+    ASSERT_NE(g, nullptr) << f.name;
+    EXPECT_EQ(g->type, f.type);
+    expectSameValues(src, f, back, *g);
+  }
+}
+
 TEST(PcdRead, AsciiWithNanAndBinaryCompressed) {
   const ScratchDir scratch("io_pcd_formats");
   const fs::path &dir = scratch.path;

@@ -7,6 +7,7 @@
 // only then is it handed to PCL, whose result is checked once more while copying it into a PointBuffer.
 
 #include "hpds/io/PointCloudFile.hpp"
+#include "hpds/io/PclCloud.hpp"
 
 #include "../io/FileAccess.hpp"
 
@@ -1113,21 +1114,8 @@ PointBuffer readPointCloud(const std::string &path) {
   fail(path, "unsupported extension " + quote(ext.empty() ? "(none)" : ext) + " (expected .pcd, .ply or .bin)");
 }
 
-void writePcd(const std::string &path, const PointBuffer &cloud) {
+pcl::PCLPointCloud2 toPclCloud2(const PointBuffer &cloud) {
   const PointLayout &layout = cloud.layout();
-  try {
-    layout.validate();
-  } catch (const std::invalid_argument &e) {
-    fail(path, std::string("cannot write PCD: invalid layout: ") + e.what());
-  }
-  if (layout.fields.empty()) fail(path, "cannot write PCD: the cloud has no fields");
-  for (const auto &f : layout.fields) {
-    if (!isValidPcdFieldName(f.name)) fail(path, "cannot write PCD: field name " + quote(f.name) + " is invalid");
-    if (f.count > kMaxFieldCount)
-      fail(path, "cannot write PCD: field '" + f.name + "' has count " + std::to_string(f.count) +
-                     ", more than the " + std::to_string(kMaxFieldCount) + " elements a field may have");
-  }
-
   // PCL's header writer assumes fields in offset order and derives "_" padding from the gaps between them.
   std::vector<PointField> fields = layout.fields;
   std::stable_sort(fields.begin(), fields.end(),
@@ -1155,7 +1143,7 @@ void writePcd(const std::string &path, const PointBuffer &cloud) {
     pc.point_step = layout.point_step;
     pc.data = cloud.bytes();
   } else {
-    // A PCD record cannot express aliasing fields: repack each into its own bytes.
+    // PCL fields cannot alias each other: repack each into its own bytes.
     std::uint32_t offset = 0;
     for (const auto &f : layout.fields) {
       pcl::PCLPointField pf;
@@ -1175,6 +1163,25 @@ void writePcd(const std::string &path, const PointBuffer &cloud) {
     }
   }
   pc.row_step = pc.width * pc.point_step;
+  return pc;
+}
+
+void writePcd(const std::string &path, const PointBuffer &cloud) {
+  const PointLayout &layout = cloud.layout();
+  try {
+    layout.validate();
+  } catch (const std::invalid_argument &e) {
+    fail(path, std::string("cannot write PCD: invalid layout: ") + e.what());
+  }
+  if (layout.fields.empty()) fail(path, "cannot write PCD: the cloud has no fields");
+  for (const auto &f : layout.fields) {
+    if (!isValidPcdFieldName(f.name)) fail(path, "cannot write PCD: field name " + quote(f.name) + " is invalid");
+    if (f.count > kMaxFieldCount)
+      fail(path, "cannot write PCD: field '" + f.name + "' has count " + std::to_string(f.count) +
+                     ", more than the " + std::to_string(kMaxFieldCount) + " elements a field may have");
+  }
+
+  const pcl::PCLPointCloud2 pc = toPclCloud2(cloud);
 
   const fs::path parent = fs::path(path).parent_path();
   std::error_code ec;
