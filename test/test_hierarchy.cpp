@@ -443,5 +443,39 @@ TEST(Hierarchy, BallQueryMatchesBruteForce) {
   }
 }
 
+// Far from the origin, on cell faces and with radii of whole cells: the window of blocks must not lose a cell to
+// rounding. The grid is dense enough that the block walk (not the full scan) answers wide balls.
+TEST(Hierarchy, BallQueryOnCellFacesFarFromTheOriginMatchesBruteForce) {
+  std::mt19937_64 rng(21);
+  Hierarchy h(1.0, 4);
+  const double offset[3] = {1e5, -3e4, 7.0};
+  auto xyz = randomCloud(rng, 20000, 4.0, true);
+  for (std::size_t i = 0; i < xyz.size(); ++i) xyz[i] += offset[i % 3];
+  insertAll(h, xyz, shuffledOrder(20000, rng));
+  ASSERT_GT(h.countAtLevel(4), 2000u);
+  std::uniform_int_distribution<int> cell(-60, 60), level(0, 4), cells(1, 24);
+  std::uniform_real_distribution<double> u(-4.0, 4.0);
+  const std::vector<SampleId> all = h.samplesUpTo(4);
+  for (int t = 0; t < 400; ++t) {
+    const int l = level(rng);
+    const double e = h.edge(4);
+    // Half the queries sit exactly on a face in x and y (a multiple of the finest edge, exact in a double).
+    const double q[3] = {offset[0] + (t % 2 ? cell(rng) * e : u(rng)), offset[1] + (t % 2 ? cell(rng) * e : u(rng)),
+                         offset[2] + (t % 4 == 1 ? 0.0 : 0.002 * u(rng))};
+    const double whole = cells(rng) * e;
+    const double radius = t % 3 == 0 ? whole : (t % 3 == 1 ? std::nextafter(whole, INFINITY) : whole * 0.7);
+    std::vector<SampleId> got;
+    h.forEachInBall(q, radius, l, [&](SampleId id, double d2) {
+      EXPECT_EQ(d2, dist2(h.position(id), q));
+      got.push_back(id);
+    });
+    std::vector<SampleId> want;
+    for (SampleId id : all)
+      if (h.level(id) <= l && dist2(h.position(id), q) < radius * radius) want.push_back(id);
+    std::sort(got.begin(), got.end());
+    ASSERT_EQ(got, want) << "query " << t << " level " << l << " radius " << radius;
+  }
+}
+
 }  // namespace
 }  // namespace hpds

@@ -44,24 +44,6 @@ SampleId Hierarchy::sampleInCell(int level, const double xyz[3]) const {
   return grids_[level].find(k);
 }
 
-namespace {
-// Masks of the cells of a 4x4x4 block (bit x | y << 2 | z << 4) whose local coordinate along one axis lies in
-// [lo, hi], indexed [axis][lo * 4 + hi].
-struct BlockAxisMasks {
-  std::uint64_t m[3][16] = {};
-  BlockAxisMasks() {
-    for (int lo = 0; lo < 4; ++lo)
-      for (int hi = lo; hi < 4; ++hi)
-        for (unsigned bit = 0; bit < 64; ++bit) {
-          const int c[3] = {static_cast<int>(bit & 3), static_cast<int>((bit >> 2) & 3), static_cast<int>(bit >> 4)};
-          for (int a = 0; a < 3; ++a)
-            if (c[a] >= lo && c[a] <= hi) m[a][lo * 4 + hi] |= std::uint64_t(1) << bit;
-        }
-  }
-};
-const BlockAxisMasks kAxisMasks;
-}  // namespace
-
 double Hierarchy::conflictAt(int level, const double q[3], const CellKey &k, double radius, bool skip_own,
                              SampleId &witness, const LevelGrid::Block *own_block, bool own_block_known) const {
   const LevelGrid &grid = grids_[level];
@@ -87,16 +69,16 @@ double Hierarchy::conflictAt(int level, const double q[3], const CellKey &k, dou
   const std::uint64_t own_bit = std::uint64_t(1) << LevelGrid::localBit(k.x, k.y, k.z);
   for (std::int32_t bz = c0[2] >> sh; bz <= (c1[2] >> sh); ++bz) {
     const int zl = std::max(c0[2] - bz * 4, 0), zh = std::min(c1[2] - bz * 4, 3);
-    const std::uint64_t zm = kAxisMasks.m[2][zl * 4 + zh];
+    const std::uint64_t zm = LevelGrid::axisMask(2, zl, zh);
     for (std::int32_t by = c0[1] >> sh; by <= (c1[1] >> sh); ++by) {
       const int yl = std::max(c0[1] - by * 4, 0), yh = std::min(c1[1] - by * 4, 3);
-      const std::uint64_t yzm = zm & kAxisMasks.m[1][yl * 4 + yh];
+      const std::uint64_t yzm = zm & LevelGrid::axisMask(1, yl, yh);
       for (std::int32_t bx = c0[0] >> sh; bx <= (c1[0] >> sh); ++bx) {
         const int xl = std::max(c0[0] - bx * 4, 0), xh = std::min(c1[0] - bx * 4, 3);
         const bool is_own = bx == own[0] && by == own[1] && bz == own[2];
         const LevelGrid::Block *b = is_own && own_block_known ? own_block : grid.findBlock(bx, by, bz);
         if (!b) continue;
-        std::uint64_t bits = b->mask & yzm & kAxisMasks.m[0][xl * 4 + xh];
+        std::uint64_t bits = b->mask & yzm & LevelGrid::axisMask(0, xl, xh);
         if (is_own && skip_own) bits &= ~own_bit;
         for (; bits != 0; bits &= bits - 1) {
           const SampleId s = grid.idAt(*b, static_cast<unsigned>(__builtin_ctzll(bits)));

@@ -134,6 +134,9 @@ std::vector<SampleNormal> estimateNormals(const Hierarchy &h, const std::vector<
         std::nth_element(nb.begin(), nb.begin() + params.k, nb.end());
         nb.resize(static_cast<std::size_t>(params.k));
       }
+      // Summed nearest first: the normal's last bits then depend on the neighbours alone, not on the order the
+      // grid walk met them in (a full scan of a level follows its hash slots).
+      std::sort(nb.begin(), nb.end());
       if (static_cast<int>(nb.size()) < params.min_neighbors) continue;
       PcaAccumulator acc(q);
       for (const auto &n : nb) acc.add(h.position(n.second));

@@ -16,6 +16,7 @@
 // - Not thread-safe for mutation; const queries may run concurrently.
 #pragma once
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <cstddef>
@@ -205,44 +206,53 @@ void Hierarchy::visitBall(int level, const double q[3], double radius, Fn &fn) c
   CellKey k;
   if (!keyAt(level, q, k)) return;
   const double e = edge_[level];
-  const double span_f = std::ceil(radius / e);
   const double r2 = radius * radius;
-  // A ball much larger than the level's cells: scanning the occupied cells is cheaper than walking the ball.
-  if (!(span_f < 64.0) || (2.0 * span_f + 1.0) * (2.0 * span_f + 1.0) * (2.0 * span_f + 1.0) > 4.0 * double(grid.capacity() + grid.size())) {
-    grid.forEach([&](const CellKey &, SampleId s) {
-      const double *p = position(s);
-      const double ddx = p[0] - q[0], ddy = p[1] - q[1], ddz = p[2] - q[2];
-      const double d2 = ddx * ddx + ddy * ddy + ddz * ddz;
-      if (d2 < r2) fn(s, d2);
-    });
+  auto visit = [&](SampleId s) {
+    const double *p = position(s);
+    const double ddx = p[0] - q[0], ddy = p[1] - q[1], ddz = p[2] - q[2];
+    const double d2 = ddx * ddx + ddy * ddy + ddz * ddz;
+    if (d2 < r2) fn(s, d2);
+  };
+  // The window of cells the rounding-widened ball reaches, per axis: cell k - n is reached when its gap
+  // below + (n - 1) e is within reach (likewise above). Taking a cell too many only costs distance tests.
+  const double reach = radius + pruneSlack(q, e);
+  const std::int32_t kc[3] = {k.x, k.y, k.z};
+  std::int32_t c0[3], c1[3];
+  double blocks = 1.0;
+  constexpr int sh = LevelGrid::kBlockShift;
+  for (int a = 0; a < 3; ++a) {
+    const double below = offsetInCell(q[a], kc[a], e), above = e - below;
+    // The division may round a count down by one; the gap test as a loop then adds it back.
+    double nb = below <= reach ? std::floor((reach - below) / e) + 1.0 : 0.0;
+    double na = above <= reach ? std::floor((reach - above) / e) + 1.0 : 0.0;
+    if (!(nb < 1e6 && na < 1e6)) {
+      blocks = INFINITY;
+      break;
+    }
+    while (below + nb * e <= reach) nb += 1.0;
+    while (above + na * e <= reach) na += 1.0;
+    c0[a] = kc[a] - static_cast<std::int32_t>(nb);
+    c1[a] = kc[a] + static_cast<std::int32_t>(na);
+    blocks *= double((c1[a] >> sh) - (c0[a] >> sh) + 1);
+  }
+  // A window of more than a quarter as many blocks as the grid has hash slots: scanning the slots in memory order
+  // is cheaper than hashing that many blocks (a radius-3 m query at level 5 of an HDL-32 frame: 71 -> 59 ms per
+  // 1 300 queries against a threshold of one).
+  if (!(4.0 * blocks <= double(grid.capacity()))) {
+    grid.forEach([&](const CellKey &, SampleId s) { visit(s); });
     return;
   }
-  const int span = static_cast<int>(span_f);
-  double lo[3], hi[3];
-  const std::int32_t kc[3] = {k.x, k.y, k.z};
-  for (int a = 0; a < 3; ++a) {
-    lo[a] = offsetInCell(q[a], kc[a], e);
-    hi[a] = e - lo[a];
-  }
-  // A cell is skipped only when even the rounding-widened ball misses it.
-  const double reach = radius + pruneSlack(q, e);
-  const double prune = reach * reach;
-  auto gap = [&](int a, int d) { return d < 0 ? lo[a] + (-d - 1) * e : (d > 0 ? hi[a] + (d - 1) * e : 0.0); };
-  for (int dx = -span; dx <= span; ++dx) {
-    const double gx = gap(0, dx), gx2 = gx * gx;
-    if (gx2 > prune) continue;
-    for (int dy = -span; dy <= span; ++dy) {
-      const double gy = gap(1, dy), gxy2 = gx2 + gy * gy;
-      if (gxy2 > prune) continue;
-      for (int dz = -span; dz <= span; ++dz) {
-        const double gz = gap(2, dz);
-        if (gxy2 + gz * gz > prune) continue;
-        const SampleId s = grid.find(CellKey{k.x + dx, k.y + dy, k.z + dz});
-        if (s == kNoSample) continue;
-        const double *p = position(s);
-        const double ddx = p[0] - q[0], ddy = p[1] - q[1], ddz = p[2] - q[2];
-        const double d2 = ddx * ddx + ddy * ddy + ddz * ddz;
-        if (d2 < r2) fn(s, d2);
+  // Each block of the window is hashed once and only its occupied cells inside the window are read.
+  for (std::int32_t bz = c0[2] >> sh; bz <= (c1[2] >> sh); ++bz) {
+    const std::uint64_t zm = LevelGrid::axisMask(2, std::max(c0[2] - bz * 4, 0), std::min(c1[2] - bz * 4, 3));
+    for (std::int32_t by = c0[1] >> sh; by <= (c1[1] >> sh); ++by) {
+      const std::uint64_t yzm = zm & LevelGrid::axisMask(1, std::max(c0[1] - by * 4, 0), std::min(c1[1] - by * 4, 3));
+      for (std::int32_t bx = c0[0] >> sh; bx <= (c1[0] >> sh); ++bx) {
+        const LevelGrid::Block *b = grid.findBlock(bx, by, bz);
+        if (!b) continue;
+        for (std::uint64_t bits = b->mask & yzm & LevelGrid::axisMask(0, std::max(c0[0] - bx * 4, 0), std::min(c1[0] - bx * 4, 3));
+             bits != 0; bits &= bits - 1)
+          visit(grid.idAt(*b, static_cast<unsigned>(__builtin_ctzll(bits))));
       }
     }
   }

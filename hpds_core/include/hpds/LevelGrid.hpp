@@ -21,6 +21,26 @@ namespace hpds {
 using SampleId = std::uint32_t;
 inline constexpr SampleId kNoSample = 0xFFFFFFFFu;
 
+namespace detail {
+// Per axis and [lo, hi] (index lo * 4 + hi): the cells of a 4x4x4 block whose local coordinate on that axis lies in
+// [lo, hi]; a cell's bit is x | y << 2 | z << 4.
+struct BlockAxisMasks {
+  std::uint64_t m[3][16];
+};
+constexpr BlockAxisMasks makeBlockAxisMasks() {
+  BlockAxisMasks t{};
+  for (int lo = 0; lo < 4; ++lo)
+    for (int hi = lo; hi < 4; ++hi)
+      for (unsigned bit = 0; bit < 64; ++bit) {
+        const int c[3] = {static_cast<int>(bit & 3), static_cast<int>((bit >> 2) & 3), static_cast<int>(bit >> 4)};
+        for (int a = 0; a < 3; ++a)
+          if (c[a] >= lo && c[a] <= hi) t.m[a][lo * 4 + hi] |= std::uint64_t(1) << bit;
+      }
+  return t;
+}
+inline constexpr BlockAxisMasks kBlockAxisMasks = makeBlockAxisMasks();
+}  // namespace detail
+
 class LevelGrid {
  public:
   /// Cells per block along each axis is 1 << kBlockShift.
@@ -58,6 +78,10 @@ class LevelGrid {
     m = (m + (m >> 4)) & 0x0F0F0F0F0F0F0F0Full;
     return static_cast<unsigned>((m * 0x0101010101010101ull) >> 56);
   }
+  /// Cells of a block whose local coordinate along `axis` (0 = x, 1 = y, 2 = z) lies in [lo, hi], 0 <= lo <= hi <= 3.
+  /// AND-ing the three axes gives the cells of a block inside a box of cells, so a box query reads only occupied
+  /// cells of the blocks it overlaps.
+  [[nodiscard]] static std::uint64_t axisMask(int axis, int lo, int hi) { return detail::kBlockAxisMasks.m[axis][lo * 4 + hi]; }
   /// Index of a cell inside its block.
   [[nodiscard]] static unsigned localBit(std::int32_t x, std::int32_t y, std::int32_t z) {
     return static_cast<unsigned>((x & 3) | ((y & 3) << 2) | ((z & 3) << 4));
