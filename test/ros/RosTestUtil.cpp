@@ -4,6 +4,8 @@
 
 #include <cmath>
 #include <filesystem>
+#include <fstream>
+#include <iterator>
 #include <unordered_map>
 
 #include "hpds/io/PointCloudFile.hpp"
@@ -19,14 +21,35 @@ std::string sharedDataDir() {
   return dir;
 }
 
-sensor_msgs::PointCloud2Ptr loadFrame(const std::string &path, const std::string &frame_id, const ros::Time &stamp) {
-  const hpds::PointBuffer cloud = hpds::readPointCloud(path);
-  auto msg = boost::make_shared<sensor_msgs::PointCloud2>();
+sensor_msgs::PointCloud2 toMsg(const hpds::PointBuffer &points, const std::string &frame_id, const ros::Time &stamp) {
   std_msgs::Header header;
   header.frame_id = frame_id;
   header.stamp = stamp;
-  hpds_node::toRosCloud(cloud, header, *msg);
+  sensor_msgs::PointCloud2 msg;
+  hpds_node::toRosCloud(points, header, msg);
   return msg;
+}
+
+sensor_msgs::PointCloud2Ptr loadFrame(const std::string &path, const std::string &frame_id, const ros::Time &stamp) {
+  return boost::make_shared<sensor_msgs::PointCloud2>(toMsg(hpds::readPointCloud(path), frame_id, stamp));
+}
+
+sensor_msgs::PointCloud2Ptr fixedFrameMsg(const hpds::SyntheticLidar &lidar, int i, const std::string &frame_id,
+                                          const ros::Time &stamp) {
+  hpds::SyntheticFrame f = lidar.frame(i);
+  hpds::PointBuffer &points = f.frame.points;
+  const hpds::PointLayout &l = points.layout();
+  const hpds::PointField *fx = l.find("x"), *fy = l.find("y"), *fz = l.find("z");
+  for (std::size_t k = 0; k < points.size(); ++k) {
+    std::uint8_t *r = points.record(k);
+    const Eigen::Vector3d p =
+        f.frame.sensor_to_fixed *
+        Eigen::Vector3d(hpds::readAsDouble(r, *fx), hpds::readAsDouble(r, *fy), hpds::readAsDouble(r, *fz));
+    hpds::writeFromDouble(r, *fx, p.x());
+    hpds::writeFromDouble(r, *fy, p.y());
+    hpds::writeFromDouble(r, *fz, p.z());
+  }
+  return boost::make_shared<sensor_msgs::PointCloud2>(toMsg(points, frame_id, stamp));
 }
 
 bool waitFor(const std::function<bool()> &pred, double timeout_s) {
@@ -126,6 +149,16 @@ void expectOutputLayout(const sensor_msgs::PointCloud2 &out, const sensor_msgs::
     EXPECT_EQ(out.fields[i].count, 1u) << "field " << out.fields[i].name;
   }
   EXPECT_FALSE(out.is_bigendian);
+}
+
+std::vector<std::uint8_t> readBytes(const std::filesystem::path &p) {
+  std::ifstream in(p, std::ios::binary);
+  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+}
+
+void writeBytes(const std::filesystem::path &p, const std::vector<std::uint8_t> &bytes) {
+  std::ofstream out(p, std::ios::binary | std::ios::trunc);
+  out.write(reinterpret_cast<const char *>(bytes.data()), static_cast<std::streamsize>(bytes.size()));
 }
 
 }  // namespace hpds_test

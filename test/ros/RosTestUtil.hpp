@@ -1,5 +1,5 @@
-// Helpers of the rostest test nodes: real frames as PointCloud2, collecting messages, checks on output clouds,
-// reading the node's diagnostics.
+// Helpers of the ROS tests (the rostest nodes and the master-less unit tests): frames as PointCloud2, collecting
+// messages, checks on output clouds, reading the node's diagnostics, whole files as bytes.
 #pragma once
 
 #include <diagnostic_msgs/DiagnosticArray.h>
@@ -8,6 +8,8 @@
 
 #include <Eigen/Core>
 #include <condition_variable>
+#include <cstdint>
+#include <filesystem>
 #include <functional>
 #include <map>
 #include <mutex>
@@ -15,6 +17,7 @@
 #include <vector>
 
 #include "hpds/PointBuffer.hpp"
+#include "hpds/SyntheticLidar.hpp"
 
 namespace hpds_test {
 
@@ -23,6 +26,13 @@ std::string sharedDataDir();
 
 /// A real frame from the shared data as a PointCloud2 (every field of the file kept).
 sensor_msgs::PointCloud2Ptr loadFrame(const std::string &path, const std::string &frame_id, const ros::Time &stamp);
+
+/// `points` as a PointCloud2 with that header (every field kept).
+sensor_msgs::PointCloud2 toMsg(const hpds::PointBuffer &points, const std::string &frame_id, const ros::Time &stamp);
+
+/// Frame i of `lidar` with its points moved into the fixed frame (so its sensor pose is the identity).
+sensor_msgs::PointCloud2Ptr fixedFrameMsg(const hpds::SyntheticLidar &lidar, int i, const std::string &frame_id,
+                                          const ros::Time &stamp);
 
 /// Spins (the caller runs an AsyncSpinner) until pred() or the wall-clock timeout; returns pred().
 bool waitFor(const std::function<bool()> &pred, double timeout_s);
@@ -87,5 +97,11 @@ class DiagnosticsReader {
 /// Checks the layout of an hpds output cloud: x y z float32, level uint8, normals when `normals`, then every field
 /// of `input` except x/y/z with the same name, datatype and count.
 void expectOutputLayout(const sensor_msgs::PointCloud2 &out, const sensor_msgs::PointCloud2 &input, bool normals);
+
+/// The whole file (empty when it cannot be read) / replaces the file with `bytes`.
+std::vector<std::uint8_t> readBytes(const std::filesystem::path &p);
+void writeBytes(const std::filesystem::path &p, const std::vector<std::uint8_t> &bytes);
+
+inline bool contains(const std::string &text, const std::string &part) { return text.find(part) != std::string::npos; }
 
 }  // namespace hpds_test

@@ -6,11 +6,10 @@
 
 #include <cstring>
 #include <filesystem>
-#include <fstream>
 #include <functional>
-#include <iterator>
 #include <limits>
 
+#include "RosTestUtil.hpp"
 #include "hpds/SyntheticLidar.hpp"
 #include "hpds_node/FrameProcessor.hpp"
 
@@ -31,24 +30,12 @@ hpds::SyntheticLidarConfig smallLidar() {
 }
 
 PointCloud2 toMsg(const hpds::PointBuffer &points, double stamp, const std::string &frame = "lidar") {
-  std_msgs::Header h;
-  h.frame_id = frame;
-  h.stamp.fromSec(stamp);
-  PointCloud2 m;
-  hpds_node::toRosCloud(points, h, m);
-  return m;
+  ros::Time t;
+  t.fromSec(stamp);
+  return hpds_test::toMsg(points, frame, t);
 }
 
-std::vector<Eigen::Vector3d> xyzOf(const PointCloud2 &msg) {
-  hpds::PointBuffer b;
-  EXPECT_EQ(hpds_node::fromRosCloud(msg, b), hpds_node::CloudError::None);
-  std::vector<Eigen::Vector3d> out;
-  const auto *fx = b.layout().find("x"), *fy = b.layout().find("y"), *fz = b.layout().find("z");
-  for (std::size_t i = 0; i < b.size(); ++i)
-    out.emplace_back(hpds::readAsDouble(b.record(i), *fx), hpds::readAsDouble(b.record(i), *fy),
-                     hpds::readAsDouble(b.record(i), *fz));
-  return out;
-}
+std::vector<Eigen::Vector3d> xyzOf(const PointCloud2 &msg) { return hpds_test::positions(hpds_test::toBuffer(msg)); }
 
 double nearest(const Eigen::Vector3d &q, const std::vector<Eigen::Vector3d> &set) {
   double best = std::numeric_limits<double>::infinity();
@@ -263,15 +250,8 @@ namespace {
 
 namespace fs = std::filesystem;
 
-std::vector<std::uint8_t> readBytes(const fs::path &p) {
-  std::ifstream in(p, std::ios::binary);
-  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
-}
-
-void writeBytes(const fs::path &p, const std::vector<std::uint8_t> &bytes) {
-  std::ofstream out(p, std::ios::binary | std::ios::trunc);
-  out.write(reinterpret_cast<const char *>(bytes.data()), static_cast<std::streamsize>(bytes.size()));
-}
+using hpds_test::readBytes;
+using hpds_test::writeBytes;
 
 std::string errorOf(const std::function<void()> &f) {
   try {

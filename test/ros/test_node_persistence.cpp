@@ -16,8 +16,6 @@
 
 #include <cstdio>
 #include <filesystem>
-#include <fstream>
-#include <iterator>
 
 #include "RosTestUtil.hpp"
 #include "hpds/HierarchyFile.hpp"
@@ -32,6 +30,9 @@ namespace fs = std::filesystem;
 using hpds_node::FrameProcessor;
 using hpds_node::OutputRequest;
 using hpds_test::Collector;
+using hpds_test::contains;
+using hpds_test::readBytes;
+using hpds_test::writeBytes;
 using sensor_msgs::PointCloud2;
 
 const std::string kFixed = "odom";
@@ -49,25 +50,7 @@ hpds::SyntheticLidar makeLidar() {
 
 // Frame i of the lidar moved into the fixed frame, stamped 100 + i s.
 PointCloud2::Ptr frameMsg(const hpds::SyntheticLidar &lidar, int i) {
-  hpds::SyntheticFrame f = lidar.frame(i);
-  hpds::PointBuffer &points = f.frame.points;
-  const hpds::PointLayout &l = points.layout();
-  const hpds::PointField *fx = l.find("x"), *fy = l.find("y"), *fz = l.find("z");
-  for (std::size_t k = 0; k < points.size(); ++k) {
-    std::uint8_t *r = points.record(k);
-    const Eigen::Vector3d p =
-        f.frame.sensor_to_fixed *
-        Eigen::Vector3d(hpds::readAsDouble(r, *fx), hpds::readAsDouble(r, *fy), hpds::readAsDouble(r, *fz));
-    hpds::writeFromDouble(r, *fx, p.x());
-    hpds::writeFromDouble(r, *fy, p.y());
-    hpds::writeFromDouble(r, *fz, p.z());
-  }
-  std_msgs::Header h;
-  h.frame_id = kFixed;
-  h.stamp = ros::Time(100 + i, 0);
-  auto msg = boost::make_shared<PointCloud2>();
-  hpds_node::toRosCloud(points, h, *msg);
-  return msg;
+  return hpds_test::fixedFrameMsg(lidar, i, kFixed, ros::Time(100 + i, 0));
 }
 
 std_srvs::Trigger::Response call(const std::string &service) {
@@ -75,18 +58,6 @@ std_srvs::Trigger::Response call(const std::string &service) {
   EXPECT_TRUE(ros::service::waitForService(service, ros::Duration(30.0))) << service;
   EXPECT_TRUE(ros::service::call(service, srv)) << service << ": the call itself failed";
   return srv.response;
-}
-
-bool contains(const std::string &text, const std::string &part) { return text.find(part) != std::string::npos; }
-
-std::vector<char> readBytes(const fs::path &p) {
-  std::ifstream in(p, std::ios::binary);
-  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
-}
-
-void writeBytes(const fs::path &p, const std::vector<char> &bytes) {
-  std::ofstream out(p, std::ios::binary | std::ios::trunc);
-  out.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
 }
 
 fs::path mapDir() {
@@ -177,7 +148,7 @@ TEST_F(NodePersistence, SaveAndLoadServicesOnARunningNode) {
     EXPECT_EQ(loaded.hierarchy().sampleCount(), reported);
     EXPECT_EQ(loaded.framesProcessed(), 3u);
   }
-  const std::vector<char> good = readBytes(file);
+  const std::vector<std::uint8_t> good = readBytes(file);
 
   // Two more frames grow the node's map past the file's.
   ASSERT_TRUE(send(3).first);
@@ -204,9 +175,9 @@ TEST_F(NodePersistence, SaveAndLoadServicesOnARunningNode) {
 
   // Refused files: success=false with the file and the reason; the running map is untouched, which frame 4 shows
   // (it continues exactly like the reference).
-  std::vector<char> corrupt = good;
+  std::vector<std::uint8_t> corrupt = good;
   corrupt[good.size() / 2] ^= 0x20;
-  const std::vector<char> truncated(good.begin(), good.begin() + static_cast<std::ptrdiff_t>(good.size() - 7));
+  const std::vector<std::uint8_t> truncated(good.begin(), good.begin() + static_cast<std::ptrdiff_t>(good.size() - 7));
   for (const auto &[bytes, reason] : {std::pair{corrupt, std::string("corrupt sample data (checksum mismatch)")},
                                       std::pair{truncated, std::string("truncated")}}) {
     SCOPED_TRACE(reason);
@@ -303,7 +274,7 @@ TEST(NodePersistenceRestart, ARestartLosesNothing) {
 
   // A file that exists but does not load: the server refuses to start, names the file and the reason, and does
   // not touch it (no save on the way out).
-  std::vector<char> bytes = readBytes(file);
+  std::vector<std::uint8_t> bytes = readBytes(file);
   bytes[bytes.size() / 2] ^= 0x01;
   writeBytes(file, bytes);
   try {
