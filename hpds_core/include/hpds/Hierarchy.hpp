@@ -242,20 +242,7 @@ void Hierarchy::visitBall(int level, const double q[3], double radius, Fn &fn) c
     grid.forEach([&](const CellKey &, SampleId s) { visit(s); });
     return;
   }
-  // Each block of the window is hashed once and only its occupied cells inside the window are read.
-  for (std::int32_t bz = c0[2] >> sh; bz <= (c1[2] >> sh); ++bz) {
-    const std::uint64_t zm = LevelGrid::axisMask(2, std::max(c0[2] - bz * 4, 0), std::min(c1[2] - bz * 4, 3));
-    for (std::int32_t by = c0[1] >> sh; by <= (c1[1] >> sh); ++by) {
-      const std::uint64_t yzm = zm & LevelGrid::axisMask(1, std::max(c0[1] - by * 4, 0), std::min(c1[1] - by * 4, 3));
-      for (std::int32_t bx = c0[0] >> sh; bx <= (c1[0] >> sh); ++bx) {
-        const LevelGrid::Block *b = grid.findBlock(bx, by, bz);
-        if (!b) continue;
-        for (std::uint64_t bits = b->mask & yzm & LevelGrid::axisMask(0, std::max(c0[0] - bx * 4, 0), std::min(c1[0] - bx * 4, 3));
-             bits != 0; bits &= bits - 1)
-          visit(grid.idAt(*b, static_cast<unsigned>(__builtin_ctzll(bits))));
-      }
-    }
-  }
+  grid.forEachInBox(CellKey{c0[0], c0[1], c0[2]}, CellKey{c1[0], c1[1], c1[2]}, visit);
 }
 
 }  // namespace hpds

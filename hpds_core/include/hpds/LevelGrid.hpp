@@ -9,6 +9,7 @@
 // - Move-only; not thread-safe for concurrent mutation; concurrent const lookups are safe.
 #pragma once
 
+#include <algorithm>
 #include <array>
 #include <cstddef>
 #include <cstdint>
@@ -92,6 +93,27 @@ class LevelGrid {
     if (!(b.mask & m)) return kNoSample;
     if ((b.mask & (b.mask - 1)) == 0) return b.base;
     return ids_[b.base + bitCount(b.mask & (m - 1))];
+  }
+
+  /// Calls fn(SampleId) for every occupied cell with lo <= key <= hi on each axis; each block the box overlaps is
+  /// hashed once and only its occupied cells inside the box are read.
+  template <typename Fn>
+  void forEachInBox(const CellKey &lo, const CellKey &hi, Fn &&fn) const {
+    if (size_ == 0) return;
+    constexpr int sh = kBlockShift;
+    for (std::int32_t bz = lo.z >> sh; bz <= (hi.z >> sh); ++bz) {
+      const std::uint64_t zm = axisMask(2, std::max(lo.z - (bz << sh), 0), std::min(hi.z - (bz << sh), 3));
+      for (std::int32_t by = lo.y >> sh; by <= (hi.y >> sh); ++by) {
+        const std::uint64_t yzm = zm & axisMask(1, std::max(lo.y - (by << sh), 0), std::min(hi.y - (by << sh), 3));
+        for (std::int32_t bx = lo.x >> sh; bx <= (hi.x >> sh); ++bx) {
+          const Block *b = findBlock(bx, by, bz);
+          if (!b) continue;
+          for (std::uint64_t bits = b->mask & yzm & axisMask(0, std::max(lo.x - (bx << sh), 0), std::min(hi.x - (bx << sh), 3));
+               bits != 0; bits &= bits - 1)
+            fn(idAt(*b, static_cast<unsigned>(__builtin_ctzll(bits))));
+        }
+      }
+    }
   }
 
   /// Sample in `key`'s cell, or kNoSample.
