@@ -44,11 +44,10 @@ SampleId Hierarchy::sampleInCell(int level, const double xyz[3]) const {
   return grids_[level].find(k);
 }
 
-double Hierarchy::conflictAt(int level, const double q[3], const CellKey &k, double radius, bool skip_own,
-                             SampleId &witness, const LevelGrid::Block *own_block, bool own_block_known) const {
-  const LevelGrid &grid = grids_[level];
+double Hierarchy::conflictIn(const LevelGrid &grid, double e, const double q[3], const CellKey &k, double radius,
+                             bool skip_own, SampleId &witness, const LevelGrid::Block *own_block,
+                             bool own_block_known) const {
   if (grid.size() == 0) return -1.0;
-  const double e = edge_[level];
   const double r2 = radius * radius;
   // radius <= sqrt(3)/2 * edge of this level or of a coarser one, so the ball never reaches past the 26 neighbours.
   // A neighbour side is taken only when even the rounding-widened ball reaches it.
@@ -159,6 +158,7 @@ InsertResult Hierarchy::insert(const InsertBatch &batch) {
   const std::size_t words = (n + 63) / 64;
   for (auto &p : pending_) p.assign(words, 0);
   finest_keys_.resize(n);
+  accepted_keys_.clear();
   const double ef = edge_[max_depth_], ief = inv_edge_[max_depth_];
   for (std::uint32_t rank = 0; rank < n; ++rank) {
     const double *q = batch.xyz + 3 * std::size_t(batch.order[rank]);
@@ -183,6 +183,17 @@ InsertResult Hierarchy::insert(const InsertBatch &batch) {
 
   for (int d = 0; d <= max_depth_; ++d) {
     const double rd = radius_[d], rd2 = radius2_[d];
+    // When the batch started on an empty hierarchy, the samples of levels < d are exactly those accepted so far; one
+    // grid of level d's cells holding them all replaces d grid walks per check. It holds one sample per cell: two
+    // samples of levels < d are at least r_(d-1) apart, the diagonal of a level-d cell (should rounding ever put
+    // two in one cell, the pass falls back to the per-level walks).
+    bool coarser_valid = false;
+    if (finest_populated < 0 && d > 0) {
+      coarser_.reset();
+      coarser_valid = true;
+      for (std::size_t i = 0; i < result.accepted.size(); ++i)
+        coarser_valid &= coarser_.insert(coarsen(accepted_keys_[i], d), result.accepted[i]);
+    }
     const int group_level = std::min(d + kWitnessGroupOffset, max_depth_);
     const std::vector<std::uint64_t> &todo = pending_[d];
     // A pass visits its points in rank order, i.e. at random places: a cursor running a few points ahead
@@ -244,8 +255,12 @@ InsertResult Hierarchy::insert(const InsertBatch &batch) {
         next = nextLevelAfterConflict(d, ddx * ddx + ddy * ddy + ddz * ddz);
       }
       if (ok) {
-        double d2 = conflictAt(d, q, key, rd, /*skip_own=*/true, witness, own, /*own_block_known=*/true);
-        for (int l = d - 1; d2 < 0.0 && l >= 0; --l) d2 = conflictAt(l, q, coarsen(finest, l), rd, false, witness);
+        double d2 = conflictIn(grids_[d], edge_[d], q, key, rd, /*skip_own=*/true, witness, own, /*own_block_known=*/true);
+        if (coarser_valid) {
+          if (d2 < 0.0) d2 = conflictIn(coarser_, edge_[d], q, key, rd, false, witness);
+        } else {
+          for (int l = d - 1; d2 < 0.0 && l >= 0; --l) d2 = conflictAt(l, q, coarsen(finest, l), rd, false, witness);
+        }
         if (d2 >= 0.0) {
           ok = false;
           next = nextLevelAfterConflict(d, d2);
@@ -278,6 +293,7 @@ InsertResult Hierarchy::insert(const InsertBatch &batch) {
         ++live_;
         ++result.accepted_per_level[d];
         result.accepted.push_back(id);
+        accepted_keys_.push_back(finest);
         slot.remember(h, q);
       } else {
         if (witness != kNoSample) slot.remember(h, position(witness));
@@ -359,6 +375,8 @@ void Hierarchy::shrink() {
   records_.shrink_to_fit();
   free_ids_.shrink_to_fit();
   std::vector<CellKey>().swap(finest_keys_);  // `= {}` would keep the capacity
+  std::vector<CellKey>().swap(accepted_keys_);
+  coarser_.clear();
   std::vector<WitnessSlot>().swap(witness_);
   for (auto &p : pending_) std::vector<std::uint64_t>().swap(p);
 }
@@ -393,7 +411,8 @@ std::size_t Hierarchy::memUsage() const {
 }
 
 std::size_t Hierarchy::scratchBytes() const {
-  std::size_t bytes = finest_keys_.capacity() * sizeof(CellKey) + witness_.capacity() * sizeof(WitnessSlot);
+  std::size_t bytes = (finest_keys_.capacity() + accepted_keys_.capacity()) * sizeof(CellKey) +
+                      witness_.capacity() * sizeof(WitnessSlot) + coarser_.memUsage();
   for (const auto &p : pending_) bytes += p.capacity() * sizeof(std::uint64_t);
   return bytes;
 }

@@ -17,12 +17,14 @@ std::uint64_t splitmix64(std::uint64_t &state) {
   z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
   return z ^ (z >> 31);
 }
-/// Unbiased integer in [0, bound) by rejection (Lemire's multiply-shift would also do; this is simpler to audit).
+/// Unbiased integer in [0, bound) by rejection: draws at or above the largest multiple of bound are redrawn.
+/// That multiple is at least 2^64 - bound, so it is only computed (a second division) for a draw that high.
 std::uint64_t below(std::uint64_t &state, std::uint64_t bound) {
-  const std::uint64_t limit = ~std::uint64_t(0) - (~std::uint64_t(0) % bound);
-  std::uint64_t v;
-  do v = splitmix64(state);
-  while (v >= limit);
+  std::uint64_t v = splitmix64(state);
+  if (v >= std::uint64_t(0) - bound) {
+    const std::uint64_t limit = ~std::uint64_t(0) - (~std::uint64_t(0) % bound);
+    while (v >= limit) v = splitmix64(state);
+  }
   return v % bound;
 }
 }  // namespace

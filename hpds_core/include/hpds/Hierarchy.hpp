@@ -131,8 +131,12 @@ class Hierarchy {
   /// skip_own), or a negative value when there is none. `key` is q's cell at `level`.
   /// `own_block` is key's block when the caller already looked it up (own_block_known; nullptr = no such block).
   /// `witness` receives the conflicting sample.
-  double conflictAt(int level, const double q[3], const CellKey &key, double radius, bool skip_own, SampleId &witness,
-                    const LevelGrid::Block *own_block = nullptr, bool own_block_known = false) const;
+  double conflictAt(int level, const double q[3], const CellKey &key, double radius, bool skip_own, SampleId &witness) const {
+    return conflictIn(grids_[level], edge_[level], q, key, radius, skip_own, witness);
+  }
+  /// The same in `grid`, a grid of cells of edge `e`.
+  double conflictIn(const LevelGrid &grid, double e, const double q[3], const CellKey &key, double radius, bool skip_own,
+                    SampleId &witness, const LevelGrid::Block *own_block = nullptr, bool own_block_known = false) const;
   /// q's cell at `level` from its finest-level cell: nested power-of-two cells make this an exact shift.
   [[nodiscard]] CellKey coarsen(const CellKey &finest, int level) const {
     const int shift = max_depth_ - level;
@@ -182,6 +186,10 @@ class Hierarchy {
   // Per-insert scratch, kept to avoid reallocating per frame: the finest-level cell of each ranked point and, per
   // level, a bitset of the ranks still to try there (scanning it yields rank order without sorting).
   std::vector<CellKey> finest_keys_;
+  // Scan mode (a batch on an empty hierarchy): the finest cells of the samples accepted so far, and per pass d a
+  // grid of level d's cells holding every sample of levels < d.
+  std::vector<CellKey> accepted_keys_;
+  LevelGrid coarser_;
   std::vector<std::vector<std::uint64_t>> pending_;
   // Per-insert cache of rejection witnesses: slot = hash of (level, a finer cell around the point), holding the
   // position of a sample of that level or coarser that recently rejected or was accepted near there. The position
