@@ -49,7 +49,7 @@ double Hierarchy::conflictIn(const LevelGrid &grid, double e, const double q[3],
                              bool own_block_known) const {
   if (grid.size() == 0) return -1.0;
   const double r2 = radius * radius;
-  // radius <= sqrt(3)/2 * edge of this level or of a coarser one, so the ball never reaches past the 26 neighbours.
+  // radius <= sqrt(3)/2 * e, so the ball never reaches past the 26 neighbours.
   // A neighbour side is taken only when even the rounding-widened ball reaches it.
   const double reach = radius + pruneSlack(q, e);
   const double prune = reach * reach;

@@ -127,16 +127,16 @@ class Hierarchy {
 
  private:
   bool keyAt(int level, const double q[3], CellKey &key) const;
-  /// Squared distance to some sample of `level` strictly within `radius` of q (skipping q's own cell when
-  /// skip_own), or a negative value when there is none. `key` is q's cell at `level`.
+  /// Squared distance to some sample of `grid` (cells of edge `e`) strictly within `radius` of q (skipping q's own
+  /// cell when skip_own), or a negative value when there is none. `key` is q's cell in `grid`; radius <= sqrt(3)/2 e.
   /// `own_block` is key's block when the caller already looked it up (own_block_known; nullptr = no such block).
   /// `witness` receives the conflicting sample.
+  double conflictIn(const LevelGrid &grid, double e, const double q[3], const CellKey &key, double radius, bool skip_own,
+                    SampleId &witness, const LevelGrid::Block *own_block = nullptr, bool own_block_known = false) const;
+  /// The same in the grid of `level`.
   double conflictAt(int level, const double q[3], const CellKey &key, double radius, bool skip_own, SampleId &witness) const {
     return conflictIn(grids_[level], edge_[level], q, key, radius, skip_own, witness);
   }
-  /// The same in `grid`, a grid of cells of edge `e`.
-  double conflictIn(const LevelGrid &grid, double e, const double q[3], const CellKey &key, double radius, bool skip_own,
-                    SampleId &witness, const LevelGrid::Block *own_block = nullptr, bool own_block_known = false) const;
   /// q's cell at `level` from its finest-level cell: nested power-of-two cells make this an exact shift.
   [[nodiscard]] CellKey coarsen(const CellKey &finest, int level) const {
     const int shift = max_depth_ - level;
