@@ -44,11 +44,11 @@ SampleId Hierarchy::sampleInCell(int level, const double xyz[3]) const {
   return grids_[level].find(k);
 }
 
-double Hierarchy::conflictIn(const LevelGrid &grid, double e, const double q[3], const CellKey &k, double radius,
-                             bool skip_own, SampleId &witness, const LevelGrid::Block *own_block,
-                             bool own_block_known) const {
+template <typename Test>
+double Hierarchy::walkConflicts(const LevelGrid &grid, double e, const double q[3], const CellKey &k, double radius,
+                                bool skip_own, const LevelGrid::Block *own_block, bool own_block_known,
+                                Test &&test) const {
   if (grid.size() == 0) return -1.0;
-  const double r2 = radius * radius;
   // radius <= sqrt(3)/2 * e, so the ball never reaches past the 26 neighbours.
   // A neighbour side is taken only when even the rounding-widened ball reaches it.
   const double reach = radius + pruneSlack(q, e);
@@ -80,19 +80,48 @@ double Hierarchy::conflictIn(const LevelGrid &grid, double e, const double q[3],
         std::uint64_t bits = b->mask & yzm & LevelGrid::axisMask(0, xl, xh);
         if (is_own && skip_own) bits &= ~own_bit;
         for (; bits != 0; bits &= bits - 1) {
-          const SampleId s = grid.idAt(*b, static_cast<unsigned>(__builtin_ctzll(bits)));
-          const double *p = position(s);
-          const double ddx = p[0] - q[0], ddy = p[1] - q[1], ddz = p[2] - q[2];
-          const double d2 = ddx * ddx + ddy * ddy + ddz * ddz;
-          if (d2 < r2) {
-            witness = s;
-            return d2;
-          }
+          const unsigned bit = static_cast<unsigned>(__builtin_ctzll(bits));
+          const double d2 = test(grid.idAt(*b, bit), *b, bit);
+          if (d2 >= 0.0) return d2;
         }
       }
     }
   }
   return -1.0;
+}
+
+double Hierarchy::conflictIn(const LevelGrid &grid, double e, const double q[3], const CellKey &k, double radius,
+                             bool skip_own, SampleId &witness, const LevelGrid::Block *own_block,
+                             bool own_block_known) const {
+  const double r2 = radius * radius;
+  return walkConflicts(grid, e, q, k, radius, skip_own, own_block, own_block_known,
+                       [&](SampleId s, const LevelGrid::Block &, unsigned) {
+                         const double d2 = distance2(position(s), q);
+                         if (!(d2 < r2)) return -1.0;
+                         witness = s;
+                         return d2;
+                       });
+}
+
+double Hierarchy::passConflict(int level, const double q[3], const CellKey &k, SampleId &witness,
+                               const LevelGrid::Block *own_block) const {
+  const double r2 = radius2_[level];
+  auto nearer = [&](SampleId s) {
+    const double d2 = distance2(position(s), q);
+    if (!(d2 < r2)) return -1.0;
+    witness = s;
+    return d2;
+  };
+  return walkConflicts(pass_grid_, edge_[level], q, k, radius_[level], /*skip_own=*/true, own_block, true,
+                       [&](SampleId s, const LevelGrid::Block &b, unsigned bit) {
+                         if (!(s & kSharedCell)) return nearer(s);
+                         const double d2 = nearer(s & ~kSharedCell);
+                         if (d2 >= 0.0) return d2;
+                         const CellKey c{b.x * 4 + static_cast<std::int32_t>(bit & 3),
+                                         b.y * 4 + static_cast<std::int32_t>((bit >> 2) & 3),
+                                         b.z * 4 + static_cast<std::int32_t>(bit >> 4)};
+                         return nearer(shared_.find(c));
+                       });
 }
 
 int Hierarchy::nextLevelAfterConflict(int level, double d2) const {
@@ -183,16 +212,18 @@ InsertResult Hierarchy::insert(const InsertBatch &batch) {
 
   for (int d = 0; d <= max_depth_; ++d) {
     const double rd = radius_[d], rd2 = radius2_[d];
-    // When the batch started on an empty hierarchy, the samples of levels < d are exactly those accepted so far; one
-    // grid of level d's cells holding them all replaces d grid walks per check. It holds one sample per cell: two
-    // samples of levels < d are at least r_(d-1) apart, the diagonal of a level-d cell (should rounding ever put
-    // two in one cell, the pass falls back to the per-level walks).
-    bool coarser_valid = false;
-    if (finest_populated < 0 && d > 0) {
-      coarser_.reset();
-      coarser_valid = true;
+    // When the batch started on an empty hierarchy (scan mode), the samples of levels < d are exactly those accepted
+    // so far: one grid of level d's cells holding them, and the level-d samples as they come, replaces the d + 1
+    // per-level grid walks of a check. No two samples of levels < d share a level-d cell (they are at least
+    // r_(d-1) apart, the cell's diagonal); a level-d sample in a cell that a coarser one holds is kept in shared_
+    // and the cell's id carries kSharedCell. Should rounding ever put two coarser samples in one cell, or ids reach
+    // the flag bit, the pass uses the per-level walks, as map mode does.
+    bool pass_valid = finest_populated < 0 && level_.size() + n < kSharedCell;
+    if (pass_valid) {
+      pass_grid_.reset();
+      shared_.reset();
       for (std::size_t i = 0; i < result.accepted.size(); ++i)
-        coarser_valid &= coarser_.insert(coarsen(accepted_keys_[i], d), result.accepted[i]);
+        pass_valid &= pass_grid_.insert(coarsen(accepted_keys_[i], d), result.accepted[i]);
     }
     const int group_level = std::min(d + kWitnessGroupOffset, max_depth_);
     const std::vector<std::uint64_t> &todo = pending_[d];
@@ -245,25 +276,41 @@ InsertResult Hierarchy::insert(const InsertBatch &batch) {
       bool ok = true;
       SampleId witness = kNoSample;
       constexpr int sh = LevelGrid::kBlockShift;
-      const LevelGrid::Block *own = grids_[d].findBlock(key.x >> sh, key.y >> sh, key.z >> sh);
-      const SampleId occupant = own ? grids_[d].idAt(*own, LevelGrid::localBit(key.x, key.y, key.z)) : kNoSample;
-      if (occupant != kNoSample) {
-        const double *p = position(occupant);
-        const double ddx = p[0] - q[0], ddy = p[1] - q[1], ddz = p[2] - q[2];
-        ok = false;
-        witness = occupant;
-        next = nextLevelAfterConflict(d, ddx * ddx + ddy * ddy + ddz * ddz);
-      }
-      if (ok) {
-        double d2 = conflictIn(grids_[d], edge_[d], q, key, rd, /*skip_own=*/true, witness, own, /*own_block_known=*/true);
-        if (coarser_valid) {
-          if (d2 < 0.0) d2 = conflictIn(coarser_, edge_[d], q, key, rd, false, witness);
-        } else {
-          for (int l = d - 1; d2 < 0.0 && l >= 0; --l) d2 = conflictAt(l, q, coarsen(finest, l), rd, false, witness);
+      if (pass_valid) {
+        // The cell is taken when its occupant is of level d, or is a coarser sample that shares it with one.
+        const LevelGrid::Block *own = pass_grid_.findBlock(key.x >> sh, key.y >> sh, key.z >> sh);
+        const SampleId occupant = own ? pass_grid_.idAt(*own, LevelGrid::localBit(key.x, key.y, key.z)) : kNoSample;
+        if (occupant != kNoSample) {
+          const SampleId c = occupant & ~kSharedCell;
+          const double d2 = distance2(position(c), q);
+          if ((occupant & kSharedCell) || level_[c] == d || d2 < rd2) {
+            ok = false;
+            witness = c;
+            next = nextLevelAfterConflict(d, d2);
+          }
         }
-        if (d2 >= 0.0) {
+        if (ok) {
+          const double d2 = passConflict(d, q, key, witness, own);
+          if (d2 >= 0.0) {
+            ok = false;
+            next = nextLevelAfterConflict(d, d2);
+          }
+        }
+      } else {
+        const LevelGrid::Block *own = grids_[d].findBlock(key.x >> sh, key.y >> sh, key.z >> sh);
+        const SampleId occupant = own ? grids_[d].idAt(*own, LevelGrid::localBit(key.x, key.y, key.z)) : kNoSample;
+        if (occupant != kNoSample) {
           ok = false;
-          next = nextLevelAfterConflict(d, d2);
+          witness = occupant;
+          next = nextLevelAfterConflict(d, distance2(position(occupant), q));
+        }
+        if (ok) {
+          double d2 = conflictIn(grids_[d], edge_[d], q, key, rd, /*skip_own=*/true, witness, own, /*own_block_known=*/true);
+          for (int l = d - 1; d2 < 0.0 && l >= 0; --l) d2 = conflictAt(l, q, coarsen(finest, l), rd, false, witness);
+          if (d2 >= 0.0) {
+            ok = false;
+            next = nextLevelAfterConflict(d, d2);
+          }
         }
       }
       if (ok) {
@@ -290,6 +337,13 @@ InsertResult Hierarchy::insert(const InsertBatch &batch) {
           std::memcpy(&records_[std::size_t(id) * record_layout_.point_step], batch.records + pi * batch.record_step,
                       record_layout_.point_step);
         grids_[d].insert(key, id);
+        if (pass_valid && !pass_grid_.insert(key, id)) {
+          // A coarser sample holds the cell (a level-d one would have taken it): both stay findable.
+          const SampleId c = pass_grid_.find(key);
+          pass_grid_.erase(key);
+          pass_grid_.insert(key, c | kSharedCell);
+          shared_.insert(key, id);
+        }
         ++live_;
         ++result.accepted_per_level[d];
         result.accepted.push_back(id);
@@ -376,7 +430,8 @@ void Hierarchy::shrink() {
   free_ids_.shrink_to_fit();
   std::vector<CellKey>().swap(finest_keys_);  // `= {}` would keep the capacity
   std::vector<CellKey>().swap(accepted_keys_);
-  coarser_.clear();
+  pass_grid_.clear();
+  shared_.clear();
   std::vector<WitnessSlot>().swap(witness_);
   for (auto &p : pending_) std::vector<std::uint64_t>().swap(p);
 }
@@ -412,7 +467,7 @@ std::size_t Hierarchy::memUsage() const {
 
 std::size_t Hierarchy::scratchBytes() const {
   std::size_t bytes = (finest_keys_.capacity() + accepted_keys_.capacity()) * sizeof(CellKey) +
-                      witness_.capacity() * sizeof(WitnessSlot) + coarser_.memUsage();
+                      witness_.capacity() * sizeof(WitnessSlot) + pass_grid_.memUsage() + shared_.memUsage();
   for (const auto &p : pending_) bytes += p.capacity() * sizeof(std::uint64_t);
   return bytes;
 }

@@ -133,6 +133,18 @@ class Hierarchy {
   /// `witness` receives the conflicting sample.
   double conflictIn(const LevelGrid &grid, double e, const double q[3], const CellKey &key, double radius, bool skip_own,
                     SampleId &witness, const LevelGrid::Block *own_block = nullptr, bool own_block_known = false) const;
+  /// The walk behind conflictIn: test(id, block, bit) gives the squared distance of a conflict or a negative value.
+  template <typename Test>
+  double walkConflicts(const LevelGrid &grid, double e, const double q[3], const CellKey &key, double radius,
+                       bool skip_own, const LevelGrid::Block *own_block, bool own_block_known, Test &&test) const;
+  /// conflictIn for a level-`level` candidate in scan mode: pass_grid_ (samples of levels <= level), q's own cell
+  /// skipped (its block `own_block`, looked up already).
+  double passConflict(int level, const double q[3], const CellKey &key, SampleId &witness,
+                      const LevelGrid::Block *own_block) const;
+  static double distance2(const double *a, const double *b) {
+    const double dx = a[0] - b[0], dy = a[1] - b[1], dz = a[2] - b[2];
+    return dx * dx + dy * dy + dz * dz;
+  }
   /// The same in the grid of `level`.
   double conflictAt(int level, const double q[3], const CellKey &key, double radius, bool skip_own, SampleId &witness) const {
     return conflictIn(grids_[level], edge_[level], q, key, radius, skip_own, witness);
@@ -187,9 +199,12 @@ class Hierarchy {
   // level, a bitset of the ranks still to try there (scanning it yields rank order without sorting).
   std::vector<CellKey> finest_keys_;
   // Scan mode (a batch on an empty hierarchy): the finest cells of the samples accepted so far, and per pass d a
-  // grid of level d's cells holding every sample of levels < d.
+  // grid of level d's cells holding every sample of levels <= d; a level-d sample in a cell a coarser sample holds
+  // is in shared_, and that cell's id in pass_grid_ carries kSharedCell.
+  static constexpr SampleId kSharedCell = 0x80000000u;
   std::vector<CellKey> accepted_keys_;
-  LevelGrid coarser_;
+  LevelGrid pass_grid_;
+  LevelGrid shared_;
   std::vector<std::vector<std::uint64_t>> pending_;
   // Per-insert cache of rejection witnesses: slot = hash of (level, a finer cell around the point), holding the
   // position of a sample of that level or coarser that recently rejected or was accepted near there. The position
