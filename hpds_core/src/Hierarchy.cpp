@@ -190,6 +190,8 @@ InsertResult Hierarchy::insert(const InsertBatch &batch) {
   accepted_keys_.clear();
   const double ef = edge_[max_depth_], ief = inv_edge_[max_depth_];
   for (std::uint32_t rank = 0; rank < n; ++rank) {
+    // Ranks visit the points at random places: fetch a few ahead so the loads overlap.
+    if (rank + kPrefetchDistance < n) __builtin_prefetch(batch.xyz + 3 * std::size_t(batch.order[rank + kPrefetchDistance]));
     const double *q = batch.xyz + 3 * std::size_t(batch.order[rank]);
     if (inCellRange(q[0], ief) && inCellRange(q[1], ief) && inCellRange(q[2], ief)) {
       finest_keys_[rank] = CellKey{exactCellCoord(q[0], ef, ief), exactCellCoord(q[1], ef, ief), exactCellCoord(q[2], ef, ief)};
