@@ -156,7 +156,14 @@ class Hierarchy {
   }
   /// First level after `level` whose radius no longer rules out a point at squared distance d2 from a sample
   /// of levels <= level: every level in between would reject the point for that same sample.
-  int nextLevelAfterConflict(int level, double d2) const;
+  int nextLevelAfterConflict(int level, double d2) const {
+    // Same comparison as the spacing test (d2 < r*r), so a skipped level is one that certainly rejects. Radii shrink
+    // with the level, so counting the levels that still reject gives the first that does not, without a
+    // data-dependent loop exit (a mispredicted branch per rejection otherwise). Inline: it runs once per try.
+    int next = level + 1;
+    for (int l = level + 1; l <= max_depth_; ++l) next += d2 < radius2_[l] ? 1 : 0;
+    return next;
+  }
   /// Puts the point of `rank` on the schedule of `level`; level max_depth + 1 (at most) means dropped.
   void schedule(int level, std::uint32_t rank) { pending_[level][rank >> 6] |= std::uint64_t(1) << (rank & 63); }
   /// Witness-cache slots are keyed by a cell this many levels finer than the level being tried.
