@@ -256,8 +256,7 @@ InsertResult Hierarchy::insert(const InsertBatch &batch) {
       WitnessSlot &slot = witness_[h >> slot_shift];
       {
         // An empty slot holds (0,0,0) with tag 0: the distance is computed anyway and ignored, one branch less.
-        const double ddx = slot.xyz[0] - q[0], ddy = slot.xyz[1] - q[1], ddz = slot.xyz[2] - q[2];
-        const double d2 = ddx * ddx + ddy * ddy + ddz * ddz;
+        const double d2 = distance2(slot.xyz, q);
         if ((slot.tag == h) & (d2 < rd2)) {
           schedule(nextLevelAfterConflict(d, d2), rank);
           continue;
@@ -385,9 +384,7 @@ std::size_t Hierarchy::evictOutside(const double center[3], double distance) {
   std::size_t n = 0;
   for (SampleId id = 0; id < level_.size(); ++id) {
     if (level_[id] == kFreeSlotLevel) continue;
-    const double *p = position(id);
-    const double dx = p[0] - center[0], dy = p[1] - center[1], dz = p[2] - center[2];
-    if (dx * dx + dy * dy + dz * dz > r2) {
+    if (distance2(position(id), center) > r2) {
       release(id);
       ++n;
     }
@@ -401,9 +398,7 @@ std::size_t Hierarchy::evictToCap(const double center[3], std::size_t max_sample
   by_distance.reserve(live_);
   for (SampleId id = 0; id < level_.size(); ++id) {
     if (level_[id] == kFreeSlotLevel) continue;
-    const double *p = position(id);
-    const double dx = p[0] - center[0], dy = p[1] - center[1], dz = p[2] - center[2];
-    by_distance.emplace_back(dx * dx + dy * dy + dz * dz, id);
+    by_distance.emplace_back(distance2(position(id), center), id);
   }
   const std::size_t excess = live_ - max_samples;
   // Farthest first; ties broken by id so the outcome is deterministic.

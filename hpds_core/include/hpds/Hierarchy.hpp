@@ -127,6 +127,11 @@ class Hierarchy {
 
  private:
   bool keyAt(int level, const double q[3], CellKey &key) const;
+  /// Squared distance, computed the same way wherever a spacing decision depends on it.
+  static double distance2(const double *a, const double *b) {
+    const double dx = a[0] - b[0], dy = a[1] - b[1], dz = a[2] - b[2];
+    return dx * dx + dy * dy + dz * dz;
+  }
   /// Squared distance to some sample of `grid` (cells of edge `e`) strictly within `radius` of q (skipping q's own
   /// cell when skip_own), or a negative value when there is none. `key` is q's cell in `grid`; radius <= sqrt(3)/2 e.
   /// `own_block` is key's block when the caller already looked it up (own_block_known; nullptr = no such block).
@@ -141,11 +146,7 @@ class Hierarchy {
   /// skipped (its block `own_block`, looked up already).
   double passConflict(int level, const double q[3], const CellKey &key, SampleId &witness,
                       const LevelGrid::Block *own_block) const;
-  static double distance2(const double *a, const double *b) {
-    const double dx = a[0] - b[0], dy = a[1] - b[1], dz = a[2] - b[2];
-    return dx * dx + dy * dy + dz * dz;
-  }
-  /// The same in the grid of `level`.
+  /// conflictIn in the grid of `level`.
   double conflictAt(int level, const double q[3], const CellKey &key, double radius, bool skip_own, SampleId &witness) const {
     return conflictIn(grids_[level], edge_[level], q, key, radius, skip_own, witness);
   }
@@ -238,9 +239,7 @@ void Hierarchy::visitBall(int level, const double q[3], double radius, Fn &fn) c
   const double e = edge_[level];
   const double r2 = radius * radius;
   auto visit = [&](SampleId s) {
-    const double *p = position(s);
-    const double ddx = p[0] - q[0], ddy = p[1] - q[1], ddz = p[2] - q[2];
-    const double d2 = ddx * ddx + ddy * ddy + ddz * ddz;
+    const double d2 = distance2(position(s), q);
     if (d2 < r2) fn(s, d2);
   };
   // The window of cells the rounding-widened ball reaches, per axis: cell k - n is reached when its gap
