@@ -100,15 +100,16 @@ class LevelGrid {
   template <typename Fn>
   void forEachInBox(const CellKey &lo, const CellKey &hi, Fn &&fn) const {
     if (size_ == 0) return;
-    constexpr int sh = kBlockShift;
+    constexpr int sh = kBlockShift, n = 1 << kBlockShift;  // block coordinates are scaled by n, not shifted:
+    // a left shift of a negative value is undefined in C++17
     for (std::int32_t bz = lo.z >> sh; bz <= (hi.z >> sh); ++bz) {
-      const std::uint64_t zm = axisMask(2, std::max(lo.z - (bz << sh), 0), std::min(hi.z - (bz << sh), 3));
+      const std::uint64_t zm = axisMask(2, std::max(lo.z - bz * n, 0), std::min(hi.z - bz * n, 3));
       for (std::int32_t by = lo.y >> sh; by <= (hi.y >> sh); ++by) {
-        const std::uint64_t yzm = zm & axisMask(1, std::max(lo.y - (by << sh), 0), std::min(hi.y - (by << sh), 3));
+        const std::uint64_t yzm = zm & axisMask(1, std::max(lo.y - by * n, 0), std::min(hi.y - by * n, 3));
         for (std::int32_t bx = lo.x >> sh; bx <= (hi.x >> sh); ++bx) {
           const Block *b = findBlock(bx, by, bz);
           if (!b) continue;
-          for (std::uint64_t bits = b->mask & yzm & axisMask(0, std::max(lo.x - (bx << sh), 0), std::min(hi.x - (bx << sh), 3));
+          for (std::uint64_t bits = b->mask & yzm & axisMask(0, std::max(lo.x - bx * n, 0), std::min(hi.x - bx * n, 3));
                bits != 0; bits &= bits - 1)
             fn(idAt(*b, static_cast<unsigned>(__builtin_ctzll(bits))));
         }
