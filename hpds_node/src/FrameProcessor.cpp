@@ -48,6 +48,18 @@ std::uint64_t ProcessorStats::droppedTotal() const {
   return n;
 }
 
+ProcessorStats &ProcessorStats::operator+=(const ProcessorStats &o) {
+  received += o.received;
+  processed += o.processed;
+  empty += o.empty;
+  for (std::size_t i = 0; i < malformed.size(); ++i) malformed[i] += o.malformed[i];
+  for (std::size_t i = 0; i < dropped.size(); ++i) dropped[i] += o.dropped[i];
+  seconds_sum += o.seconds_sum;
+  seconds_max = std::max(seconds_max, o.seconds_max);
+  points += o.points;
+  return *this;
+}
+
 bool lookupSensorPose(const tf2::BufferCore &buffer, const std::string &target, const std::string &source,
                       const ros::Time &stamp, Eigen::Isometry3d &pose, std::string *why) {
   geometry_msgs::TransformStamped t;

@@ -9,6 +9,8 @@
 #include <sstream>
 #include <system_error>
 
+#include "hpds/ParallelFor.hpp"
+
 namespace hpds_node {
 
 namespace {
@@ -94,9 +96,15 @@ HpdsServer::HpdsServer(ros::NodeHandle nh, ros::NodeHandle private_nh, const std
     : nh_(nh),
       pnh_(private_nh),
       config_(loadNodeConfigFromParams(private_nh)),
-      processor_(std::make_unique<FrameProcessor>(config_)),
-      target_frame_(processor_->targetFrame()),
+      target_frame_(FrameProcessor(config_).targetFrame()),
       updater_(nh, private_nh, name) {
+  // Scan mode: frames are independent, so `threads` workers take one frame each, each processor on one thread.
+  const std::size_t workers =
+      config_.hpds.mode == hpds::Mode::Scan ? static_cast<std::size_t>(hpds::resolveThreads(config_.hpds.threads)) : 1;
+  NodeConfig per_worker = config_;
+  if (workers > 1) per_worker.hpds.threads = 1;
+  for (std::size_t w = 0; w < workers; ++w) processors_.push_back(std::make_unique<FrameProcessor>(per_worker));
+  processor_ = processors_[0].get();
   const bool map_mode = config_.hpds.mode == hpds::Mode::Map;
   // Before anything is advertised: a node that cannot load its map does not appear at all.
   if (config_.ros.load_map_on_start) loadMapOnStart();
@@ -120,9 +128,11 @@ HpdsServer::HpdsServer(ros::NodeHandle nh, ros::NodeHandle private_nh, const std
   diagnostics_timer_ = nh_.createWallTimer(ros::WallDuration(period), [this](const ros::WallTimerEvent &) {
     updater_.force_update();
   });
-  takeSnapshot(0.0);
+  snapshot_.stats.resize(processors_.size());
+  snapshot_.memory.resize(processors_.size());
+  for (std::size_t w = 0; w < processors_.size(); ++w) takeSnapshot(w, 0.0);
 
-  worker_ = std::thread([this] { workerLoop(); });
+  for (std::size_t w = 0; w < processors_.size(); ++w) workers_.emplace_back([this, w] { workerLoop(w); });
   // roscpp's own queue only has to absorb bursts while onCloud runs; the counted dropping happens in queue_.
   sub_ = pnh_.subscribe("input", static_cast<std::uint32_t>(config_.ros.queue_size) + 4, &HpdsServer::onCloud, this);
   // Advertised in scan mode too, so that a call gets a clear answer rather than "service does not exist".
@@ -136,6 +146,7 @@ HpdsServer::HpdsServer(ros::NodeHandle nh, ros::NodeHandle private_nh, const std
           << processor_->pipeline().outputLevel() << " (spacing "
           << hpds::poissonRadius(config_.hpds.hierarchy.cell_size, processor_->pipeline().outputLevel()) << " m)";
   if (!target_frame_.empty()) summary << ", outputs in frame '" << target_frame_ << "'";
+  if (processors_.size() > 1) summary << ", " << processors_.size() << " frames in parallel";
   ROS_INFO_STREAM_NAMED("hpds", summary.str() << "; input " << sub_.getTopic() << ", output "
                                               << pub_output_.getTopic());
 }
@@ -150,7 +161,8 @@ HpdsServer::~HpdsServer() {
     stopping_ = true;
   }
   queue_cv_.notify_all();
-  if (worker_.joinable()) worker_.join();
+  for (std::thread &t : workers_)
+    if (t.joinable()) t.join();
   // The worker is gone: the map is complete (no frame half-inserted) and nothing else touches it.
   if (config_.ros.save_map_on_shutdown && config_.hpds.mode == hpds::Mode::Map) {
     const auto [ok, message] = runMapCommand(true);
@@ -247,10 +259,65 @@ void HpdsServer::onCloud(const sensor_msgs::PointCloud2::ConstPtr &msg) {
   queue_cv_.notify_one();
 }
 
-void HpdsServer::workerLoop() {
+// Every frame a worker takes passes both turns exactly once, whatever happens to it (the destructor passes what
+// is left), so a later frame never waits forever. Its predecessors are all held by running workers, which finish
+// their frames before stopping.
+class HpdsServer::Turns {
+ public:
+  Turns(HpdsServer &server, std::uint64_t ticket) : s_(server), ticket_(ticket) {}
+  Turns(const Turns &) = delete;
+  Turns &operator=(const Turns &) = delete;
+  ~Turns() {
+    if (!indexed_) passIndexTurn();
+    if (!publishing_) waitToPublish();
+    {
+      std::lock_guard<std::mutex> lock(s_.turn_mutex_);
+      ++s_.publish_turn_;
+    }
+    s_.turn_cv_.notify_all();
+  }
+  /// The frame's index in the stream of frames that passed the checks.
+  std::uint32_t takeIndex() {
+    std::uint32_t index;
+    {
+      std::unique_lock<std::mutex> lock(s_.turn_mutex_);
+      s_.turn_cv_.wait(lock, [this] { return s_.index_turn_ == ticket_; });
+      index = s_.next_frame_index_++;
+      ++s_.index_turn_;
+    }
+    indexed_ = true;
+    s_.turn_cv_.notify_all();
+    return index;
+  }
+  /// Returns once every earlier frame has been published or dropped.
+  void waitToPublish() {
+    if (!indexed_) passIndexTurn();
+    std::unique_lock<std::mutex> lock(s_.turn_mutex_);
+    s_.turn_cv_.wait(lock, [this] { return s_.publish_turn_ == ticket_; });
+    publishing_ = true;
+  }
+  /// A dropped frame: its index turn goes by without an index.
+  void passIndexTurn() {
+    {
+      std::unique_lock<std::mutex> lock(s_.turn_mutex_);
+      s_.turn_cv_.wait(lock, [this] { return s_.index_turn_ == ticket_; });
+      ++s_.index_turn_;
+    }
+    indexed_ = true;
+    s_.turn_cv_.notify_all();
+  }
+
+ private:
+  HpdsServer &s_;
+  std::uint64_t ticket_;
+  bool indexed_ = false, publishing_ = false;
+};
+
+void HpdsServer::workerLoop(std::size_t worker) {
   for (;;) {
     sensor_msgs::PointCloud2::ConstPtr msg;
     std::shared_ptr<MapCommand> command;
+    std::uint64_t ticket = 0;
     {
       std::unique_lock<std::mutex> lock(queue_mutex_);
       queue_cv_.wait(lock, [this] { return stopping_ || !queue_.empty() || !commands_.empty(); });
@@ -263,21 +330,25 @@ void HpdsServer::workerLoop() {
       } else {
         msg = queue_.front();
         queue_.pop_front();
+        ticket = next_ticket_++;
       }
     }
     if (command) {
       command->done.set_value(runMapCommand(command->save));
-      takeSnapshot(0.0);
+      takeSnapshot(worker, 0.0);
       continue;
     }
     double seconds = 0.0;
-    try {
-      seconds = handle(msg);
-    } catch (const std::exception &e) {
-      // A bug must not take the node down with it; the frame is lost and said so.
-      ROS_ERROR_STREAM_THROTTLE_NAMED(5.0, "hpds", "hpds: frame dropped by an internal error: " << e.what());
+    {
+      Turns turns(*this, ticket);
+      try {
+        seconds = handle(msg, worker, turns);
+      } catch (const std::exception &e) {
+        // A bug must not take the node down with it; the frame is lost and said so.
+        ROS_ERROR_STREAM_THROTTLE_NAMED(5.0, "hpds", "hpds: frame dropped by an internal error: " << e.what());
+      }
     }
-    takeSnapshot(seconds);
+    takeSnapshot(worker, seconds);
   }
 }
 
@@ -308,10 +379,11 @@ bool HpdsServer::waitForPose(const std::string &target, const std_msgs::Header &
   return lookupSensorPose(tf_buffer_, target, header.frame_id, header.stamp, pose, why);
 }
 
-double HpdsServer::handle(const sensor_msgs::PointCloud2::ConstPtr &msg) {
+double HpdsServer::handle(const sensor_msgs::PointCloud2::ConstPtr &msg, std::size_t worker, Turns &turns) {
+  FrameProcessor &processor = *processors_[worker];
   // 1. Validate before any work.
   std::string why;
-  const CloudError error = processor_->check(*msg, &why);
+  const CloudError error = processor.check(*msg, &why);
   if (error != CloudError::None) {
     ROS_ERROR_STREAM_THROTTLE_NAMED(5.0, "hpds", "hpds: dropped malformed PointCloud2 ("
                                                       << toString(error) << "): " << why);
@@ -321,26 +393,30 @@ double HpdsServer::handle(const sensor_msgs::PointCloud2::ConstPtr &msg) {
   // 2. Nobody listening: scan mode has nothing to keep, map mode still has to grow the map.
   const OutputRequest wants = subscribedOutputs();
   if (config_.hpds.mode == hpds::Mode::Scan && !wants.any()) {
-    processor_->countDrop(DropReason::NoSubscribers);
+    processor.countDrop(DropReason::NoSubscribers);
     return 0.0;
   }
 
   // 3. Sensor pose in the target frame at the message stamp.
   Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
   if (!target_frame_.empty() && !waitForPose(target_frame_, msg->header, pose, &why)) {
-    processor_->countDrop(DropReason::NoTransform);
+    processor.countDrop(DropReason::NoTransform);
     ROS_WARN_STREAM_THROTTLE_NAMED(5.0, "hpds", "hpds: dropped frame at " << msg->header.stamp << ": no transform '"
                                                                            << msg->header.frame_id << "' -> '"
                                                                            << target_frame_ << "': " << why);
     return 0.0;
   }
 
-  // 4. Shared per-frame processing, then publish what was built.
-  ProcessedFrame frame = processor_->process(*msg, pose, wants);
+  // 4. Shared per-frame processing, then publish what was built, in arrival order. With one worker its pipeline
+  //    counts the frames itself; several take the index of their frame in the stream.
+  const std::uint32_t index = turns.takeIndex();
+  if (processors_.size() > 1) processor.setNextFrameIndex(index);
+  ProcessedFrame frame = processor.process(*msg, pose, wants);
   if (!frame.processed) {
     ROS_ERROR_STREAM_THROTTLE_NAMED(5.0, "hpds", "hpds: dropped frame: " << frame.why);
     return 0.0;
   }
+  turns.waitToPublish();
   publish(frame);
   return frame.seconds;
 }
@@ -369,16 +445,20 @@ void HpdsServer::publish(ProcessedFrame &frame) {
   }
 }
 
-void HpdsServer::takeSnapshot(double frame_seconds) {
-  const hpds::Hierarchy &h = processor_->pipeline().hierarchy();
-  Snapshot s;
-  s.stats = processor_->stats();
-  for (int d = 0; d <= h.maxDepth(); ++d) s.samples_per_level.push_back(h.countAtLevel(d));
-  s.samples_total = h.sampleCount();
-  s.memory_bytes = h.memUsage();
+void HpdsServer::takeSnapshot(std::size_t worker, double frame_seconds) {
+  // Each worker reports its own processor; the hierarchy shown is the one of the frame finished last.
+  const FrameProcessor &processor = *processors_[worker];
+  const hpds::Hierarchy &h = processor.pipeline().hierarchy();
+  std::vector<std::size_t> per_level;
+  for (int d = 0; d <= h.maxDepth(); ++d) per_level.push_back(h.countAtLevel(d));
+  const ProcessorStats stats = processor.stats();
+  const std::size_t total = h.sampleCount(), memory = h.memUsage();
   std::lock_guard<std::mutex> lock(snapshot_mutex_);
-  s.seconds_max_window = std::max(snapshot_.seconds_max_window, frame_seconds);
-  snapshot_ = std::move(s);
+  snapshot_.stats[worker] = stats;
+  snapshot_.memory[worker] = memory;
+  snapshot_.samples_per_level = std::move(per_level);
+  snapshot_.samples_total = total;
+  snapshot_.seconds_max_window = std::max(snapshot_.seconds_max_window, frame_seconds);
 }
 
 void HpdsServer::diagnose(diagnostic_updater::DiagnosticStatusWrapper &status) {
@@ -396,7 +476,11 @@ void HpdsServer::diagnose(diagnostic_updater::DiagnosticStatusWrapper &status) {
   }
   const ros::WallTime now = ros::WallTime::now();
   const double window = std::max(1e-6, (now - window_start_).toSec());
-  const ProcessorStats &t = s.stats, &w = window_stats_;
+  ProcessorStats t;
+  for (const ProcessorStats &one : s.stats) t += one;
+  std::size_t memory_bytes = 0;
+  for (std::size_t m : s.memory) memory_bytes += m;
+  const ProcessorStats &w = window_stats_;
   const std::uint64_t frames_window = t.processed - w.processed;
   const std::uint64_t dropped_window =
       (t.droppedTotal() - w.droppedTotal()) + (overload - window_overload_) -
@@ -426,7 +510,7 @@ void HpdsServer::diagnose(diagnostic_updater::DiagnosticStatusWrapper &status) {
   status.add("samples stored", s.samples_total);
   for (std::size_t d = 0; d < s.samples_per_level.size(); ++d)
     status.add("samples level " + std::to_string(d), s.samples_per_level[d]);
-  status.add("memory in use [bytes]", s.memory_bytes);
+  status.add("memory in use [bytes]", memory_bytes);
 
   if (dropped_window > 0) {
     status.summaryf(diagnostic_msgs::DiagnosticStatus::WARN, "%llu frames dropped in the last %.1f s",

@@ -84,6 +84,8 @@ struct ProcessorStats {
 
   [[nodiscard]] std::uint64_t malformedTotal() const;
   [[nodiscard]] std::uint64_t droppedTotal() const;  ///< malformed + every DropReason
+  /// Totals of two processors (the node's scan-mode workers): counts and times add, seconds_max is the larger.
+  ProcessorStats &operator+=(const ProcessorStats &o);
 };
 
 class FrameProcessor {
@@ -110,6 +112,10 @@ class FrameProcessor {
   /// std::runtime_error ("<path>: <problem>") for a missing, corrupt, truncated or incompatible file, leaving the
   /// processor unchanged.
   void loadMap(const std::string &path);
+
+  /// Scan mode with several workers: the index (and with it the insertion-order seed) of the next frame, so that a
+  /// frame's output depends on its place in the stream, not on which worker's processor runs it.
+  void setNextFrameIndex(std::uint32_t index) { pipeline_.setNextFrameIndex(index); }
 
   [[nodiscard]] const ProcessorStats &stats() const { return stats_; }
   [[nodiscard]] const hpds::Pipeline &pipeline() const { return pipeline_; }

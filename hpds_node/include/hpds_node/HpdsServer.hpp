@@ -7,8 +7,11 @@
 // - Topics (private, remap them): ~input (sensor_msgs/PointCloud2) in; ~output, and in map mode ~new_samples and
 //   ~local_map, plus ~level_<D> for each ros.publish_levels entry, out. Diagnostics on /diagnostics.
 // - Threads: the subscriber callback only queues the message (ros.queue_size deep; when full the oldest is
-//   dropped and counted as overload, so the newest frame wins); one worker thread validates, waits for tf (at most
-//   ros.tf_timeout of wall time, then drops and counts), runs the shared FrameProcessor and publishes.
+//   dropped and counted as overload, so the newest frame wins); a worker thread validates, waits for tf (at most
+//   ros.tf_timeout of wall time, then drops and counts), runs its FrameProcessor and publishes. Map mode has one
+//   worker. Scan mode has `threads` workers (0 = all cores), each with its own processor running one thread: frames
+//   are taken in arrival order, get their frame index (the insertion-order seed) in that order after the checks
+//   that may drop them, and are published in that order, so the output is the same for any number of workers.
 // - Work is skipped when nobody listens: scan mode drops the frame (counted as no_subscribers) before converting;
 //   map mode still inserts it (the map must stay complete) but builds only the clouds that have subscribers.
 // - Services (private, std_srvs/Trigger): ~save_map writes the map to ros.map_file, ~load_map replaces the map
@@ -57,14 +60,16 @@ class HpdsServer {
 
  private:
   void onCloud(const sensor_msgs::PointCloud2::ConstPtr &msg);
-  void workerLoop();
+  // A frame's place in the stream: the index and publish turns it must take (or pass) in arrival order.
+  class Turns;
+  void workerLoop(std::size_t worker);
   /// Returns the processing time of the frame, 0 when it was dropped.
-  double handle(const sensor_msgs::PointCloud2::ConstPtr &msg);
+  double handle(const sensor_msgs::PointCloud2::ConstPtr &msg, std::size_t worker, Turns &turns);
   bool waitForPose(const std::string &target, const std_msgs::Header &header, Eigen::Isometry3d &pose,
                    std::string *why);
   [[nodiscard]] OutputRequest subscribedOutputs() const;
   void publish(ProcessedFrame &frame);
-  void takeSnapshot(double frame_seconds);
+  void takeSnapshot(std::size_t worker, double frame_seconds);
   void diagnose(diagnostic_updater::DiagnosticStatusWrapper &status);
 
   // Map persistence: a save or load request waiting for the worker.
@@ -79,7 +84,8 @@ class HpdsServer {
 
   ros::NodeHandle nh_, pnh_;
   NodeConfig config_;
-  std::unique_ptr<FrameProcessor> processor_;  // worker thread only
+  std::vector<std::unique_ptr<FrameProcessor>> processors_;  // one per worker, used by that worker only
+  FrameProcessor *processor_ = nullptr;                      // processors_[0]: map mode's only one
   std::string target_frame_;
 
   tf2_ros::Buffer tf_buffer_;
@@ -99,13 +105,21 @@ class HpdsServer {
   bool stopping_ = false;
   std::uint64_t received_ = 0;  // guarded by queue_mutex_
   std::uint64_t overload_ = 0;  // guarded by queue_mutex_
+  std::uint64_t next_ticket_ = 0;  // guarded by queue_mutex_: arrival order of the frames taken by the workers
+
+  // Turns, in ticket order: a frame's index is handed out, and its clouds published, only after every earlier
+  // frame's (a dropped frame passes both turns without using them).
+  std::mutex turn_mutex_;
+  std::condition_variable turn_cv_;
+  std::uint64_t index_turn_ = 0, publish_turn_ = 0;  // guarded by turn_mutex_
+  std::uint32_t next_frame_index_ = 0;               // guarded by turn_mutex_
 
   // What the diagnostics see: a copy the worker refreshes after every frame.
   struct Snapshot {
-    ProcessorStats stats;
+    std::vector<ProcessorStats> stats;  // per worker, summed for the report
+    std::vector<std::size_t> memory;    // per worker
     std::vector<std::size_t> samples_per_level;
     std::size_t samples_total = 0;
-    std::size_t memory_bytes = 0;
     double seconds_max_window = 0.0;  // reset by each diagnostics report
   };
   std::mutex snapshot_mutex_;
@@ -116,7 +130,7 @@ class HpdsServer {
   ProcessorStats window_stats_;
   std::uint64_t window_overload_ = 0;
 
-  std::thread worker_;  // last: started once everything above exists
+  std::vector<std::thread> workers_;  // last: started once everything above exists
 };
 
 }  // namespace hpds_node
