@@ -46,14 +46,11 @@ SampleId Hierarchy::sampleInCell(int level, const double xyz[3]) const {
 
 template <typename Test>
 double Hierarchy::walkConflicts(const LevelGrid &grid, double e, const double q[3], const CellKey &k, double radius,
-                                bool skip_own, const LevelGrid::Block *own_block, bool own_block_known,
-                                Test &&test) const {
-  if (grid.size() == 0) return -1.0;
+                                const LevelGrid::KnownBlock *known, Test &&test) const {
   // radius <= sqrt(3)/2 * e, so the ball never reaches past the 26 neighbours.
   // A neighbour side is taken only when even the rounding-widened ball reaches it.
   const double reach = radius + pruneSlack(q, e);
   const double prune = reach * reach;
-  constexpr int sh = LevelGrid::kBlockShift;
   const std::int32_t kc[3] = {k.x, k.y, k.z};
   std::int32_t c0[3], c1[3];
   for (int a = 0; a < 3; ++a) {
@@ -61,66 +58,42 @@ double Hierarchy::walkConflicts(const LevelGrid &grid, double e, const double q[
     c0[a] = kc[a] - (below * below <= prune ? 1 : 0);
     c1[a] = kc[a] + (above * above <= prune ? 1 : 0);
   }
-  // The window of candidate cells covers one or two blocks per axis. Each block is hashed once (the caller may
-  // pass q's own block, already looked up), and only its occupied cells inside the window are read: corner cells
-  // the ball misses cost a distance test only when occupied.
-  const std::int32_t own[3] = {k.x >> sh, k.y >> sh, k.z >> sh};
-  const std::uint64_t own_bit = std::uint64_t(1) << LevelGrid::localBit(k.x, k.y, k.z);
-  for (std::int32_t bz = c0[2] >> sh; bz <= (c1[2] >> sh); ++bz) {
-    const int zl = std::max(c0[2] - bz * 4, 0), zh = std::min(c1[2] - bz * 4, 3);
-    const std::uint64_t zm = LevelGrid::axisMask(2, zl, zh);
-    for (std::int32_t by = c0[1] >> sh; by <= (c1[1] >> sh); ++by) {
-      const int yl = std::max(c0[1] - by * 4, 0), yh = std::min(c1[1] - by * 4, 3);
-      const std::uint64_t yzm = zm & LevelGrid::axisMask(1, yl, yh);
-      for (std::int32_t bx = c0[0] >> sh; bx <= (c1[0] >> sh); ++bx) {
-        const int xl = std::max(c0[0] - bx * 4, 0), xh = std::min(c1[0] - bx * 4, 3);
-        const bool is_own = bx == own[0] && by == own[1] && bz == own[2];
-        const LevelGrid::Block *b = is_own && own_block_known ? own_block : grid.findBlock(bx, by, bz);
-        if (!b) continue;
-        std::uint64_t bits = b->mask & yzm & LevelGrid::axisMask(0, xl, xh);
-        if (is_own && skip_own) bits &= ~own_bit;
-        for (; bits != 0; bits &= bits - 1) {
-          const unsigned bit = static_cast<unsigned>(__builtin_ctzll(bits));
-          const double d2 = test(grid.idAt(*b, bit), *b, bit);
-          if (d2 >= 0.0) return d2;
-        }
-      }
-    }
-  }
-  return -1.0;
+  // The window covers one or two blocks per axis; corner cells the ball misses cost a distance test only when
+  // occupied.
+  double found = -1.0;
+  grid.anyInBox(
+      CellKey{c0[0], c0[1], c0[2]}, CellKey{c1[0], c1[1], c1[2]},
+      [&](SampleId s, const LevelGrid::Block &b, unsigned bit) {
+        found = test(s, b, bit);
+        return found >= 0.0;
+      },
+      known);
+  return found;
+}
+
+double Hierarchy::conflictWith(SampleId s, const double q[3], double r2, SampleId &witness) const {
+  const double d2 = distance2(position(s), q);
+  if (!(d2 < r2)) return -1.0;
+  witness = s;
+  return d2;
 }
 
 double Hierarchy::conflictIn(const LevelGrid &grid, double e, const double q[3], const CellKey &k, double radius,
-                             bool skip_own, SampleId &witness, const LevelGrid::Block *own_block,
-                             bool own_block_known) const {
+                             SampleId &witness, const LevelGrid::KnownBlock *known) const {
   const double r2 = radius * radius;
-  return walkConflicts(grid, e, q, k, radius, skip_own, own_block, own_block_known,
-                       [&](SampleId s, const LevelGrid::Block &, unsigned) {
-                         const double d2 = distance2(position(s), q);
-                         if (!(d2 < r2)) return -1.0;
-                         witness = s;
-                         return d2;
-                       });
+  return walkConflicts(grid, e, q, k, radius, known,
+                       [&](SampleId s, const LevelGrid::Block &, unsigned) { return conflictWith(s, q, r2, witness); });
 }
 
 double Hierarchy::passConflict(int level, const double q[3], const CellKey &k, SampleId &witness,
-                               const LevelGrid::Block *own_block) const {
+                               const LevelGrid::KnownBlock &own) const {
   const double r2 = radius2_[level];
-  auto nearer = [&](SampleId s) {
-    const double d2 = distance2(position(s), q);
-    if (!(d2 < r2)) return -1.0;
-    witness = s;
-    return d2;
-  };
-  return walkConflicts(pass_grid_, edge_[level], q, k, radius_[level], /*skip_own=*/true, own_block, true,
+  return walkConflicts(pass_grid_, edge_[level], q, k, radius_[level], &own,
                        [&](SampleId s, const LevelGrid::Block &b, unsigned bit) {
-                         if (!(s & kSharedCell)) return nearer(s);
-                         const double d2 = nearer(s & ~kSharedCell);
+                         if (!(s & kSharedCell)) return conflictWith(s, q, r2, witness);
+                         const double d2 = conflictWith(s & ~kSharedCell, q, r2, witness);
                          if (d2 >= 0.0) return d2;
-                         const CellKey c{b.x * 4 + static_cast<std::int32_t>(bit & 3),
-                                         b.y * 4 + static_cast<std::int32_t>((bit >> 2) & 3),
-                                         b.z * 4 + static_cast<std::int32_t>(bit >> 4)};
-                         return nearer(shared_.find(c));
+                         return conflictWith(shared_.find(LevelGrid::cellAt(b, bit)), q, r2, witness);
                        });
 }
 
@@ -268,11 +241,10 @@ InsertResult Hierarchy::insert(const InsertBatch &batch) {
       int next = d + 1;
       bool ok = true;
       SampleId witness = kNoSample;
-      constexpr int sh = LevelGrid::kBlockShift;
       if (pass_valid) {
         // The cell is taken when its occupant is of level d, or is a coarser sample that shares it with one.
-        const LevelGrid::Block *own = pass_grid_.findBlock(key.x >> sh, key.y >> sh, key.z >> sh);
-        const SampleId occupant = own ? pass_grid_.idAt(*own, LevelGrid::localBit(key.x, key.y, key.z)) : kNoSample;
+        const LevelGrid::KnownBlock own = ownBlock(pass_grid_, key);
+        const SampleId occupant = own.block ? pass_grid_.idAt(*own.block, LevelGrid::localBit(key.x, key.y, key.z)) : kNoSample;
         if (occupant != kNoSample) {
           const SampleId c = occupant & ~kSharedCell;
           const double d2 = distance2(position(c), q);
@@ -290,16 +262,16 @@ InsertResult Hierarchy::insert(const InsertBatch &batch) {
           }
         }
       } else {
-        const LevelGrid::Block *own = grids_[d].findBlock(key.x >> sh, key.y >> sh, key.z >> sh);
-        const SampleId occupant = own ? grids_[d].idAt(*own, LevelGrid::localBit(key.x, key.y, key.z)) : kNoSample;
+        const LevelGrid::KnownBlock own = ownBlock(grids_[d], key);
+        const SampleId occupant = own.block ? grids_[d].idAt(*own.block, LevelGrid::localBit(key.x, key.y, key.z)) : kNoSample;
         if (occupant != kNoSample) {
           ok = false;
           witness = occupant;
           next = nextLevelAfterConflict(d, distance2(position(occupant), q));
         }
         if (ok) {
-          double d2 = conflictIn(grids_[d], edge_[d], q, key, rd, /*skip_own=*/true, witness, own, /*own_block_known=*/true);
-          for (int l = d - 1; d2 < 0.0 && l >= 0; --l) d2 = conflictAt(l, q, coarsen(finest, l), rd, false, witness);
+          double d2 = conflictIn(grids_[d], edge_[d], q, key, rd, witness, &own);
+          for (int l = d - 1; d2 < 0.0 && l >= 0; --l) d2 = conflictAt(l, q, coarsen(finest, l), rd, witness);
           if (d2 >= 0.0) {
             ok = false;
             next = nextLevelAfterConflict(d, d2);
@@ -312,7 +284,7 @@ InsertResult Hierarchy::insert(const InsertBatch &batch) {
         // witness for level d, so it is not cached.
         SampleId finer = kNoSample;
         for (int l = finest_populated; l > d; --l) {
-          const double d2 = conflictAt(l, q, coarsen(finest, l), radius_[l], false, finer);
+          const double d2 = conflictAt(l, q, coarsen(finest, l), radius_[l], finer);
           if (d2 >= 0.0) {
             ok = false;
             next = std::max(l + 1, nextLevelAfterConflict(d, d2));

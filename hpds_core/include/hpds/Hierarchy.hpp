@@ -132,23 +132,32 @@ class Hierarchy {
     const double dx = a[0] - b[0], dy = a[1] - b[1], dz = a[2] - b[2];
     return dx * dx + dy * dy + dz * dz;
   }
-  /// Squared distance to some sample of `grid` (cells of edge `e`) strictly within `radius` of q (skipping q's own
-  /// cell when skip_own), or a negative value when there is none. `key` is q's cell in `grid`; radius <= sqrt(3)/2 e.
-  /// `own_block` is key's block when the caller already looked it up (own_block_known; nullptr = no such block).
-  /// `witness` receives the conflicting sample.
-  double conflictIn(const LevelGrid &grid, double e, const double q[3], const CellKey &key, double radius, bool skip_own,
-                    SampleId &witness, const LevelGrid::Block *own_block = nullptr, bool own_block_known = false) const;
-  /// The walk behind conflictIn: test(id, block, bit) gives the squared distance of a conflict or a negative value.
+  /// Squared distance to some sample of `grid` (cells of edge `e`) strictly within `radius` of q, or a negative value
+  /// when there is none. `key` is q's cell in `grid`; radius <= sqrt(3)/2 e. `known`: q's own block, looked up
+  /// already, with the cells to leave out (q's own when its occupant was tested apart). `witness` receives the
+  /// conflicting sample.
+  double conflictIn(const LevelGrid &grid, double e, const double q[3], const CellKey &key, double radius,
+                    SampleId &witness, const LevelGrid::KnownBlock *known = nullptr) const;
+  /// The window walk behind conflictIn: test(id, block, bit) gives the squared distance of a conflict or a negative
+  /// value.
   template <typename Test>
   double walkConflicts(const LevelGrid &grid, double e, const double q[3], const CellKey &key, double radius,
-                       bool skip_own, const LevelGrid::Block *own_block, bool own_block_known, Test &&test) const;
-  /// conflictIn for a level-`level` candidate in scan mode: pass_grid_ (samples of levels <= level), q's own cell
-  /// skipped (its block `own_block`, looked up already).
+                       const LevelGrid::KnownBlock *known, Test &&test) const;
+  /// The squared distance from sample s to q when below r2 (s becomes the witness), else a negative value.
+  double conflictWith(SampleId s, const double q[3], double r2, SampleId &witness) const;
+  /// conflictIn for a level-`level` candidate in scan mode: pass_grid_ (samples of levels <= level); `own` is q's
+  /// block, its cell left out.
   double passConflict(int level, const double q[3], const CellKey &key, SampleId &witness,
-                      const LevelGrid::Block *own_block) const;
+                      const LevelGrid::KnownBlock &own) const;
   /// conflictIn in the grid of `level`.
-  double conflictAt(int level, const double q[3], const CellKey &key, double radius, bool skip_own, SampleId &witness) const {
-    return conflictIn(grids_[level], edge_[level], q, key, radius, skip_own, witness);
+  double conflictAt(int level, const double q[3], const CellKey &key, double radius, SampleId &witness) const {
+    return conflictIn(grids_[level], edge_[level], q, key, radius, witness);
+  }
+  /// `key`'s block in `grid`, looked up, with `key`'s cell to be left out of a walk.
+  static LevelGrid::KnownBlock ownBlock(const LevelGrid &grid, const CellKey &key) {
+    constexpr int sh = LevelGrid::kBlockShift;
+    return LevelGrid::KnownBlock{key.x >> sh, key.y >> sh, key.z >> sh, grid.findBlock(key.x >> sh, key.y >> sh, key.z >> sh),
+                                 std::uint64_t(1) << LevelGrid::localBit(key.x, key.y, key.z)};
   }
   /// q's cell at `level` from its finest-level cell: nested power-of-two cells make this an exact shift.
   [[nodiscard]] CellKey coarsen(const CellKey &finest, int level) const {

@@ -95,11 +95,27 @@ class LevelGrid {
     return ids_[b.base + bitCount(b.mask & (m - 1))];
   }
 
-  /// Calls fn(SampleId) for every occupied cell with lo <= key <= hi on each axis; each block the box overlaps is
-  /// hashed once and only its occupied cells inside the box are read.
+  /// Key of local cell `bit` of block `b`.
+  [[nodiscard]] static CellKey cellAt(const Block &b, unsigned bit) {
+    constexpr std::int32_t n = 1 << kBlockShift;
+    return CellKey{b.x * n + static_cast<std::int32_t>(bit & 3), b.y * n + static_cast<std::int32_t>((bit >> 2) & 3),
+                   b.z * n + static_cast<std::int32_t>(bit >> 4)};
+  }
+
+  /// A block the caller has already looked up (`block`, nullptr when it does not exist), so that a box walk does not
+  /// hash it again, and the cells of it (`skip`, a mask of local bits) the walk must leave out.
+  struct KnownBlock {
+    std::int32_t x, y, z;  ///< block coordinates
+    const Block *block;
+    std::uint64_t skip;
+  };
+
+  /// Calls fn(id, block, bit) for the occupied cells with lo <= key <= hi on each axis; each block the box overlaps
+  /// is hashed once (`known` instead, when it is that block) and only its occupied cells inside the box are read.
+  /// Stops, and returns true, as soon as fn returns true.
   template <typename Fn>
-  void forEachInBox(const CellKey &lo, const CellKey &hi, Fn &&fn) const {
-    if (size_ == 0) return;
+  bool anyInBox(const CellKey &lo, const CellKey &hi, Fn &&fn, const KnownBlock *known = nullptr) const {
+    if (size_ == 0) return false;
     constexpr int sh = kBlockShift, n = 1 << kBlockShift;  // block coordinates are scaled by n, not shifted:
     // a left shift of a negative value is undefined in C++17
     for (std::int32_t bz = lo.z >> sh; bz <= (hi.z >> sh); ++bz) {
@@ -107,14 +123,28 @@ class LevelGrid {
       for (std::int32_t by = lo.y >> sh; by <= (hi.y >> sh); ++by) {
         const std::uint64_t yzm = zm & axisMask(1, std::max(lo.y - by * n, 0), std::min(hi.y - by * n, 3));
         for (std::int32_t bx = lo.x >> sh; bx <= (hi.x >> sh); ++bx) {
-          const Block *b = findBlock(bx, by, bz);
+          const bool is_known = known && bx == known->x && by == known->y && bz == known->z;
+          const Block *b = is_known ? known->block : findBlock(bx, by, bz);
           if (!b) continue;
-          for (std::uint64_t bits = b->mask & yzm & axisMask(0, std::max(lo.x - bx * n, 0), std::min(hi.x - bx * n, 3));
-               bits != 0; bits &= bits - 1)
-            fn(idAt(*b, static_cast<unsigned>(__builtin_ctzll(bits))));
+          std::uint64_t bits = b->mask & yzm & axisMask(0, std::max(lo.x - bx * n, 0), std::min(hi.x - bx * n, 3));
+          if (is_known) bits &= ~known->skip;
+          for (; bits != 0; bits &= bits - 1) {
+            const unsigned bit = static_cast<unsigned>(__builtin_ctzll(bits));
+            if (fn(idAt(*b, bit), *b, bit)) return true;
+          }
         }
       }
     }
+    return false;
+  }
+
+  /// Calls fn(SampleId) for every occupied cell with lo <= key <= hi on each axis (anyInBox without stopping).
+  template <typename Fn>
+  void forEachInBox(const CellKey &lo, const CellKey &hi, Fn &&fn) const {
+    anyInBox(lo, hi, [&](SampleId id, const Block &, unsigned) {
+      fn(id);
+      return false;
+    });
   }
 
   /// Sample in `key`'s cell, or kNoSample.
@@ -143,9 +173,7 @@ class LevelGrid {
     for (const Block &b : slots_)
       for (std::uint64_t m = b.mask; m != 0; m &= m - 1) {
         const unsigned bit = static_cast<unsigned>(__builtin_ctzll(m));
-        const CellKey k{b.x * 4 + static_cast<std::int32_t>(bit & 3), b.y * 4 + static_cast<std::int32_t>((bit >> 2) & 3),
-                        b.z * 4 + static_cast<std::int32_t>(bit >> 4)};
-        fn(k, idAt(b, bit));
+        fn(cellAt(b, bit), idAt(b, bit));
       }
   }
 
