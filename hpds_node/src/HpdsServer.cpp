@@ -96,7 +96,6 @@ HpdsServer::HpdsServer(ros::NodeHandle nh, ros::NodeHandle private_nh, const std
     : nh_(nh),
       pnh_(private_nh),
       config_(loadNodeConfigFromParams(private_nh)),
-      target_frame_(FrameProcessor(config_).targetFrame()),
       updater_(nh, private_nh, name) {
   // Scan mode: frames are independent, so `threads` workers take one frame each, each processor on one thread.
   const std::size_t workers =
@@ -104,7 +103,7 @@ HpdsServer::HpdsServer(ros::NodeHandle nh, ros::NodeHandle private_nh, const std
   NodeConfig per_worker = config_;
   if (workers > 1) per_worker.hpds.threads = 1;
   for (std::size_t w = 0; w < workers; ++w) processors_.push_back(std::make_unique<FrameProcessor>(per_worker));
-  processor_ = processors_[0].get();
+  target_frame_ = processors_.front()->targetFrame();
   const bool map_mode = config_.hpds.mode == hpds::Mode::Map;
   // Before anything is advertised: a node that cannot load its map does not appear at all.
   if (config_.ros.load_map_on_start) loadMapOnStart();
@@ -141,10 +140,10 @@ HpdsServer::HpdsServer(ros::NodeHandle nh, ros::NodeHandle private_nh, const std
   srv_load_map_ = pnh_.advertiseService<std_srvs::Trigger::Request, std_srvs::Trigger::Response>(
       "load_map", [this](auto &req, auto &res) { return onMapService(false, req, res); });
 
+  const int output_level = processors_.front()->pipeline().outputLevel();
   std::ostringstream summary;
-  summary << "hpds: " << hpds::toString(config_.hpds.mode) << " mode, output levels 0.."
-          << processor_->pipeline().outputLevel() << " (spacing "
-          << hpds::poissonRadius(config_.hpds.hierarchy.cell_size, processor_->pipeline().outputLevel()) << " m)";
+  summary << "hpds: " << hpds::toString(config_.hpds.mode) << " mode, output levels 0.." << output_level
+          << " (spacing " << hpds::poissonRadius(config_.hpds.hierarchy.cell_size, output_level) << " m)";
   if (!target_frame_.empty()) summary << ", outputs in frame '" << target_frame_ << "'";
   if (processors_.size() > 1) summary << ", " << processors_.size() << " frames in parallel";
   ROS_INFO_STREAM_NAMED("hpds", summary.str() << "; input " << sub_.getTopic() << ", output "
@@ -189,15 +188,16 @@ void HpdsServer::loadMapOnStart() {
 
 std::pair<bool, std::string> HpdsServer::runMapCommand(bool save) {
   const std::string &path = config_.ros.map_file;
-  const hpds::Pipeline &pipeline = processor_->pipeline();
+  FrameProcessor &processor = *processors_.front();  // map mode's only one
+  const hpds::Pipeline &pipeline = processor.pipeline();
   std::ostringstream msg;
   try {
     if (save) {
-      processor_->saveMap(path);
+      processor.saveMap(path);
       msg << "saved " << pipeline.hierarchy().sampleCount() << " samples (next frame index "
           << pipeline.framesProcessed() << ") to '" << path << "'";
     } else {
-      processor_->loadMap(path);
+      processor.loadMap(path);
       msg << "loaded " << pipeline.hierarchy().sampleCount() << " samples (next frame index "
           << pipeline.framesProcessed() << ") from '" << path << "'";
     }
@@ -277,18 +277,7 @@ class HpdsServer::Turns {
     s_.turn_cv_.notify_all();
   }
   /// The frame's index in the stream of frames that passed the checks.
-  std::uint32_t takeIndex() {
-    std::uint32_t index;
-    {
-      std::unique_lock<std::mutex> lock(s_.turn_mutex_);
-      s_.turn_cv_.wait(lock, [this] { return s_.index_turn_ == ticket_; });
-      index = s_.next_frame_index_++;
-      ++s_.index_turn_;
-    }
-    indexed_ = true;
-    s_.turn_cv_.notify_all();
-    return index;
-  }
+  std::uint32_t takeIndex() { return indexTurn(/*take=*/true); }
   /// Returns once every earlier frame has been published or dropped.
   void waitToPublish() {
     if (!indexed_) passIndexTurn();
@@ -297,17 +286,22 @@ class HpdsServer::Turns {
     publishing_ = true;
   }
   /// A dropped frame: its index turn goes by without an index.
-  void passIndexTurn() {
+  void passIndexTurn() { indexTurn(/*take=*/false); }
+
+ private:
+  std::uint32_t indexTurn(bool take) {
+    std::uint32_t index = 0;
     {
       std::unique_lock<std::mutex> lock(s_.turn_mutex_);
       s_.turn_cv_.wait(lock, [this] { return s_.index_turn_ == ticket_; });
+      if (take) index = s_.next_frame_index_++;
       ++s_.index_turn_;
     }
     indexed_ = true;
     s_.turn_cv_.notify_all();
+    return index;
   }
 
- private:
   HpdsServer &s_;
   std::uint64_t ticket_;
   bool indexed_ = false, publishing_ = false;

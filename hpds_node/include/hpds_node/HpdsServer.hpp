@@ -84,8 +84,8 @@ class HpdsServer {
 
   ros::NodeHandle nh_, pnh_;
   NodeConfig config_;
-  std::vector<std::unique_ptr<FrameProcessor>> processors_;  // one per worker, used by that worker only
-  FrameProcessor *processor_ = nullptr;                      // processors_[0]: map mode's only one
+  // One per worker, used by that worker only (map mode has one).
+  std::vector<std::unique_ptr<FrameProcessor>> processors_;
   std::string target_frame_;
 
   tf2_ros::Buffer tf_buffer_;
