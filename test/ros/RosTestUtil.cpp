@@ -13,6 +13,14 @@
 
 namespace hpds_test {
 
+int runRosTests(int argc, char **argv, const std::string &node_name) {
+  testing::InitGoogleTest(&argc, argv);
+  ros::init(argc, argv, node_name);
+  ros::AsyncSpinner spinner(2);
+  spinner.start();
+  return RUN_ALL_TESTS();
+}
+
 std::string sharedDataDir() {
   std::string dir;
   ros::NodeHandle("~").param<std::string>("data_dir", dir, "");

@@ -21,6 +21,10 @@
 
 namespace hpds_test {
 
+/// A test node's main: GoogleTest and ROS initialised (node `node_name`), an AsyncSpinner for the subscriptions,
+/// then every test.
+int runRosTests(int argc, char **argv, const std::string &node_name);
+
 /// The shared lidar folder from the test node's ~data_dir parameter, or empty when it is absent.
 std::string sharedDataDir();
 

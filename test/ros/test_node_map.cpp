@@ -181,10 +181,4 @@ TEST_F(MapTest, TwoScansBuildAPoissonMapInTheFixedFrame) {
 
 }  // namespace
 
-int main(int argc, char **argv) {
-  testing::InitGoogleTest(&argc, argv);
-  ros::init(argc, argv, "test_node_map");
-  ros::AsyncSpinner spinner(2);
-  spinner.start();
-  return RUN_ALL_TESTS();
-}
+int main(int argc, char **argv) { return hpds_test::runRosTests(argc, argv, "test_node_map"); }
