@@ -122,7 +122,8 @@ class Hierarchy {
 
   /// Bytes held by grids and sample storage (what the map costs between frames).
   [[nodiscard]] std::size_t memUsage() const;
-  /// Bytes of per-insert scratch (finest keys and level schedules, sized by the largest recent batch).
+  /// Bytes of per-insert scratch (finest keys, level schedules, the witness cache and the scan-mode pass grids,
+  /// sized by the largest recent batch).
   [[nodiscard]] std::size_t scratchBytes() const;
 
  private:
@@ -215,6 +216,7 @@ class Hierarchy {
   // Per-insert scratch, kept to avoid reallocating per frame: the finest-level cell of each ranked point and, per
   // level, a bitset of the ranks still to try there (scanning it yields rank order without sorting).
   std::vector<CellKey> finest_keys_;
+  std::vector<std::vector<std::uint64_t>> pending_;
   // Scan mode (a batch on an empty hierarchy): the finest cells of the samples accepted so far, and per pass d a
   // grid of level d's cells holding every sample of levels <= d; a level-d sample in a cell a coarser sample holds
   // is in shared_, and that cell's id in pass_grid_ carries kSharedCell.
@@ -222,7 +224,6 @@ class Hierarchy {
   std::vector<CellKey> accepted_keys_;
   LevelGrid pass_grid_;
   LevelGrid shared_;
-  std::vector<std::vector<std::uint64_t>> pending_;
   // Per-insert cache of rejection witnesses: slot = hash of (level, a finer cell around the point), holding the
   // position of a sample of that level or coarser that recently rejected or was accepted near there. The position
   // is kept in the slot so a hit needs no further load. Tag 0 marks an empty slot (a hash of 0 is only a miss).
