@@ -132,6 +132,74 @@ void Hierarchy::release(SampleId id) {
   --live_;
 }
 
+// Forced inline, like the pass loop's other helpers: it runs once per witness-cache miss.
+__attribute__((always_inline)) inline int Hierarchy::checkTry(int d, const double *q, const CellKey &finest,
+                                                              bool pass_valid, int finest_populated,
+                                                              SampleId &witness) const {
+  const double rd2 = radius2_[d];
+  const CellKey key = coarsen(finest, d);
+  if (pass_valid) {
+    // The cell is taken when its occupant is of level d, or is a coarser sample that shares it with one.
+    const LevelGrid::KnownBlock own = ownBlock(pass_grid_, key);
+    const SampleId occupant = own.block ? pass_grid_.idAt(*own.block, LevelGrid::localBit(key.x, key.y, key.z)) : kNoSample;
+    if (occupant != kNoSample) {
+      const SampleId c = occupant & ~kSharedCell;
+      const double d2 = distance2(position(c), q);
+      if ((occupant & kSharedCell) || level_[c] == d || d2 < rd2) {
+        witness = c;
+        return nextLevelAfterConflict(d, d2);
+      }
+    }
+    const double d2 = passConflict(d, q, key, witness, own);
+    if (d2 >= 0.0) return nextLevelAfterConflict(d, d2);
+  } else {
+    const LevelGrid::KnownBlock own = ownBlock(grids_[d], key);
+    const SampleId occupant = own.block ? grids_[d].idAt(*own.block, LevelGrid::localBit(key.x, key.y, key.z)) : kNoSample;
+    if (occupant != kNoSample) {
+      witness = occupant;
+      return nextLevelAfterConflict(d, distance2(position(occupant), q));
+    }
+    double d2 = conflictIn(grids_[d], edge_[d], q, key, radius_[d], witness, &own);
+    for (int l = d - 1; d2 < 0.0 && l >= 0; --l) d2 = conflictAt(l, q, coarsen(finest, l), radius_[d], witness);
+    if (d2 >= 0.0) return nextLevelAfterConflict(d, d2);
+  }
+  // Samples of finer levels (earlier batches) keep their own, smaller radius. A conflict at level l rules out every
+  // level <= l, so the point continues at l + 1 (or later, as above). Such a sample is no witness for level d, so it
+  // is not reported (the caller would cache it).
+  SampleId finer = kNoSample;
+  for (int l = finest_populated; l > d; --l) {
+    const double d2 = conflictAt(l, q, coarsen(finest, l), radius_[l], finer);
+    if (d2 >= 0.0) return std::max(l + 1, nextLevelAfterConflict(d, d2));
+  }
+  return d;
+}
+
+__attribute__((always_inline)) inline void Hierarchy::store(int d, const InsertBatch &batch, std::uint32_t pi,
+                                                            const double *q, const CellKey &finest, bool pass_valid,
+                                                            InsertResult &result) {
+  const CellKey key = coarsen(finest, d);
+  const SampleId id = allocate();
+  std::memcpy(&xyz_[3 * std::size_t(id)], q, 3 * sizeof(double));
+  level_[id] = static_cast<std::uint8_t>(d);
+  frame_[id] = batch.frame_index;
+  view_[id] = encodeViewDirection(batch.viewpoint[0] - q[0], batch.viewpoint[1] - q[1], batch.viewpoint[2] - q[2]);
+  if (batch.records && record_layout_.point_step)
+    std::memcpy(&records_[std::size_t(id) * record_layout_.point_step], batch.records + pi * batch.record_step,
+                record_layout_.point_step);
+  grids_[d].insert(key, id);
+  if (pass_valid && !pass_grid_.insert(key, id)) {
+    // A coarser sample holds the cell (a level-d one would have taken it): both stay findable.
+    const SampleId c = pass_grid_.find(key);
+    pass_grid_.erase(key);
+    pass_grid_.insert(key, c | kSharedCell);
+    shared_.insert(key, id);
+  }
+  ++live_;
+  ++result.accepted_per_level[d];
+  result.accepted.push_back(id);
+  accepted_keys_.push_back(finest);
+}
+
 InsertResult Hierarchy::insert(const InsertBatch &batch) {
   InsertResult result;
   if (batch.records && batch.record_step != record_layout_.point_step)
@@ -177,7 +245,7 @@ InsertResult Hierarchy::insert(const InsertBatch &batch) {
   const int slot_shift = 64 - __builtin_ctzll(slots);
 
   for (int d = 0; d <= max_depth_; ++d) {
-    const double rd = radius_[d], rd2 = radius2_[d];
+    const double rd2 = radius2_[d];
     // When the batch started on an empty hierarchy (scan mode), the samples of levels < d are exactly those accepted
     // so far: one grid of level d's cells holding them, and the level-d samples as they come, replaces the d + 1
     // per-level grid walks of a check. No two samples of levels < d share a level-d cell (they are at least
@@ -237,82 +305,10 @@ InsertResult Hierarchy::insert(const InsertBatch &batch) {
       }
       // From here on the point may be accepted: start fetching its record while the neighbourhood is checked.
       if (batch.records) __builtin_prefetch(batch.records + std::size_t(pi) * batch.record_step);
-      const CellKey key = coarsen(finest, d);
-      int next = d + 1;
-      bool ok = true;
       SampleId witness = kNoSample;
-      if (pass_valid) {
-        // The cell is taken when its occupant is of level d, or is a coarser sample that shares it with one.
-        const LevelGrid::KnownBlock own = ownBlock(pass_grid_, key);
-        const SampleId occupant = own.block ? pass_grid_.idAt(*own.block, LevelGrid::localBit(key.x, key.y, key.z)) : kNoSample;
-        if (occupant != kNoSample) {
-          const SampleId c = occupant & ~kSharedCell;
-          const double d2 = distance2(position(c), q);
-          if ((occupant & kSharedCell) || level_[c] == d || d2 < rd2) {
-            ok = false;
-            witness = c;
-            next = nextLevelAfterConflict(d, d2);
-          }
-        }
-        if (ok) {
-          const double d2 = passConflict(d, q, key, witness, own);
-          if (d2 >= 0.0) {
-            ok = false;
-            next = nextLevelAfterConflict(d, d2);
-          }
-        }
-      } else {
-        const LevelGrid::KnownBlock own = ownBlock(grids_[d], key);
-        const SampleId occupant = own.block ? grids_[d].idAt(*own.block, LevelGrid::localBit(key.x, key.y, key.z)) : kNoSample;
-        if (occupant != kNoSample) {
-          ok = false;
-          witness = occupant;
-          next = nextLevelAfterConflict(d, distance2(position(occupant), q));
-        }
-        if (ok) {
-          double d2 = conflictIn(grids_[d], edge_[d], q, key, rd, witness, &own);
-          for (int l = d - 1; d2 < 0.0 && l >= 0; --l) d2 = conflictAt(l, q, coarsen(finest, l), rd, witness);
-          if (d2 >= 0.0) {
-            ok = false;
-            next = nextLevelAfterConflict(d, d2);
-          }
-        }
-      }
-      if (ok) {
-        // Samples of finer levels (earlier batches) keep their own, smaller radius. A conflict at level l rules
-        // out every level <= l, so the point continues at l + 1 (or later, as above). Such a sample is no
-        // witness for level d, so it is not cached.
-        SampleId finer = kNoSample;
-        for (int l = finest_populated; l > d; --l) {
-          const double d2 = conflictAt(l, q, coarsen(finest, l), radius_[l], finer);
-          if (d2 >= 0.0) {
-            ok = false;
-            next = std::max(l + 1, nextLevelAfterConflict(d, d2));
-            break;
-          }
-        }
-      }
-      if (ok) {
-        const SampleId id = allocate();
-        std::memcpy(&xyz_[3 * std::size_t(id)], q, 3 * sizeof(double));
-        level_[id] = static_cast<std::uint8_t>(d);
-        frame_[id] = batch.frame_index;
-        view_[id] = encodeViewDirection(batch.viewpoint[0] - q[0], batch.viewpoint[1] - q[1], batch.viewpoint[2] - q[2]);
-        if (batch.records && record_layout_.point_step)
-          std::memcpy(&records_[std::size_t(id) * record_layout_.point_step], batch.records + pi * batch.record_step,
-                      record_layout_.point_step);
-        grids_[d].insert(key, id);
-        if (pass_valid && !pass_grid_.insert(key, id)) {
-          // A coarser sample holds the cell (a level-d one would have taken it): both stay findable.
-          const SampleId c = pass_grid_.find(key);
-          pass_grid_.erase(key);
-          pass_grid_.insert(key, c | kSharedCell);
-          shared_.insert(key, id);
-        }
-        ++live_;
-        ++result.accepted_per_level[d];
-        result.accepted.push_back(id);
-        accepted_keys_.push_back(finest);
+      const int next = checkTry(d, q, finest, pass_valid, finest_populated, witness);
+      if (next == d) {
+        store(d, batch, pi, q, finest, pass_valid, result);
         slot.remember(h, q);
       } else {
         if (witness != kNoSample) slot.remember(h, position(witness));

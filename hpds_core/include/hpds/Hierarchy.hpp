@@ -193,6 +193,15 @@ class Hierarchy {
   }
   template <typename Fn>
   void visitBall(int level, const double q[3], double radius, Fn &fn) const;
+  /// A level-d try of q after a witness-cache miss, against the samples stored so far: d when nothing rules q out,
+  /// else the next level to try. `witness` receives a conflicting sample of level <= d (a finer one is no witness
+  /// for level d and is not reported). `pass_valid`: the scan-mode pass grid is in use; `finest_populated`: the
+  /// finest level holding samples of earlier batches.
+  int checkTry(int d, const double *q, const CellKey &finest, bool pass_valid, int finest_populated,
+               SampleId &witness) const;
+  /// Stores q (batch point `pi`, finest cell `finest`) as a level-d sample: arrays, level grid, pass grid, result.
+  void store(int d, const InsertBatch &batch, std::uint32_t pi, const double *q, const CellKey &finest, bool pass_valid,
+             InsertResult &result);
   SampleId allocate();
   void release(SampleId id);
 
