@@ -110,6 +110,34 @@ TEST(RefinedNormals, GrowthSpansParallelScanLines) {
 
 }
 
+TEST(RefinedNormals, TooFewNeighboursGrowTheFootprintUntilThereAreEnough) {
+  // A plane sampled on a 0.2 m grid, far sparser than the output level: the base footprint (2.5 r_5 = 0.068 m) holds
+  // the sample alone, 2x still, 4x (0.27 m) the sample and its four nearest grid neighbours.
+  std::vector<double> xyz;
+  for (int i = 0; i < 20; ++i)
+    for (int j = 0; j < 20; ++j) xyz.insert(xyz.end(), {0.013 + 0.2 * i, 0.029 + 0.2 * j, 0.0});
+  const Hierarchy h = build(xyz, 6, 11);
+  const int level = 5;
+  std::vector<SampleId> ids;
+  for (SampleId id : h.samplesUpTo(level)) {
+    const double *p = h.position(id);
+    if (p[0] > 0.3 && p[0] < 3.6 && p[1] > 0.3 && p[1] < 3.6) ids.push_back(id);  // four neighbours each
+  }
+  ASSERT_EQ(ids.size(), 16u * 16u);
+  NormalParams p = params(level, 0, 2.5 * h.radius(level));
+  p.min_neighbors = 5;
+  p.neighborhood_level_offset = 0;
+  for (const double growth : {1.0, 2.0}) {
+    p.max_growth = growth;
+    for (const SampleNormal &n : estimateNormals(h, ids, p)) EXPECT_FALSE(n.valid) << "growth " << growth;
+  }
+  p.max_growth = 8.0;
+  for (const SampleNormal &n : estimateNormals(h, ids, p)) {
+    ASSERT_TRUE(n.valid);
+    EXPECT_NEAR(n.normal[2], 1.0f, 1e-6f);  // the viewpoint is above
+  }
+}
+
 TEST(RefinedNormals, ThreadCountDoesNotChangeResultsAndNormalsFaceTheViewpoint) {
   std::mt19937_64 rng(3);
   std::uniform_real_distribution<double> u(0.0, 3.0);

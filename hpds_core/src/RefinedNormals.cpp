@@ -138,8 +138,17 @@ std::vector<SampleNormal> estimateNormalsRefined(const Hierarchy &h, const std::
       PcaAccumulator acc(v.q);
       for (std::size_t t = 0; t < v.count; ++t)
         if (v.d2[t] < r2) acc.add(&v.xyz[3 * std::size_t(v.inside[t])]);
+      // Too few neighbours: nothing is chosen and the footprint grows whatever the PCA says (a neighbourhood only
+      // gains points as it grows, so no earlier round chose one either), so it is not solved. Most first rounds at
+      // fine levels end here: a footprint of a few centimetres holds a short piece of one scan line.
+      if (static_cast<int>(acc.count()) < params.min_neighbors) {
+        if (rho[i] * 2.0 > limit[i] * (1.0 + 1e-12)) return;
+        rho[i] *= 2.0;
+        again[i] = 1;
+        return;
+      }
       const LocalPca pca = acc.solveNormal();
-      const bool enough = static_cast<int>(acc.count()) >= params.min_neighbors && pca.valid;
+      const bool enough = pca.valid;
       const bool flat = pca.l0 <= params.max_plane_rms * params.max_plane_rms * r2;
       const bool not_line = pca.l1 >= params.line_ratio * pca.l2;
       if (enough && (!have[i] || (flat && not_line))) {
