@@ -107,6 +107,47 @@ TEST(BallGrid, MatchesBruteForceForPointsAndForeignQueries) {
   EXPECT_EQ(once[0].points, once[queries.size - 1].points);
 }
 
+TEST(BallGrid, KeysWiderThan32BitsVisitAsPackedKeysDo) {
+  // Clusters in a 30 m box at a 5 cm radius: 27-bit cell keys, sorted packed with the point index. The same points
+  // followed by three far beyond the box's upper corner: 48-bit keys, sorted as (key, index) pairs. The lower
+  // corner, hence every cell, stays the same, so each original point must see the same neighbours in the same order
+  // (cells by x, y, z; a cell's points by index), and they must be brute force's.
+  std::mt19937_64 rng(5);
+  std::uniform_real_distribution<double> u(0.0, 30.0);
+  std::normal_distribution<double> g(0.0, 0.03);
+  std::vector<double> xyz;
+  for (int c = 0; c < 400; ++c) {
+    const double cx = u(rng), cy = u(rng), cz = 0.1 * u(rng);
+    for (int k = 0; k < 8; ++k) xyz.insert(xyz.end(), {cx + g(rng), cy + g(rng), cz + g(rng)});
+  }
+  for (int i = 0; i < 20; ++i) xyz.insert(xyz.end(), {xyz[3 * i], xyz[3 * i + 1], xyz[3 * i + 2]});
+  const std::size_t n = xyz.size() / 3;
+  std::vector<double> wide = xyz;
+  for (int i = 1; i <= 3; ++i) wide.insert(wide.end(), {40.0 + 3000.0 * i, 40.0 + 3000.0 * i, 10.0 + 50.0 * i});
+  const double radius = 0.05;
+  const PointSet packed_set{xyz.data(), nullptr, n}, wide_set{wide.data(), nullptr, wide.size() / 3};
+  const auto packed = viaGrid(packed_set, packed_set, radius, 1);
+  const auto widened = viaGrid(wide_set, wide_set, radius, 3);
+  std::size_t pairs = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    ASSERT_EQ(widened[i].calls, 1);
+    ASSERT_EQ(widened[i].points, packed[i].points) << "point " << i;
+    ASSERT_EQ(widened[i].d2, packed[i].d2) << "point " << i;
+    std::vector<std::uint32_t> got = widened[i].points;
+    std::sort(got.begin(), got.end());
+    ASSERT_EQ(got, bruteForce(packed_set, packed_set.at(i), radius)) << "point " << i;
+    pairs += got.size() - 1;
+  }
+  EXPECT_GT(pairs, 2000u);  // the clusters do overlap the radius
+  for (std::size_t i = n; i < wide_set.size; ++i) EXPECT_EQ(widened[i].points, std::vector<std::uint32_t>{std::uint32_t(i)});
+  // Foreign queries (an index subset of the points) on the wide keys: the same neighbourhoods.
+  std::vector<std::uint32_t> subset;
+  for (std::uint32_t i = 0; i < n; i += 4) subset.push_back(i);
+  const PointSet queries{xyz.data(), subset.data(), subset.size()};
+  const auto foreign = viaGrid(wide_set, queries, radius, 2);
+  for (std::size_t t = 0; t < subset.size(); ++t) ASSERT_EQ(foreign[t].points, packed[subset[t]].points) << "query " << t;
+}
+
 TEST(BallGrid, EmptyDegenerateAndOutOfRangeInputs) {
   const std::vector<double> one = {1.0, 2.0, 3.0};
   // No points: every query is visited with no neighbours.

@@ -23,11 +23,15 @@ int bitWidth(std::uint64_t v) {
   return b;
 }
 
-/// Calls emit(key, i) for the elements of `set` with a cell (keyOf true), by ascending (key, i). Keys below 2^32
-/// (the usual case: up to 2^32 cells in the bounding box) are radix sorted packed with the index into one word;
-/// larger ones fall back to a comparison sort.
+/// Calls emit(key, i) for the elements of `set` with a cell (keyOf true), by ascending (key, i): stable LSD radix
+/// passes of at most 11 bits over the key, the index ascending to begin with. Keys below 2^32 (up to 2^32 cells in
+/// the bounding box) travel packed with the index in one word; wider ones (fine radii over a whole frame: a
+/// 3.4 cm radius over a 200 m VLS-128 frame needs 39 bits) as (key, index) pairs, which a comparison sort took
+/// 18% of that frame's default normals to order.
 template <typename KeyOf, typename Emit>
 void forEachSorted(const PointSet &set, const KeyOf &keyOf, int key_bits, Emit &&emit) {
+  const int passes = std::max(1, (key_bits + 10) / 11), width = (key_bits + passes - 1) / passes;
+  const std::size_t buckets = std::size_t(1) << width;
   if (key_bits <= 32) {
     std::vector<std::uint64_t> v(set.size), tmp;
     std::size_t kept = 0;
@@ -37,8 +41,6 @@ void forEachSorted(const PointSet &set, const KeyOf &keyOf, int key_bits, Emit &
     }
     v.resize(kept);
     // Stable LSD passes over the key's digits (the index, in the low word, is already ascending).
-    const int passes = std::max(1, (key_bits + 10) / 11), width = (key_bits + passes - 1) / passes;
-    const std::size_t buckets = std::size_t(1) << width;
     std::vector<std::uint32_t> count(buckets * passes, 0);
     for (const std::uint64_t x : v)
       for (int p = 0; p < passes; ++p) ++count[p * buckets + ((x >> (32 + p * width)) & (buckets - 1))];
@@ -58,14 +60,34 @@ void forEachSorted(const PointSet &set, const KeyOf &keyOf, int key_bits, Emit &
       emit(v[t] >> 32, static_cast<std::uint32_t>(v[t]));
     }
   } else {
-    std::vector<std::pair<std::uint64_t, std::uint32_t>> v;
+    struct Keyed {
+      std::uint64_t key;
+      std::uint32_t index;
+    };
+    std::vector<Keyed> v, tmp;
     v.reserve(set.size);
     for (std::size_t i = 0; i < set.size; ++i) {
       std::uint64_t key;
-      if (keyOf(set.at(i), key)) v.emplace_back(key, static_cast<std::uint32_t>(i));
+      if (keyOf(set.at(i), key)) v.push_back(Keyed{key, static_cast<std::uint32_t>(i)});
     }
-    std::sort(v.begin(), v.end());
-    for (const auto &[key, i] : v) emit(key, i);
+    const std::size_t kept = v.size();
+    std::vector<std::uint32_t> count(buckets * passes, 0);
+    for (const Keyed &x : v)
+      for (int p = 0; p < passes; ++p) ++count[p * buckets + ((x.key >> (p * width)) & (buckets - 1))];
+    tmp.resize(kept);
+    for (int p = 0; p < passes; ++p) {
+      std::uint32_t *c = &count[p * buckets];
+      if (kept == 0 || *std::max_element(c, c + buckets) == kept) continue;
+      std::uint32_t sum = 0;
+      for (std::size_t b = 0; b < buckets; ++b) sum += std::exchange(c[b], sum);
+      for (const Keyed &x : v) tmp[c[(x.key >> (p * width)) & (buckets - 1)]++] = x;
+      v.swap(tmp);
+    }
+    constexpr std::size_t kAhead = 8;
+    for (std::size_t t = 0; t < kept; ++t) {
+      if (t + kAhead < kept) prefetch(set.at(v[t + kAhead].index));
+      emit(v[t].key, v[t].index);
+    }
   }
 }
 
