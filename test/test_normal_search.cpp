@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "../hpds_core/src/BallGrid.hpp"
+#include "hpds/FrameGridIndex.hpp"
 #include "hpds/Hierarchy.hpp"
 #include "hpds/LocalPca.hpp"
 #include "hpds/NormalEstimator.hpp"
@@ -146,6 +147,54 @@ TEST(BallGrid, KeysWiderThan32BitsVisitAsPackedKeysDo) {
   const PointSet queries{xyz.data(), subset.data(), subset.size()};
   const auto foreign = viaGrid(wide_set, queries, radius, 2);
   for (std::size_t t = 0; t < subset.size(); ++t) ASSERT_EQ(foreign[t].points, packed[subset[t]].points) << "query " << t;
+}
+
+TEST(FrameGridIndex, NeighboursAndAnyWithinMatchBruteForceInAFixedOrder) {
+  // Clustered points with duplicates; the index over every point in ascending order and over the same points in a
+  // shuffled order must list each neighbourhood alike (cells by x, y, z; a cell's points by index), as brute force
+  // finds it, and anyWithin must agree with brute force for queries anywhere (near, between clusters, far away).
+  std::mt19937_64 rng(9);
+  std::uniform_real_distribution<double> u(-20.0, 20.0);
+  std::normal_distribution<double> g(0.0, 0.1);
+  std::vector<double> xyz;
+  for (int c = 0; c < 300; ++c) {
+    const double cx = u(rng), cy = u(rng), cz = 0.2 * u(rng);
+    for (int k = 0; k < 10; ++k) xyz.insert(xyz.end(), {cx + g(rng), cy + g(rng), cz + g(rng)});
+  }
+  for (int i = 0; i < 30; ++i) xyz.insert(xyz.end(), {xyz[3 * i], xyz[3 * i + 1], xyz[3 * i + 2]});
+  const std::size_t n = xyz.size() / 3;
+  const double radius = 0.2;
+  std::vector<std::uint32_t> ascending(n);
+  std::iota(ascending.begin(), ascending.end(), 0u);
+  std::vector<std::uint32_t> shuffled = ascending;
+  std::shuffle(shuffled.begin(), shuffled.end(), rng);
+  const FrameGridIndex a(xyz.data(), ascending, radius), b(xyz.data(), shuffled, radius);
+  const PointSet all{xyz.data(), nullptr, n};
+  std::size_t pairs = 0;
+  for (std::uint32_t i = 0; i < n; ++i) {
+    std::vector<std::uint32_t> from_a, from_b;
+    a.forEachNeighbor(i, [&](std::uint32_t j) { from_a.push_back(j); });
+    b.forEachNeighbor(i, [&](std::uint32_t j) { from_b.push_back(j); });
+    ASSERT_EQ(from_a, from_b) << "point " << i;
+    std::sort(from_a.begin(), from_a.end());
+    ASSERT_EQ(from_a, bruteForce(all, all.at(i), radius)) << "point " << i;
+    pairs += from_a.size() - 1;
+  }
+  EXPECT_GT(pairs, 3000u);
+  std::uniform_real_distribution<double> wide(-25.0, 25.0);
+  std::size_t near = 0;
+  for (int t = 0; t < 20000; ++t) {
+    const std::size_t base = static_cast<std::size_t>(t) % n;
+    double q[3] = {xyz[3 * base] + 0.3 * g(rng), xyz[3 * base + 1] + 0.3 * g(rng), xyz[3 * base + 2] + 0.3 * g(rng)};
+    if (t % 4 == 0) q[0] = wide(rng), q[1] = wide(rng), q[2] = wide(rng);
+    if (t == 1) q[0] = 1e9;  // beyond the index's cells: nothing near
+    const bool want = !bruteForce(all, q, radius).empty();
+    near += want ? 1 : 0;
+    ASSERT_EQ(a.anyWithin(q), want) << "query " << t;
+    ASSERT_EQ(b.anyWithin(q), want) << "query " << t;
+  }
+  EXPECT_GT(near, 5000u);
+  EXPECT_LT(near, 19000u);
 }
 
 TEST(BallGrid, EmptyDegenerateAndOutOfRangeInputs) {

@@ -1,5 +1,7 @@
 #include "BallGrid.hpp"
 
+#include "KeyRadixSort.hpp"
+
 #include <algorithm>
 #include <cmath>
 #include <utility>
@@ -26,13 +28,13 @@ int bitWidth(std::uint64_t v) {
 /// Calls emit(key, i) for the elements of `set` with a cell (keyOf true), by ascending (key, i): stable LSD radix
 /// passes of at most 11 bits over the key, the index ascending to begin with. Keys below 2^32 (up to 2^32 cells in
 /// the bounding box) travel packed with the index in one word; wider ones (fine radii over a whole frame: a
-/// 3.4 cm radius over a 200 m VLS-128 frame needs 39 bits) as (key, index) pairs, which a comparison sort took
-/// 18% of that frame's default normals to order.
+/// 3.4 cm radius over a 200 m VLS-128 frame needs 39 bits) as (key, index) records (sortByKeyStable), where a
+/// comparison sort took 18% of that frame's default normals.
 template <typename KeyOf, typename Emit>
 void forEachSorted(const PointSet &set, const KeyOf &keyOf, int key_bits, Emit &&emit) {
-  const int passes = std::max(1, (key_bits + 10) / 11), width = (key_bits + passes - 1) / passes;
-  const std::size_t buckets = std::size_t(1) << width;
   if (key_bits <= 32) {
+    const int passes = std::max(1, (key_bits + 10) / 11), width = (key_bits + passes - 1) / passes;
+    const std::size_t buckets = std::size_t(1) << width;
     std::vector<std::uint64_t> v(set.size), tmp;
     std::size_t kept = 0;
     for (std::size_t i = 0; i < set.size; ++i) {
@@ -60,32 +62,16 @@ void forEachSorted(const PointSet &set, const KeyOf &keyOf, int key_bits, Emit &
       emit(v[t] >> 32, static_cast<std::uint32_t>(v[t]));
     }
   } else {
-    struct Keyed {
-      std::uint64_t key;
-      std::uint32_t index;
-    };
-    std::vector<Keyed> v, tmp;
+    std::vector<KeyedIndex> v;
     v.reserve(set.size);
     for (std::size_t i = 0; i < set.size; ++i) {
       std::uint64_t key;
-      if (keyOf(set.at(i), key)) v.push_back(Keyed{key, static_cast<std::uint32_t>(i)});
+      if (keyOf(set.at(i), key)) v.push_back(KeyedIndex{key, static_cast<std::uint32_t>(i)});
     }
-    const std::size_t kept = v.size();
-    std::vector<std::uint32_t> count(buckets * passes, 0);
-    for (const Keyed &x : v)
-      for (int p = 0; p < passes; ++p) ++count[p * buckets + ((x.key >> (p * width)) & (buckets - 1))];
-    tmp.resize(kept);
-    for (int p = 0; p < passes; ++p) {
-      std::uint32_t *c = &count[p * buckets];
-      if (kept == 0 || *std::max_element(c, c + buckets) == kept) continue;
-      std::uint32_t sum = 0;
-      for (std::size_t b = 0; b < buckets; ++b) sum += std::exchange(c[b], sum);
-      for (const Keyed &x : v) tmp[c[(x.key >> (p * width)) & (buckets - 1)]++] = x;
-      v.swap(tmp);
-    }
+    sortByKeyStable(v, key_bits);
     constexpr std::size_t kAhead = 8;
-    for (std::size_t t = 0; t < kept; ++t) {
-      if (t + kAhead < kept) prefetch(set.at(v[t + kAhead].index));
+    for (std::size_t t = 0; t < v.size(); ++t) {
+      if (t + kAhead < v.size()) prefetch(set.at(v[t + kAhead].index));
       emit(v[t].key, v[t].index);
     }
   }

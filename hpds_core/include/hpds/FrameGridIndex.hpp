@@ -1,4 +1,5 @@
-// FrameGridIndex: fixed-radius neighbour search over one frame's points, for the feature-sensitive orders.
+// FrameGridIndex: fixed-radius neighbour search over one frame's points, for the feature-sensitive orders and
+// the map-mode output selection (Pipeline::samplesHitByLastFrame).
 //
 // Contract: built once per frame from a subset of point indices; cells of edge = radius, points bucketed by
 // sorting their packed cell keys, then hashing the distinct keys (a few allocations per build, none per query). The hierarchy is not built yet when
@@ -22,11 +23,28 @@ class FrameGridIndex {
     forEachWithin(xyz_ + 3 * std::size_t(center), fn);
   }
 
-  /// True when some indexed point lies strictly within `radius` of `q` (any position, indexed or not).
+  /// True when some indexed point lies strictly within `radius` of `q` (any position, indexed or not). Stops at the
+  /// first such point, looking in q's own cell first (where one most often is).
   [[nodiscard]] bool anyWithin(const double q[3]) const {
-    bool found = false;
-    forEachWithin(q, [&](std::uint32_t) { found = true; });
-    return found;
+    std::int64_t k[3];
+    if (!cellOf(q, k)) return false;
+    const double r2 = radius_ * radius_;
+    auto inCell = [&](std::int64_t dx, std::int64_t dy, std::int64_t dz) {
+      std::size_t b, e;
+      if (!range(pack(k[0] + dx, k[1] + dy, k[2] + dz), b, e)) return false;
+      for (std::size_t i = b; i < e; ++i) {
+        const double *p = xyz_ + 3 * std::size_t(points_[i]);
+        const double ax = p[0] - q[0], ay = p[1] - q[1], az = p[2] - q[2];
+        if (ax * ax + ay * ay + az * az < r2) return true;
+      }
+      return false;
+    };
+    if (inCell(0, 0, 0)) return true;
+    for (int dx = -1; dx <= 1; ++dx)
+      for (int dy = -1; dy <= 1; ++dy)
+        for (int dz = -1; dz <= 1; ++dz)
+          if ((dx | dy | dz) != 0 && inCell(dx, dy, dz)) return true;
+    return false;
   }
 
   /// Calls fn(point_index) for every indexed point strictly within `radius` of `q`.
