@@ -23,29 +23,10 @@ class FrameGridIndex {
     forEachWithin(xyz_ + 3 * std::size_t(center), fn);
   }
 
-  /// True when some indexed point lies strictly within `radius` of `q` (any position, indexed or not). Stops at the
-  /// first such point, looking in q's own cell first (where one most often is).
-  [[nodiscard]] bool anyWithin(const double q[3]) const {
-    std::int64_t k[3];
-    if (!cellOf(q, k)) return false;
-    const double r2 = radius_ * radius_;
-    auto inCell = [&](std::int64_t dx, std::int64_t dy, std::int64_t dz) {
-      std::size_t b, e;
-      if (!range(pack(k[0] + dx, k[1] + dy, k[2] + dz), b, e)) return false;
-      for (std::size_t i = b; i < e; ++i) {
-        const double *p = xyz_ + 3 * std::size_t(points_[i]);
-        const double ax = p[0] - q[0], ay = p[1] - q[1], az = p[2] - q[2];
-        if (ax * ax + ay * ay + az * az < r2) return true;
-      }
-      return false;
-    };
-    if (inCell(0, 0, 0)) return true;
-    for (int dx = -1; dx <= 1; ++dx)
-      for (int dy = -1; dy <= 1; ++dy)
-        for (int dz = -1; dz <= 1; ++dz)
-          if ((dx | dy | dz) != 0 && inCell(dx, dy, dz)) return true;
-    return false;
-  }
+  /// True when some indexed point lies strictly within `radius` of `q` (any position, indexed or not). Reads the
+  /// occupancy masks of the (one to eight) 8x8x8-cell groups around q first, so a q with no point nearby costs a
+  /// lookup or two instead of 27; stops at the first point within the radius, q's own cell tried first.
+  [[nodiscard]] bool anyWithin(const double q[3]) const;
 
   /// Calls fn(point_index) for every indexed point strictly within `radius` of `q`.
   template <typename Fn>
@@ -69,7 +50,13 @@ class FrameGridIndex {
  private:
   bool cellOf(const double *p, std::int64_t k[3]) const;
   static std::uint64_t pack(std::int64_t x, std::int64_t y, std::int64_t z);
+  static constexpr std::uint32_t kNoCell = 0xFFFFFFFFu;
+  /// Index of the cell with packed key `key` in keys_, or kNoCell.
+  [[nodiscard]] std::uint32_t cellIndex(std::uint64_t key) const;
   bool range(std::uint64_t key, std::size_t &begin, std::size_t &end) const;
+  /// The 512-bit occupancy mask (8 words; word z & 7, bit (x & 7) | (y & 7) << 3) of the group of cells with group
+  /// key `group` (cell coordinates >> 3, packed), or nullptr when none of its cells holds a point.
+  [[nodiscard]] const std::uint64_t *groupMask(std::uint64_t group) const;
 
   const double *xyz_;
   double radius_, inv_;
@@ -82,6 +69,11 @@ class FrameGridIndex {
   std::vector<std::uint64_t> table_keys_;
   std::vector<std::uint32_t> table_index_;
   std::size_t table_mask_ = 0;
+  // Groups of 8x8x8 cells that hold points: the same kind of table, to their occupancy masks (8 words each).
+  std::vector<std::uint64_t> group_keys_;
+  std::vector<std::uint32_t> group_index_;
+  std::vector<std::uint64_t> group_masks_;
+  std::size_t group_mask_ = 0;
 };
 
 }  // namespace hpds
