@@ -46,6 +46,21 @@ std::vector<Found> viaGrid(const PointSet &points, const PointSet &queries, doub
   return out;
 }
 
+/// `clusters` clusters of `per_cluster` points: centres uniform in [lo, hi) on x and y and z_scale times that on z,
+/// points normally scattered by sigma around them; then copies of the first `duplicates` points.
+std::vector<double> clusteredPoints(std::mt19937_64 &rng, int clusters, int per_cluster, double lo, double hi,
+                                    double sigma, double z_scale, int duplicates) {
+  std::uniform_real_distribution<double> u(lo, hi);
+  std::normal_distribution<double> g(0.0, sigma);
+  std::vector<double> xyz;
+  for (int c = 0; c < clusters; ++c) {
+    const double cx = u(rng), cy = u(rng), cz = z_scale * u(rng);
+    for (int k = 0; k < per_cluster; ++k) xyz.insert(xyz.end(), {cx + g(rng), cy + g(rng), cz + g(rng)});
+  }
+  for (int i = 0; i < duplicates; ++i) xyz.insert(xyz.end(), {xyz[3 * i], xyz[3 * i + 1], xyz[3 * i + 2]});
+  return xyz;
+}
+
 std::vector<std::uint32_t> bruteForce(const PointSet &points, const double *q, double radius) {
   std::vector<std::uint32_t> out;
   for (std::size_t j = 0; j < points.size; ++j) {
@@ -114,14 +129,7 @@ TEST(BallGrid, KeysWiderThan32BitsVisitAsPackedKeysDo) {
   // corner, hence every cell, stays the same, so each original point must see the same neighbours in the same order
   // (cells by x, y, z; a cell's points by index), and they must be brute force's.
   std::mt19937_64 rng(5);
-  std::uniform_real_distribution<double> u(0.0, 30.0);
-  std::normal_distribution<double> g(0.0, 0.03);
-  std::vector<double> xyz;
-  for (int c = 0; c < 400; ++c) {
-    const double cx = u(rng), cy = u(rng), cz = 0.1 * u(rng);
-    for (int k = 0; k < 8; ++k) xyz.insert(xyz.end(), {cx + g(rng), cy + g(rng), cz + g(rng)});
-  }
-  for (int i = 0; i < 20; ++i) xyz.insert(xyz.end(), {xyz[3 * i], xyz[3 * i + 1], xyz[3 * i + 2]});
+  const std::vector<double> xyz = clusteredPoints(rng, 400, 8, 0.0, 30.0, 0.03, 0.1, 20);
   const std::size_t n = xyz.size() / 3;
   std::vector<double> wide = xyz;
   for (int i = 1; i <= 3; ++i) wide.insert(wide.end(), {40.0 + 3000.0 * i, 40.0 + 3000.0 * i, 10.0 + 50.0 * i});
@@ -154,14 +162,8 @@ TEST(FrameGridIndex, NeighboursAndAnyWithinMatchBruteForceInAFixedOrder) {
   // shuffled order must list each neighbourhood alike (cells by x, y, z; a cell's points by index), as brute force
   // finds it, and anyWithin must agree with brute force for queries anywhere (near, between clusters, far away).
   std::mt19937_64 rng(9);
-  std::uniform_real_distribution<double> u(-20.0, 20.0);
+  const std::vector<double> xyz = clusteredPoints(rng, 300, 10, -20.0, 20.0, 0.1, 0.2, 30);
   std::normal_distribution<double> g(0.0, 0.1);
-  std::vector<double> xyz;
-  for (int c = 0; c < 300; ++c) {
-    const double cx = u(rng), cy = u(rng), cz = 0.2 * u(rng);
-    for (int k = 0; k < 10; ++k) xyz.insert(xyz.end(), {cx + g(rng), cy + g(rng), cz + g(rng)});
-  }
-  for (int i = 0; i < 30; ++i) xyz.insert(xyz.end(), {xyz[3 * i], xyz[3 * i + 1], xyz[3 * i + 2]});
   const std::size_t n = xyz.size() / 3;
   const double radius = 0.2;
   std::vector<std::uint32_t> ascending(n);

@@ -19,12 +19,6 @@ inline void prefetch(const void *p) {
 #endif
 }
 
-int bitWidth(std::uint64_t v) {
-  int b = 0;
-  while (v) ++b, v >>= 1;
-  return b;
-}
-
 /// Calls emit(key, i) for the elements of `set` with a cell (keyOf true), by ascending (key, i): stable LSD radix
 /// passes of at most 11 bits over the key, the index ascending to begin with. Keys below 2^32 (up to 2^32 cells in
 /// the bounding box) travel packed with the index in one word; wider ones (fine radii over a whole frame: a
@@ -33,28 +27,15 @@ int bitWidth(std::uint64_t v) {
 template <typename KeyOf, typename Emit>
 void forEachSorted(const PointSet &set, const KeyOf &keyOf, int key_bits, Emit &&emit) {
   if (key_bits <= 32) {
-    const int passes = std::max(1, (key_bits + 10) / 11), width = (key_bits + passes - 1) / passes;
-    const std::size_t buckets = std::size_t(1) << width;
-    std::vector<std::uint64_t> v(set.size), tmp;
+    std::vector<std::uint64_t> v(set.size);
     std::size_t kept = 0;
     for (std::size_t i = 0; i < set.size; ++i) {
       std::uint64_t key;
       if (keyOf(set.at(i), key)) v[kept++] = key << 32 | i;
     }
     v.resize(kept);
-    // Stable LSD passes over the key's digits (the index, in the low word, is already ascending).
-    std::vector<std::uint32_t> count(buckets * passes, 0);
-    for (const std::uint64_t x : v)
-      for (int p = 0; p < passes; ++p) ++count[p * buckets + ((x >> (32 + p * width)) & (buckets - 1))];
-    tmp.resize(kept);
-    for (int p = 0; p < passes; ++p) {
-      std::uint32_t *c = &count[p * buckets];
-      if (kept == 0 || *std::max_element(c, c + buckets) == kept) continue;  // one digit value: nothing moves
-      std::uint32_t sum = 0;
-      for (std::size_t b = 0; b < buckets; ++b) sum += std::exchange(c[b], sum);
-      for (const std::uint64_t x : v) tmp[c[(x >> (32 + p * width)) & (buckets - 1)]++] = x;
-      v.swap(tmp);
-    }
+    // The index, in the low word, is already ascending.
+    sortByKeyStable(v, key_bits, [](std::uint64_t x) { return x >> 32; });
     // The caller reads each element's position in this (spatial) order, scattered in memory: fetch ahead.
     constexpr std::size_t kAhead = 8;
     for (std::size_t t = 0; t < kept; ++t) {

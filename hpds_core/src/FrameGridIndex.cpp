@@ -44,9 +44,7 @@ FrameGridIndex::FrameGridIndex(const double *xyz, const std::vector<std::uint32_
   }
   if (!std::is_sorted(subset.begin(), subset.end()))
     std::sort(keyed.begin(), keyed.end(), [](const KeyedIndex &a, const KeyedIndex &b) { return a.index < b.index; });
-  int key_bits = 0;
-  while (key_bits < 64 && (widest >> key_bits) != 0) ++key_bits;
-  sortByKeyStable(keyed, key_bits);
+  sortByKeyStable(keyed, bitWidth(widest));
   points_.reserve(keyed.size());
   for (std::size_t i = 0; i < keyed.size(); ++i) {
     if (i == 0 || keyed[i].key != keyed[i - 1].key) {

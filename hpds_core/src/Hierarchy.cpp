@@ -141,7 +141,7 @@ __attribute__((always_inline)) inline int Hierarchy::checkTry(int d, const doubl
   if (pass_valid) {
     // The cell is taken when its occupant is of level d, or is a coarser sample that shares it with one.
     const LevelGrid::KnownBlock own = ownBlock(pass_grid_, key);
-    const SampleId occupant = own.block ? pass_grid_.idAt(*own.block, LevelGrid::localBit(key.x, key.y, key.z)) : kNoSample;
+    const SampleId occupant = ownOccupant(pass_grid_, own);
     if (occupant != kNoSample) {
       const SampleId c = occupant & ~kSharedCell;
       const double d2 = distance2(position(c), q);
@@ -154,7 +154,7 @@ __attribute__((always_inline)) inline int Hierarchy::checkTry(int d, const doubl
     if (d2 >= 0.0) return nextLevelAfterConflict(d, d2);
   } else {
     const LevelGrid::KnownBlock own = ownBlock(grids_[d], key);
-    const SampleId occupant = own.block ? grids_[d].idAt(*own.block, LevelGrid::localBit(key.x, key.y, key.z)) : kNoSample;
+    const SampleId occupant = ownOccupant(grids_[d], own);
     if (occupant != kNoSample) {
       witness = occupant;
       return nextLevelAfterConflict(d, distance2(position(occupant), q));

@@ -138,25 +138,22 @@ std::vector<SampleNormal> estimateNormalsRefined(const Hierarchy &h, const std::
       PcaAccumulator acc(v.q);
       for (std::size_t t = 0; t < v.count; ++t)
         if (v.d2[t] < r2) acc.add(&v.xyz[3 * std::size_t(v.inside[t])]);
-      // Too few neighbours: nothing is chosen and the footprint grows whatever the PCA says (a neighbourhood only
-      // gains points as it grows, so no earlier round chose one either), so it is not solved. Most first rounds at
-      // fine levels end here: a footprint of a few centimetres holds a short piece of one scan line.
-      if (static_cast<int>(acc.count()) < params.min_neighbors) {
-        if (rho[i] * 2.0 > limit[i] * (1.0 + 1e-12)) return;
-        rho[i] *= 2.0;
-        again[i] = 1;
-        return;
+      // Too few neighbours: nothing is chosen and only the limit stops growth, whatever the PCA says (a
+      // neighbourhood only gains points as it grows, so no earlier round chose one either), so it is not solved.
+      // Most first rounds at fine levels are such: a footprint of a few centimetres holds a short piece of one line.
+      bool settled = false;
+      if (static_cast<int>(acc.count()) >= params.min_neighbors) {
+        const LocalPca pca = acc.solveNormal();
+        const bool flat = pca.l0 <= params.max_plane_rms * params.max_plane_rms * r2;
+        const bool not_line = pca.l1 >= params.line_ratio * pca.l2;
+        if (pca.valid && (!have[i] || (flat && not_line))) {
+          chosen[i] = pca;
+          have[i] = 1;
+          if (not_line) return;
+        }
+        settled = have[i] && !flat;
       }
-      const LocalPca pca = acc.solveNormal();
-      const bool enough = pca.valid;
-      const bool flat = pca.l0 <= params.max_plane_rms * params.max_plane_rms * r2;
-      const bool not_line = pca.l1 >= params.line_ratio * pca.l2;
-      if (enough && (!have[i] || (flat && not_line))) {
-        chosen[i] = pca;
-        have[i] = 1;
-        if (not_line) return;
-      }
-      if ((have[i] && !flat) || rho[i] * 2.0 > limit[i] * (1.0 + 1e-12)) return;
+      if (settled || rho[i] * 2.0 > limit[i] * (1.0 + 1e-12)) return;
       rho[i] *= 2.0;
       again[i] = 1;
     });

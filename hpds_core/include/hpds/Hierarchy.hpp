@@ -160,6 +160,10 @@ class Hierarchy {
     return LevelGrid::KnownBlock{key.x >> sh, key.y >> sh, key.z >> sh, grid.findBlock(key.x >> sh, key.y >> sh, key.z >> sh),
                                  std::uint64_t(1) << LevelGrid::localBit(key.x, key.y, key.z)};
   }
+  /// The sample in the cell that `own` (from ownBlock) leaves out, or kNoSample.
+  static SampleId ownOccupant(const LevelGrid &grid, const LevelGrid::KnownBlock &own) {
+    return own.block ? grid.idAt(*own.block, static_cast<unsigned>(__builtin_ctzll(own.skip))) : kNoSample;
+  }
   /// q's cell at `level` from its finest-level cell: nested power-of-two cells make this an exact shift.
   [[nodiscard]] CellKey coarsen(const CellKey &finest, int level) const {
     const int shift = max_depth_ - level;
