@@ -218,7 +218,7 @@ InsertResult Hierarchy::insert(const InsertBatch &batch) {
   const std::size_t n = batch.order_size;
   const std::size_t words = (n + 63) / 64;
   for (auto &p : pending_) p.assign(words, 0);
-  finest_keys_.resize(n);
+  ranked_.resize(n);
   accepted_keys_.clear();
   const double ef = edge_[max_depth_], ief = inv_edge_[max_depth_];
   for (std::uint32_t rank = 0; rank < n; ++rank) {
@@ -226,7 +226,9 @@ InsertResult Hierarchy::insert(const InsertBatch &batch) {
     if (rank + kPrefetchDistance < n) __builtin_prefetch(batch.xyz + 3 * std::size_t(batch.order[rank + kPrefetchDistance]));
     const double *q = batch.xyz + 3 * std::size_t(batch.order[rank]);
     if (inCellRange(q[0], ief) && inCellRange(q[1], ief) && inCellRange(q[2], ief)) {
-      finest_keys_[rank] = CellKey{exactCellCoord(q[0], ef, ief), exactCellCoord(q[1], ef, ief), exactCellCoord(q[2], ef, ief)};
+      RankedPoint &rp = ranked_[rank];
+      std::memcpy(rp.xyz, q, 3 * sizeof(double));
+      rp.finest = CellKey{exactCellCoord(q[0], ef, ief), exactCellCoord(q[1], ef, ief), exactCellCoord(q[2], ef, ief)};
       schedule(0, rank);
     } else {
       ++result.out_of_range;
@@ -278,8 +280,7 @@ InsertResult Hierarchy::insert(const InsertBatch &batch) {
       }
       const std::uint32_t r = static_cast<std::uint32_t>(ahead_w * 64 + static_cast<std::size_t>(__builtin_ctzll(ahead_bits)));
       ahead_bits &= ahead_bits - 1;
-      const std::uint64_t hr = witnessHash(coarsen(finest_keys_[r], group_level), d);
-      __builtin_prefetch(batch.xyz + 3 * std::size_t(batch.order[r]));
+      const std::uint64_t hr = witnessHash(coarsen(ranked_[r].finest, group_level), d);
       __builtin_prefetch(&witness_[hr >> slot_shift]);
       ring[head] = Ahead{r, hr};
       head = head == kPrefetchDistance ? 0 : head + 1;
@@ -291,8 +292,8 @@ InsertResult Hierarchy::insert(const InsertBatch &batch) {
       pushAhead();
       const std::uint32_t rank = cur.rank;
       const std::uint32_t pi = batch.order[rank];
-      const double *q = batch.xyz + 3 * std::size_t(pi);
-      const CellKey &finest = finest_keys_[rank];
+      const double *q = ranked_[rank].xyz;
+      const CellKey &finest = ranked_[rank].finest;
       const std::uint64_t h = cur.hash;
       WitnessSlot &slot = witness_[h >> slot_shift];
       {
@@ -385,7 +386,7 @@ void Hierarchy::shrink() {
   view_.shrink_to_fit();
   records_.shrink_to_fit();
   free_ids_.shrink_to_fit();
-  std::vector<CellKey>().swap(finest_keys_);  // `= {}` would keep the capacity
+  std::vector<RankedPoint>().swap(ranked_);  // `= {}` would keep the capacity
   std::vector<CellKey>().swap(accepted_keys_);
   pass_grid_.clear();
   shared_.clear();
@@ -423,7 +424,7 @@ std::size_t Hierarchy::memUsage() const {
 }
 
 std::size_t Hierarchy::scratchBytes() const {
-  std::size_t bytes = (finest_keys_.capacity() + accepted_keys_.capacity()) * sizeof(CellKey) +
+  std::size_t bytes = ranked_.capacity() * sizeof(RankedPoint) + accepted_keys_.capacity() * sizeof(CellKey) +
                       witness_.capacity() * sizeof(WitnessSlot) + pass_grid_.memUsage() + shared_.memUsage();
   for (const auto &p : pending_) bytes += p.capacity() * sizeof(std::uint64_t);
   return bytes;

@@ -226,9 +226,14 @@ class Hierarchy {
   std::vector<SampleId> free_ids_;
   std::size_t live_ = 0;
 
-  // Per-insert scratch, kept to avoid reallocating per frame: the finest-level cell of each ranked point and, per
-  // level, a bitset of the ranks still to try there (scanning it yields rank order without sorting).
-  std::vector<CellKey> finest_keys_;
+  // Per-insert scratch, kept to avoid reallocating per frame: each ranked point's position and finest-level cell,
+  // copied once in rank order so that the passes read them in address order; per level, a bitset of the ranks
+  // still to try there (scanning it yields rank order without sorting).
+  struct RankedPoint {
+    double xyz[3];
+    CellKey finest;
+  };
+  std::vector<RankedPoint> ranked_;
   std::vector<std::vector<std::uint64_t>> pending_;
   // Scan mode (a batch on an empty hierarchy): the finest cells of the samples accepted so far, and per pass d a
   // grid of level d's cells holding every sample of levels <= d; a level-d sample in a cell a coarser sample holds
