@@ -5,6 +5,7 @@
 
 #include <Eigen/Eigenvalues>
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <numeric>
 #include <random>
@@ -197,6 +198,43 @@ TEST(FrameGridIndex, NeighboursAndAnyWithinMatchBruteForceInAFixedOrder) {
   }
   EXPECT_GT(near, 5000u);
   EXPECT_LT(near, 19000u);
+}
+
+TEST(FrameGridIndex, AnyWithinAtTheRadiusEdgeFarFromTheOriginMatchesBruteForce) {
+  // anyWithin skips neighbour cells whose nearest face, edge or corner is a radius away; the skip must never drop a
+  // point that the exact test accepts. Sparse points 1e5 m from the origin, queries at the radius times (1 -+ a few
+  // ulps to 1e-7) along axes, face and body diagonals and random directions: every answer as brute force gives it.
+  std::mt19937_64 rng(17);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  const double radius = 0.2;
+  std::vector<double> xyz;
+  for (int i = 0; i < 400; ++i)  // spacing >= 4 radii: each query has one point near it
+    for (double c : {1e5 + 0.8 * (i % 20) + 0.1 * u(rng), -2e5 + 0.8 * ((i / 20) % 20) + 0.1 * u(rng), 3e4 + 0.05 * u(rng)})
+      xyz.push_back(c);
+  const std::size_t n = xyz.size() / 3;
+  std::vector<std::uint32_t> all_ids(n);
+  std::iota(all_ids.begin(), all_ids.end(), 0u);
+  const FrameGridIndex index(xyz.data(), all_ids, radius);
+  const PointSet all{xyz.data(), nullptr, n};
+  std::vector<std::array<double, 3>> dirs;
+  for (int x = -1; x <= 1; ++x)
+    for (int y = -1; y <= 1; ++y)
+      for (int z = -1; z <= 1; ++z)
+        if (x | y | z) dirs.push_back({double(x), double(y), double(z)});
+  for (int i = 0; i < 30; ++i) dirs.push_back({u(rng), u(rng), u(rng)});
+  std::size_t inside = 0, outside = 0;
+  for (std::size_t i = 0; i < n; ++i)
+    for (const auto &d : dirs)
+      for (double scale : {1.0 - 1e-7, 1.0 - 1e-12, 1.0 - 4e-16, 1.0, 1.0 + 4e-16, 1.0 + 1e-12}) {
+        const double len = std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+        double q[3];
+        for (int a = 0; a < 3; ++a) q[a] = xyz[3 * i + a] + d[a] / len * radius * scale;
+        const bool want = !bruteForce(all, q, radius).empty();
+        (want ? inside : outside) += 1;
+        ASSERT_EQ(index.anyWithin(q), want) << "point " << i << " scale " << scale;
+      }
+  EXPECT_GT(inside, 10000u);  // both sides of the edge are exercised
+  EXPECT_GT(outside, 10000u);
 }
 
 TEST(BallGrid, EmptyDegenerateAndOutOfRangeInputs) {

@@ -101,17 +101,7 @@ bool FrameGridIndex::anyWithin(const double q[3]) const {
   std::int64_t k[3];
   if (!cellOf(q, k) || keys_.empty()) return false;
   const double r2 = radius_ * radius_;
-  // The last group looked up: q's 27 cells lie in one to eight groups, mostly one.
-  std::uint64_t last_group = kEmptyKey;
-  const std::uint64_t *last_mask = nullptr;
-  auto hit = [&](std::int64_t x, std::int64_t y, std::int64_t z) {
-    if (x < 0 || y < 0 || z < 0) return false;  // below the origin: no cell holds a point there
-    const std::uint64_t group = pack(x >> 3, y >> 3, z >> 3);
-    if (group != last_group) {
-      last_group = group;
-      last_mask = groupMask(group);
-    }
-    if (!last_mask || !((last_mask[z & 7] >> ((x & 7) | (y & 7) << 3)) & 1)) return false;
+  const auto cellHasPointWithin = [&](std::int64_t x, std::int64_t y, std::int64_t z) {
     const std::uint32_t c = cellIndex(pack(x, y, z));
     if (c == kNoCell) return false;
     for (std::size_t i = starts_[c]; i < starts_[c + 1]; ++i) {
@@ -121,11 +111,56 @@ bool FrameGridIndex::anyWithin(const double q[3]) const {
     }
     return false;
   };
-  if (hit(k[0], k[1], k[2])) return true;
-  for (int dx = -1; dx <= 1; ++dx)
-    for (int dy = -1; dy <= 1; ++dy)
-      for (int dz = -1; dz <= 1; ++dz)
-        if ((dx | dy | dz) != 0 && hit(k[0] + dx, k[1] + dy, k[2] + dz)) return true;
+  // q's own cell first: most hits are there.
+  const std::uint64_t own_group = pack(k[0] >> 3, k[1] >> 3, k[2] >> 3);
+  const std::uint64_t *own_mask = groupMask(own_group);
+  const std::uint64_t own_bit = std::uint64_t(1) << ((k[0] & 7) | (k[1] & 7) << 3);
+  if (own_mask && (own_mask[k[2] & 7] & own_bit) && cellHasPointWithin(k[0], k[1], k[2])) return true;
+  // q's offset inside its cell, in cells: a neighbour cell whose nearest face (edge, corner) is a radius or more away
+  // cannot hold a point strictly within it, and is neither looked up nor tested. The offsets carry at most ~1e-9 cells
+  // of rounding (2^21 cells per axis), so a margin of 1e-6 never prunes a cell that the exact test would accept.
+  double lower[3], upper[3];
+  for (int a = 0; a < 3; ++a) {
+    lower[a] = (q[a] - origin_[a]) * inv_ - static_cast<double>(k[a]);
+    upper[a] = 1.0 - lower[a];
+    lower[a] *= lower[a];
+    upper[a] *= upper[a];
+  }
+  // Then the other 26, a group at a time: the group's occupancy words under the window, so that empty neighbours
+  // cost nothing and a q with no point nearby costs a lookup or two. Cells below the origin hold no point.
+  std::int64_t lo[3], hi[3];
+  for (int a = 0; a < 3; ++a) {
+    lo[a] = std::max<std::int64_t>(k[a] - 1, 0);
+    hi[a] = k[a] + 1;
+  }
+  for (std::int64_t gz = lo[2] >> 3; gz <= hi[2] >> 3; ++gz)
+    for (std::int64_t gy = lo[1] >> 3; gy <= hi[1] >> 3; ++gy)
+      for (std::int64_t gx = lo[0] >> 3; gx <= hi[0] >> 3; ++gx) {
+        const std::uint64_t group = pack(gx, gy, gz);
+        const std::uint64_t *mask = group == own_group ? own_mask : groupMask(group);
+        if (!mask) continue;
+        const std::int64_t x0 = std::max(lo[0] - 8 * gx, std::int64_t(0)), x1 = std::min(hi[0] - 8 * gx, std::int64_t(7));
+        const std::int64_t y0 = std::max(lo[1] - 8 * gy, std::int64_t(0)), y1 = std::min(hi[1] - 8 * gy, std::int64_t(7));
+        const std::int64_t z0 = std::max(lo[2] - 8 * gz, std::int64_t(0)), z1 = std::min(hi[2] - 8 * gz, std::int64_t(7));
+        // Bit (x | y << 3): x0..x1 in every row of eight, rows y0..y1.
+        const std::uint64_t row = ((std::uint64_t(2) << x1) - (std::uint64_t(1) << x0)) * 0x0101010101010101ull;
+        const std::uint64_t rows = (y1 == 7 ? ~std::uint64_t(0) : (std::uint64_t(1) << (8 * (y1 + 1))) - 1) &
+                                   ~((std::uint64_t(1) << (8 * y0)) - 1);
+        for (std::int64_t z = z0; z <= z1; ++z) {
+          std::uint64_t bits = mask[z] & row & rows;
+          const std::int64_t cz = 8 * gz + z;
+          if (group == own_group && cz == k[2]) bits &= ~own_bit;
+          for (; bits != 0; bits &= bits - 1) {
+            const unsigned b = static_cast<unsigned>(__builtin_ctzll(bits));
+            const std::int64_t cx = 8 * gx + (b & 7), cy = 8 * gy + (b >> 3);
+            const double gap = (cx < k[0] ? lower[0] : cx > k[0] ? upper[0] : 0.0) +
+                               (cy < k[1] ? lower[1] : cy > k[1] ? upper[1] : 0.0) +
+                               (cz < k[2] ? lower[2] : cz > k[2] ? upper[2] : 0.0);
+            if (gap >= 1.0 + 1e-6) continue;
+            if (cellHasPointWithin(cx, cy, cz)) return true;
+          }
+        }
+      }
   return false;
 }
 

@@ -25,7 +25,8 @@ class FrameGridIndex {
 
   /// True when some indexed point lies strictly within `radius` of `q` (any position, indexed or not). Reads the
   /// occupancy masks of the (one to eight) 8x8x8-cell groups around q first, so a q with no point nearby costs a
-  /// lookup or two instead of 27; stops at the first point within the radius, q's own cell tried first.
+  /// lookup or two instead of 27, and skips neighbour cells whose nearest corner is a radius away; stops at the first
+  /// point within the radius, q's own cell tried first.
   [[nodiscard]] bool anyWithin(const double q[3]) const;
 
   /// Calls fn(point_index) for every indexed point strictly within `radius` of `q`.
