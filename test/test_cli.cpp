@@ -155,6 +155,43 @@ TEST(Cli, SyntheticStreamScanModeTagsFramesAndSeedsAreDeterministic) {
   EXPECT_EQ(runHpds("verify " + shellQuote(tmp / "m.ply") + " --cell-size 4", &log), 0) << log;
 }
 
+TEST(Cli, ScanModeWithASpacingBuildsAndReportsOnlyTheLevelsItWrites) {
+  // --spacing 0.2 writes levels 0..5; scan mode then builds no deeper (7 with --normals, which average levels 6..7),
+  // and the summary and --stats say so instead of listing empty deeper levels. The written samples are the same as
+  // when every level is built (--level 8 writes them all; its levels 0..5 are the same points).
+  const auto tmp = test::scratchDir("cli_depth");
+  std::string log;
+  ASSERT_EQ(runHpds("synth -o " + shellQuote(tmp / "s") + " --frames 1 --beams 8 --azimuth-steps 600", &log), 0) << log;
+  const std::string input = shellQuote(tmp / "s" / "frame_000000.pcd");
+  ASSERT_EQ(runHpds("sample " + input + " --spacing 0.2 -o " + shellQuote(tmp / "a.ply") + " --stats " + shellQuote(tmp / "a.json"), &log), 0)
+      << log;
+  EXPECT_NE(log.find("dropped past level 5,"), std::string::npos) << log;
+  const std::string stats = readText(tmp / "a.json");
+  EXPECT_NE(stats.find("\"built_depth\": 5,"), std::string::npos) << stats;
+  EXPECT_NE(stats.find("\"max_depth\": 8,"), std::string::npos) << stats;
+  std::size_t listed = 0;
+  for (std::size_t at = stats.find("{\"level\": "); at != std::string::npos; at = stats.find("{\"level\": ", at + 1)) ++listed;
+  EXPECT_EQ(listed, 6u) << stats;
+  ASSERT_EQ(runHpds("sample " + input + " --spacing 0.2 --normals -o " + shellQuote(tmp / "n.ply") + " --stats " + shellQuote(tmp / "n.json"), &log), 0)
+      << log;
+  EXPECT_NE(readText(tmp / "n.json").find("\"built_depth\": 7,"), std::string::npos);
+
+  ASSERT_EQ(runHpds("sample " + input + " --level 8 -o " + shellQuote(tmp / "all.ply"), &log), 0) << log;
+  const PointBuffer a = readPointCloud((tmp / "a.ply").string()), all = readPointCloud((tmp / "all.ply").string());
+  const PointField *level = all.layout().find("level");
+  ASSERT_NE(level, nullptr);
+  std::vector<std::string> from_all;
+  for (std::size_t i = 0; i < all.size(); ++i)
+    if (readAsDouble(all.record(i), *level) <= 5.0)
+      from_all.emplace_back(reinterpret_cast<const char *>(all.record(i)), all.layout().point_step);
+  ASSERT_EQ(a.layout().point_step, all.layout().point_step);
+  std::vector<std::string> from_a;
+  for (std::size_t i = 0; i < a.size(); ++i) from_a.emplace_back(reinterpret_cast<const char *>(a.record(i)), a.layout().point_step);
+  EXPECT_GT(from_a.size(), 100u);
+  EXPECT_LT(from_a.size(), all.size());
+  EXPECT_EQ(from_a, from_all);
+}
+
 TEST(Cli, VerifyCatchesABrokenSampling) {
   const auto tmp = test::scratchDir("cli_verify");
   PointLayout l;

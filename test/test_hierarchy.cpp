@@ -320,6 +320,44 @@ INSTANTIATE_TEST_SUITE_P(
                       Case{"stream_planar", 0.7, 6, 300, 1, 3}, Case{"stream_scanlines", 1.3, 6, 300, 2, 3}),
     [](const ::testing::TestParamInfo<Case> &param_info) { return std::string(param_info.param.name); });
 
+// A batch offered down to max_level < max_depth gives exactly the levels 0..max_level of a hierarchy that stops there
+// (brute force), with the rest dropped; in map mode too, where the finer levels of earlier batches still count.
+TEST(Hierarchy, BatchMaxLevelMatchesAHierarchyThatStopsThere) {
+  for (std::uint64_t seed : {4ull, 5ull}) {
+    std::mt19937_64 rng(seed);
+    Hierarchy h(1.0, 7);
+    ReferenceHierarchy ref{1.0, 7, {}, 0};
+    for (int b = 0; b < 3; ++b) {
+      std::vector<double> xyz = scanLineCloud(rng, 400, 2.0);
+      for (std::size_t i = 0; i < xyz.size(); i += 3) xyz[i] += 0.5 * b;
+      const auto order = shuffledOrder(400, rng);
+      const int max_level = b == 1 ? 6 : 3;  // a deep batch between two shallow ones
+      InsertBatch batch;
+      batch.xyz = xyz.data();
+      batch.size = 400;
+      batch.order = order.data();
+      batch.order_size = order.size();
+      batch.frame_index = static_cast<std::uint32_t>(b);
+      batch.max_level = max_level;
+      const InsertResult r = h.insert(batch);
+      ref.max_depth = max_level;
+      const std::uint64_t dropped_before = ref.dropped;
+      ref.insert(xyz, order, b);
+      EXPECT_EQ(r.dropped_depth, ref.dropped - dropped_before) << "seed " << seed << " batch " << b;
+      for (int d = max_level + 1; d <= 7; ++d) EXPECT_EQ(r.accepted_per_level[d], 0u);
+      ASSERT_EQ(h.sampleCount(), ref.samples.size());
+      std::map<std::tuple<double, double, double>, int> ref_levels;
+      for (const auto &s : ref.samples) ref_levels[{s.p[0], s.p[1], s.p[2]}] = s.level;
+      for (SampleId id : h.samplesUpTo(7)) {
+        const double *p = h.position(id);
+        const auto it = ref_levels.find({p[0], p[1], p[2]});
+        ASSERT_NE(it, ref_levels.end());
+        ASSERT_EQ(it->second, h.level(id));
+      }
+    }
+  }
+}
+
 // The insertion remembers, per small cell, a nearby sample to try first; cells whose coordinates agree in their low
 // bits share that memory. Three copies of a dense cloud, 2^19 level-1 cells apart (so every level's cells alias),
 // interleaved in one batch: a remembered sample from another copy must never decide a point.

@@ -212,6 +212,53 @@ TEST(Pipeline, LargeCoordinatesThroughThePoseAreExact) {
 
 // ---------------------------------------------------------------- map mode
 
+TEST(Pipeline, ScanModeBuildsOnlyTheLevelsItsOutputsReadAndTheyComeOutTheSame) {
+  HpdsConfig c;
+  c.hierarchy.max_depth = 8;
+  c.output.level = 4;
+  EXPECT_EQ(Pipeline(c).buildDepth(), 4);
+  c.normals.enabled = true;  // neighborhood_level_offset 2: the normals read levels 5 and 6 too
+  EXPECT_EQ(Pipeline(c).buildDepth(), 6);
+  c.normals.neighborhood_level_offset = 7;
+  EXPECT_EQ(Pipeline(c).buildDepth(), 8);  // clamped to max_depth, as the normals clamp it
+  c.normals.neighborhood_level_offset = 2;
+  c.mode = Mode::Map;
+  EXPECT_EQ(Pipeline(c).buildDepth(), 8) << "map mode keeps every level for later reads";
+  c.mode = Mode::Scan;
+  {
+    Pipeline p(c);
+    p.requireLevel(7);
+    EXPECT_EQ(p.buildDepth(), 7);
+    p.requireLevel(3);
+    EXPECT_EQ(p.buildDepth(), 7) << "a level already built stays built";
+    EXPECT_THROW(p.requireLevel(9), std::invalid_argument);
+    EXPECT_THROW(p.requireLevel(-1), std::invalid_argument);
+  }
+
+  // The same frames through a pipeline built to level 6 and one built to max_depth: the same output samples with
+  // the same ids, fields and normals, byte for byte; the shallow one stores nothing deeper and counts as dropped
+  // exactly the points the deep one took at deeper levels or dropped.
+  const SyntheticLidar lidar(smallLidar(SceneKind::Urban, 2));
+  Pipeline shallow(c), deep(c);
+  deep.requireLevel(8);
+  for (int i = 0; i < 2; ++i) {
+    const Frame f = lidar.frame(i).frame;
+    const FrameResult a = shallow.addFrame(f), b = deep.addFrame(f);
+    for (int d = 0; d <= 6; ++d) EXPECT_EQ(a.counters.accepted_per_level[d], b.counters.accepted_per_level[d]) << d;
+    std::uint64_t deeper = 0;
+    for (int d = 7; d <= 8; ++d) {
+      EXPECT_EQ(a.counters.accepted_per_level[d], 0u);
+      deeper += b.counters.accepted_per_level[d];
+    }
+    EXPECT_GT(deeper, 0u) << "levels 7 and 8 must hold samples for this comparison to mean something";
+    EXPECT_EQ(a.counters.dropped_depth, b.counters.dropped_depth + deeper);
+    const std::vector<SampleId> ids = shallow.outputSamples();
+    ASSERT_EQ(ids, deep.outputSamples());
+    EXPECT_TRUE(shallow.makeCloud(ids, false).bytes() == deep.makeCloud(ids, false).bytes()) << "frame " << i;
+    EXPECT_LT(shallow.hierarchy().sampleCount(), deep.hierarchy().sampleCount());
+  }
+}
+
 TEST(Pipeline, MapModeNeverMovesOrRelevelsEarlierSamples) {
   const SyntheticLidar lidar(smallLidar(SceneKind::Urban, 4));
   HpdsConfig c;

@@ -246,7 +246,8 @@ InsertResult Hierarchy::insert(const InsertBatch &batch) {
   witness_.assign(slots, WitnessSlot{});
   const int slot_shift = 64 - __builtin_ctzll(slots);
 
-  for (int d = 0; d <= max_depth_; ++d) {
+  const int last_level = batch.max_level < 0 ? max_depth_ : std::min(batch.max_level, max_depth_);
+  for (int d = 0; d <= last_level; ++d) {
     const double rd2 = radius2_[d];
     // When the batch started on an empty hierarchy (scan mode), the samples of levels < d are exactly those accepted
     // so far: one grid of level d's cells holding them, and the level-d samples as they come, replaces the d + 1
@@ -317,7 +318,9 @@ InsertResult Hierarchy::insert(const InsertBatch &batch) {
       }
     }
   }
-  for (const std::uint64_t word : pending_[max_depth_ + 1]) result.dropped_depth += LevelGrid::bitCount(word);
+  // Points still scheduled past the last level tried (at most max_depth + 1) are dropped.
+  for (int l = last_level + 1; l <= max_depth_ + 1; ++l)
+    for (const std::uint64_t word : pending_[l]) result.dropped_depth += LevelGrid::bitCount(word);
   return result;
 }
 

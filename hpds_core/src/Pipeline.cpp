@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstring>
 #include <stdexcept>
+#include <string>
 
 #include "hpds/FrameGridIndex.hpp"
 #include "hpds/InsertionOrderer.hpp"
@@ -31,10 +32,26 @@ FrameCounters &FrameCounters::operator+=(const FrameCounters &o) {
   return *this;
 }
 
+namespace {
+/// Scan mode's deepest level read: the output levels, and the finer levels the normals average over.
+int scanDepthFor(const HpdsConfig &config, int output_level) {
+  const int normals = config.normals.enabled ? output_level + std::max(0, config.normals.neighborhood_level_offset) : 0;
+  return std::min(config.hierarchy.max_depth, std::max(output_level, normals));
+}
+}  // namespace
+
 Pipeline::Pipeline(const HpdsConfig &config)
     : config_((validateConfig(config), config)),
       output_level_(resolveOutputLevel(config)),
+      scan_depth_(scanDepthFor(config, output_level_)),
       hierarchy_(config.hierarchy.cell_size, config.hierarchy.max_depth) {}
+
+void Pipeline::requireLevel(int level) {
+  if (level < 0 || level > config_.hierarchy.max_depth)
+    throw std::invalid_argument("required level " + std::to_string(level) + " is outside 0..hierarchy.max_depth (" +
+                                std::to_string(config_.hierarchy.max_depth) + ")");
+  scan_depth_ = std::max(scan_depth_, level);
+}
 
 FrameResult Pipeline::addFrame(const Frame &frame) {
   FrameResult result;
@@ -139,6 +156,7 @@ FrameResult Pipeline::addFrame(const Frame &frame) {
   batch.record_step = layout.point_step;
   for (int a = 0; a < 3; ++a) batch.viewpoint[a] = viewpoint[a];
   batch.frame_index = frames_;
+  batch.max_level = buildDepth();
   InsertResult inserted = hierarchy_.insert(batch);
   result.seconds_insert = secondsSince(t_insert);
 

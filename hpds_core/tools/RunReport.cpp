@@ -38,6 +38,7 @@ std::string toJson(const RunReport &r) {
   j << "  \"cell_size\": " << num(r.cell_size) << ",\n";
   j << "  \"max_depth\": " << r.max_depth << ",\n";
   j << "  \"output_level\": " << r.output_level << ",\n";
+  j << "  \"built_depth\": " << r.built_depth << ",\n";
   j << "  \"levels\": [";
   for (std::size_t d = 0; d < r.samples_per_level.size(); ++d)
     j << (d ? ", " : "") << "{\"level\": " << d << ", \"radius\": " << num(poissonRadius(r.cell_size, static_cast<int>(d)))
@@ -79,7 +80,8 @@ std::string levelSummary(const RunReport &r) {
     s << line;
   }
   const FrameCounters &t = r.totals;
-  s << "points: " << t.input << " in, " << t.accepted << " accepted, " << t.dropped_depth << " dropped past max_depth, "
+  s << "points: " << t.input << " in, " << t.accepted << " accepted, " << t.dropped_depth << " dropped past level "
+    << r.built_depth << ", "
     << t.skipped_invalid << " NaN/Inf, " << t.skipped_zero << " no-return (0,0,0), " << t.skipped_range
     << " outside range limits, " << t.out_of_range << " beyond exact key range";
   if (t.evicted) s << ", " << t.evicted << " evicted";

@@ -20,7 +20,8 @@ struct RunReport {
   double cell_size = 0.0;
   int max_depth = 0;
   int output_level = 0;
-  std::vector<std::uint64_t> samples_per_level;  ///< samples per level (map: in the map; scan: summed over frames)
+  int built_depth = 0;  ///< deepest level built (Pipeline::buildDepth: max_depth in map mode)
+  std::vector<std::uint64_t> samples_per_level;  ///< levels 0..built_depth (map: in the map; scan: summed over frames)
   FrameCounters totals;
   std::uint64_t output_points = 0;
   std::uint64_t invalid_normals = 0;

@@ -73,7 +73,8 @@ int runSample(const SampleArgs &a) {
   report.cell_size = config.hierarchy.cell_size;
   report.max_depth = config.hierarchy.max_depth;
   report.output_level = pipeline.outputLevel();
-  report.samples_per_level.assign(static_cast<std::size_t>(config.hierarchy.max_depth) + 1, 0);
+  report.built_depth = pipeline.buildDepth();
+  report.samples_per_level.assign(static_cast<std::size_t>(report.built_depth) + 1, 0);
 
   const bool scan = config.mode == Mode::Scan;
   const bool frame_field = scan && a.inputs.size() > 1;

@@ -92,6 +92,8 @@ bool lookupSensorPose(const tf2::BufferCore &buffer, const std::string &target, 
 
 FrameProcessor::FrameProcessor(const NodeConfig &config) : config_(config), pipeline_(config.hpds) {
   validateRosConfig(config_.ros, config_.hpds);
+  // Scan mode builds only the levels something reads: the ~level_<D> topics too.
+  for (const int d : config_.ros.publish_levels) pipeline_.requireLevel(d);
 }
 
 std::string FrameProcessor::targetFrame() const {

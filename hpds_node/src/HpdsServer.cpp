@@ -444,7 +444,7 @@ void HpdsServer::takeSnapshot(std::size_t worker, double frame_seconds) {
   const FrameProcessor &processor = *processors_[worker];
   const hpds::Hierarchy &h = processor.pipeline().hierarchy();
   std::vector<std::size_t> per_level;
-  for (int d = 0; d <= h.maxDepth(); ++d) per_level.push_back(h.countAtLevel(d));
+  for (int d = 0; d <= processor.pipeline().buildDepth(); ++d) per_level.push_back(h.countAtLevel(d));
   const ProcessorStats stats = processor.stats();
   const std::size_t total = h.sampleCount(), memory = h.memUsage();
   std::lock_guard<std::mutex> lock(snapshot_mutex_);
@@ -500,7 +500,8 @@ void HpdsServer::diagnose(diagnostic_updater::DiagnosticStatusWrapper &status) {
   status.add("points skipped zero", t.points.skipped_zero);
   status.add("points skipped range", t.points.skipped_range);
   status.add("points out of key range", t.points.out_of_range);
-  status.add("points dropped below max depth", t.points.dropped_depth);
+  status.add("points dropped past the deepest level", t.points.dropped_depth);
+  status.add("deepest level built", s.samples_per_level.empty() ? 0 : s.samples_per_level.size() - 1);
   status.add("samples stored", s.samples_total);
   for (std::size_t d = 0; d < s.samples_per_level.size(); ++d)
     status.add("samples level " + std::to_string(d), s.samples_per_level[d]);

@@ -138,7 +138,8 @@ int runReplay(const ReplayArgs &a) {
   report.cell_size = config.hpds.hierarchy.cell_size;
   report.max_depth = config.hpds.hierarchy.max_depth;
   report.output_level = processor.pipeline().outputLevel();
-  report.samples_per_level.assign(static_cast<std::size_t>(config.hpds.hierarchy.max_depth) + 1, 0);
+  report.built_depth = processor.pipeline().buildDepth();
+  report.samples_per_level.assign(static_cast<std::size_t>(report.built_depth) + 1, 0);
   PointBuffer ply;
   std::uint64_t wrong_type = 0;
   Progress progress(clouds.size());

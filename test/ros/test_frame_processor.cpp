@@ -76,6 +76,36 @@ TEST(FrameProcessor, ScanOutputEqualsTheCorePipeline) {
   EXPECT_EQ(level2.size(), pipeline.hierarchy().countAtLevel(2));
 }
 
+TEST(FrameProcessor, ScanModeBuildsThePublishedLevelsBelowTheOutputLevel) {
+  // Scan mode builds only the levels something reads: a ~level_<D> topic finer than the output must still be
+  // full, and the output the same as when every level is built.
+  const hpds::SyntheticLidar lidar(smallLidar());
+  const hpds::SyntheticFrame f = lidar.frame(1);
+  NodeConfig config;
+  config.hpds.hierarchy.max_depth = 8;
+  config.hpds.output.level = 3;
+  config.ros.publish_levels = {6};
+  FrameProcessor processor(config);
+  EXPECT_EQ(processor.pipeline().buildDepth(), 6);
+  const PointCloud2 msg = toMsg(f.frame.points, 2.0);
+  const auto r = processor.process(msg, Eigen::Isometry3d::Identity(), OutputRequest::all());
+  ASSERT_TRUE(r.processed);
+
+  hpds::Pipeline full(config.hpds);
+  full.requireLevel(8);
+  hpds::Frame frame;
+  frame.points = f.frame.points;
+  full.addFrame(frame);
+  PointCloud2 expected;
+  hpds_node::toRosCloud(full.makeCloud(full.outputSamples(), false), msg.header, expected);
+  EXPECT_TRUE(r.output.data == expected.data);
+  ASSERT_EQ(r.levels.size(), 1u);
+  hpds::PointBuffer level6;
+  ASSERT_EQ(hpds_node::fromRosCloud(r.levels[0].second, level6), hpds_node::CloudError::None);
+  EXPECT_GT(level6.size(), 0u);
+  EXPECT_EQ(level6.size(), full.hierarchy().countAtLevel(6));
+}
+
 TEST(FrameProcessor, Float64AndOrganizedNanInput) {
   hpds::PointLayout layout;
   layout.append("x", hpds::FieldType::Float64);

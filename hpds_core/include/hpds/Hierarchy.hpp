@@ -7,7 +7,8 @@
 //   |a - b| >= r_max(i,j). Hence the union of levels 0..D is a Poisson-disk set of radius r_D for every D.
 //   The paper's check (the r_D-ball against levels 0..D) suffices when a batch starts on an empty hierarchy; for
 //   later batches the candidate is also checked against finer levels l > D with their own r_l.
-// - Coverage: every offered point (not skipped) lies within 2 r_D of the union of levels 0..D, for every D.
+// - Coverage: every offered point (not skipped) lies within 2 r_D of the union of levels 0..D, for every D down to
+//   the deepest level its batch was offered to (InsertBatch::max_level).
 // - Positions are in the fixed frame, metres, double precision. Coordinates whose finest-level cell index would
 //   reach 2^30 are refused (counted as out_of_range) instead of producing wrong keys.
 // - Samples keep a copy of their input record (the bytes of every input field), the frame index that contributed
@@ -42,12 +43,15 @@ struct InsertBatch {
   std::size_t record_step = 0;
   double viewpoint[3] = {0.0, 0.0, 0.0};  ///< sensor origin of this batch in the fixed frame
   std::uint32_t frame_index = 0;
+  /// Deepest level this batch's points may be accepted at; -1 = max_depth. Levels 0..max_level come out exactly as
+  /// with max_depth (a pass only looks at coarser and equal levels), points rejected down to it are dropped.
+  int max_level = -1;
 };
 
 struct InsertResult {
   std::vector<SampleId> accepted;               ///< new sample ids, in acceptance order
   std::array<std::uint64_t, kMaxDepthLimit + 1> accepted_per_level{};
-  std::uint64_t dropped_depth = 0;  ///< rejected at every level down to max_depth
+  std::uint64_t dropped_depth = 0;  ///< rejected at every level down to max_depth (or the batch's max_level)
   std::uint64_t out_of_range = 0;   ///< coordinates beyond the exact-key range (never inserted)
 };
 

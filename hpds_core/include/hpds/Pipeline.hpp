@@ -1,7 +1,10 @@
 // Pipeline: the per-frame flow shared by the CLI and the ROS node.
 //
 // Contract
-// - Scan mode: every frame is sampled on its own (the hierarchy is cleared first). Map mode: one persistent
+// - Scan mode: every frame is sampled on its own (the hierarchy is cleared first), and only the levels something
+//   reads are built: 0..buildDepth(), the output level, or down to output level + normals.neighborhood_level_offset
+//   with normals on, or to a level asked for by requireLevel (at most max_depth). Those levels are exactly what
+//   building to max_depth gives; points rejected down to buildDepth() count as dropped_depth. Map mode: one persistent
 //   hierarchy in the fixed frame; earlier samples never move or change level; samples farther than
 //   map.evict_distance from the latest sensor position are evicted before the frame is inserted, and the store is
 //   cut back to map.max_samples (farthest first), so memory is bounded by the cap plus one frame.
@@ -31,7 +34,7 @@ struct FrameCounters {
   std::uint64_t skipped_zero = 0;     ///< exact (0,0,0) no-return points
   std::uint64_t skipped_range = 0;    ///< outside input.min_range / input.max_range
   std::uint64_t out_of_range = 0;     ///< coordinates beyond the hierarchy's exact key range
-  std::uint64_t dropped_depth = 0;    ///< rejected at every level down to max_depth
+  std::uint64_t dropped_depth = 0;    ///< rejected at every level down to buildDepth()
   std::uint64_t accepted = 0;
   std::uint64_t evicted = 0;  ///< samples removed from the map before this frame
   std::array<std::uint64_t, kMaxDepthLimit + 1> accepted_per_level{};
@@ -71,6 +74,12 @@ class Pipeline {
   [[nodiscard]] const HpdsConfig &config() const { return config_; }
   [[nodiscard]] const Hierarchy &hierarchy() const { return hierarchy_; }
   [[nodiscard]] int outputLevel() const { return output_level_; }
+  /// Deepest level a frame is inserted down to: max_depth in map mode (any level may be read later); in scan mode the
+  /// deepest level this pipeline's outputs read (see contract).
+  [[nodiscard]] int buildDepth() const { return config_.mode == Mode::Map ? config_.hierarchy.max_depth : scan_depth_; }
+  /// Scan mode: build levels 0..level too (e.g. levels a node publishes besides the output). std::invalid_argument
+  /// outside 0..max_depth. No effect in map mode, which builds every level.
+  void requireLevel(int level);
   [[nodiscard]] const FrameCounters &totals() const { return totals_; }
   [[nodiscard]] std::uint32_t framesProcessed() const { return frames_; }
   /// Bytes held: the hierarchy (samples, grids, insertion scratch) and the per-frame scratch. Scratch grown for a
@@ -88,6 +97,7 @@ class Pipeline {
  private:
   HpdsConfig config_;
   int output_level_;
+  int scan_depth_;  // scan mode's buildDepth()
   Hierarchy hierarchy_;
   FrameCounters totals_;
   std::uint32_t frames_ = 0;
