@@ -273,6 +273,19 @@ struct Case {
   int batches;
 };
 
+/// The same samples (positions) at the same levels as the brute-force reference.
+void expectSameSamplesAs(const Hierarchy &h, const ReferenceHierarchy &ref) {
+  ASSERT_EQ(h.sampleCount(), ref.samples.size());
+  std::map<std::tuple<double, double, double>, int> ref_levels;
+  for (const auto &s : ref.samples) ref_levels[{s.p[0], s.p[1], s.p[2]}] = s.level;
+  for (SampleId id : h.samplesUpTo(h.maxDepth())) {
+    const double *p = h.position(id);
+    const auto it = ref_levels.find({p[0], p[1], p[2]});
+    ASSERT_NE(it, ref_levels.end()) << "a sample the reference does not have";
+    ASSERT_EQ(it->second, h.level(id));
+  }
+}
+
 class HierarchyOracle : public ::testing::TestWithParam<Case> {};
 
 TEST_P(HierarchyOracle, SameDecisionsAsBruteForceAndGuaranteesHold) {
@@ -345,15 +358,7 @@ TEST(Hierarchy, BatchMaxLevelMatchesAHierarchyThatStopsThere) {
       ref.insert(xyz, order, b);
       EXPECT_EQ(r.dropped_depth, ref.dropped - dropped_before) << "seed " << seed << " batch " << b;
       for (int d = max_level + 1; d <= 7; ++d) EXPECT_EQ(r.accepted_per_level[d], 0u);
-      ASSERT_EQ(h.sampleCount(), ref.samples.size());
-      std::map<std::tuple<double, double, double>, int> ref_levels;
-      for (const auto &s : ref.samples) ref_levels[{s.p[0], s.p[1], s.p[2]}] = s.level;
-      for (SampleId id : h.samplesUpTo(7)) {
-        const double *p = h.position(id);
-        const auto it = ref_levels.find({p[0], p[1], p[2]});
-        ASSERT_NE(it, ref_levels.end());
-        ASSERT_EQ(it->second, h.level(id));
-      }
+      expectSameSamplesAs(h, ref);
     }
   }
 }
@@ -375,16 +380,8 @@ TEST(Hierarchy, AliasedWitnessSlotsNeverDecideAPoint) {
   const InsertResult r = insertAll(h, xyz, order);
   ref.insert(xyz, order, 0);
   ASSERT_EQ(r.out_of_range, 0u);
-  ASSERT_EQ(h.sampleCount(), ref.samples.size());
   EXPECT_EQ(r.dropped_depth, ref.dropped);
-  std::map<std::tuple<double, double, double>, int> ref_levels;
-  for (const auto &s : ref.samples) ref_levels[{s.p[0], s.p[1], s.p[2]}] = s.level;
-  for (SampleId id : h.samplesUpTo(6)) {
-    const double *p = h.position(id);
-    const auto it = ref_levels.find({p[0], p[1], p[2]});
-    ASSERT_NE(it, ref_levels.end());
-    EXPECT_EQ(it->second, h.level(id));
-  }
+  expectSameSamplesAs(h, ref);
 }
 
 TEST(Hierarchy, DuplicatePointsGoToOneSampleAndDropTheRest) {
