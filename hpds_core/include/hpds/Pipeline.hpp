@@ -1,10 +1,10 @@
 // Pipeline: the per-frame flow shared by the CLI and the ROS node.
 //
 // Contract
-// - Scan mode: every frame is sampled on its own (the hierarchy is cleared first), and only the levels something
-//   reads are built: 0..buildDepth(), the output level, or down to output level + normals.neighborhood_level_offset
-//   with normals on, or to a level asked for by requireLevel (at most max_depth). Those levels are exactly what
-//   building to max_depth gives; points rejected down to buildDepth() count as dropped_depth. Map mode: one persistent
+// - Scan mode: every frame is sampled on its own (the hierarchy is cleared first), and only levels 0..buildDepth()
+//   are built: down to the output level, or to output level + normals.neighborhood_level_offset with normals on, or
+//   to a level asked for by requireLevel, never past max_depth. Those levels are exactly what building to max_depth
+//   gives; points rejected down to buildDepth() count as dropped_depth. Map mode: one persistent
 //   hierarchy in the fixed frame; earlier samples never move or change level; samples farther than
 //   map.evict_distance from the latest sensor position are evicted before the frame is inserted, and the store is
 //   cut back to map.max_samples (farthest first), so memory is bounded by the cap plus one frame.
