@@ -19,6 +19,17 @@ inline void prefetch(const void *p) {
 #endif
 }
 
+/// Calls emit(keyOf(r), indexOf(r)) for the sorted records r of `v`. The caller reads each element's position in this
+/// (spatial) order, scattered in memory: fetch a few ahead.
+template <typename Rec, typename KeyOf, typename IndexOf, typename Emit>
+void emitInOrder(const PointSet &set, const std::vector<Rec> &v, KeyOf keyOf, IndexOf indexOf, Emit &emit) {
+  constexpr std::size_t kAhead = 8;
+  for (std::size_t t = 0; t < v.size(); ++t) {
+    if (t + kAhead < v.size()) prefetch(set.at(indexOf(v[t + kAhead])));
+    emit(keyOf(v[t]), indexOf(v[t]));
+  }
+}
+
 /// Calls emit(key, i) for the elements of `set` with a cell (keyOf true), by ascending (key, i): stable LSD radix
 /// passes of at most 11 bits over the key, the index ascending to begin with. Keys below 2^32 (up to 2^32 cells in
 /// the bounding box) travel packed with the index in one word; wider ones (fine radii over a whole frame: a
@@ -35,13 +46,9 @@ void forEachSorted(const PointSet &set, const KeyOf &keyOf, int key_bits, Emit &
     }
     v.resize(kept);
     // The index, in the low word, is already ascending.
-    sortByKeyStable(v, key_bits, [](std::uint64_t x) { return x >> 32; });
-    // The caller reads each element's position in this (spatial) order, scattered in memory: fetch ahead.
-    constexpr std::size_t kAhead = 8;
-    for (std::size_t t = 0; t < kept; ++t) {
-      if (t + kAhead < kept) prefetch(set.at(static_cast<std::uint32_t>(v[t + kAhead])));
-      emit(v[t] >> 32, static_cast<std::uint32_t>(v[t]));
-    }
+    const auto packedKey = [](std::uint64_t x) { return x >> 32; };
+    sortByKeyStable(v, key_bits, packedKey);
+    emitInOrder(set, v, packedKey, [](std::uint64_t x) { return static_cast<std::uint32_t>(x); }, emit);
   } else {
     std::vector<KeyedIndex> v;
     v.reserve(set.size);
@@ -50,11 +57,7 @@ void forEachSorted(const PointSet &set, const KeyOf &keyOf, int key_bits, Emit &
       if (keyOf(set.at(i), key)) v.push_back(KeyedIndex{key, static_cast<std::uint32_t>(i)});
     }
     sortByKeyStable(v, key_bits);
-    constexpr std::size_t kAhead = 8;
-    for (std::size_t t = 0; t < v.size(); ++t) {
-      if (t + kAhead < v.size()) prefetch(set.at(v[t + kAhead].index));
-      emit(v[t].key, v[t].index);
-    }
+    emitInOrder(set, v, [](const KeyedIndex &x) { return x.key; }, [](const KeyedIndex &x) { return x.index; }, emit);
   }
 }
 

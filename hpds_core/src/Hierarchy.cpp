@@ -264,8 +264,9 @@ InsertResult Hierarchy::insert(const InsertBatch &batch) {
     }
     const int group_level = std::min(d + kWitnessGroupOffset, max_depth_);
     const std::vector<std::uint64_t> &todo = pending_[d];
-    // A pass visits its points in rank order, i.e. at random places: a cursor running a few points ahead
-    // prefetches each one's position and witness slot so the loads overlap, and hands its slot hash on.
+    // A pass visits its points in rank order: their positions and cells are in address order (ranked_), but their
+    // witness slots are at random places, so a cursor running a few points ahead prefetches each one's slot and
+    // hands its hash on.
     struct Ahead {
       std::uint32_t rank;
       std::uint64_t hash;
@@ -292,7 +293,6 @@ InsertResult Hierarchy::insert(const InsertBatch &batch) {
       tail = tail == kPrefetchDistance ? 0 : tail + 1;
       pushAhead();
       const std::uint32_t rank = cur.rank;
-      const std::uint32_t pi = batch.order[rank];
       const double *q = ranked_[rank].xyz;
       const CellKey &finest = ranked_[rank].finest;
       const std::uint64_t h = cur.hash;
@@ -306,6 +306,7 @@ InsertResult Hierarchy::insert(const InsertBatch &batch) {
         }
       }
       // From here on the point may be accepted: start fetching its record while the neighbourhood is checked.
+      const std::uint32_t pi = batch.order[rank];
       if (batch.records) __builtin_prefetch(batch.records + std::size_t(pi) * batch.record_step);
       SampleId witness = kNoSample;
       const int next = checkTry(d, q, finest, pass_valid, finest_populated, witness);
