@@ -45,17 +45,52 @@ struct Options {
   std::string only;  // "frames" or "stream": one half of the table (e.g. the thread row on an otherwise idle machine)
 };
 
+double secondsOf(const std::function<void()> &fn) {
+  const auto t0 = Clock::now();
+  fn();
+  return std::chrono::duration<double>(Clock::now() - t0).count();
+}
+
+double median(std::vector<double> v) {
+  std::sort(v.begin(), v.end());
+  const std::size_t m = v.size() / 2;
+  return v.size() % 2 ? v[m] : 0.5 * (v[m - 1] + v[m]);
+}
+
 /// Median wall time of `repeats` runs after one warm-up run.
 double medianSeconds(int repeats, const std::function<void()> &fn) {
   fn();
   std::vector<double> t;
+  for (int i = 0; i < repeats; ++i) t.push_back(secondsOf(fn));
+  return median(t);
+}
+
+struct Paired {
+  double hpds_s, peer_s, ratio;
+};
+
+/// hpds against its peer, timed in alternating rounds (hpds first in even rounds, the peer first in odd ones) after
+/// one warm-up of each. Both sides of a round see the same state of this shared machine, whose speed drifts by tens
+/// of percent within a minute, so each round's ratio compares like with like; the ratio reported is the median of
+/// those, not a ratio of two medians taken at different times.
+Paired pairedMedians(int repeats, const std::function<void()> &hpds, const std::function<void()> &peer) {
+  hpds();
+  peer();
+  std::vector<double> h, p, r;
   for (int i = 0; i < repeats; ++i) {
-    const auto t0 = Clock::now();
-    fn();
-    t.push_back(std::chrono::duration<double>(Clock::now() - t0).count());
+    double th, tp;
+    if (i % 2 == 0) {
+      th = secondsOf(hpds);
+      tp = secondsOf(peer);
+    } else {
+      tp = secondsOf(peer);
+      th = secondsOf(hpds);
+    }
+    h.push_back(th);
+    p.push_back(tp);
+    r.push_back(th / tp);
   }
-  std::sort(t.begin(), t.end());
-  return t[t.size() / 2];
+  return Paired{median(h), median(p), median(r)};
 }
 
 pcl::PointCloud<pcl::PointXYZ>::Ptr toPcl(const PointBuffer &b) {
@@ -76,19 +111,24 @@ pcl::PointCloud<pcl::PointXYZ>::Ptr toPcl(const PointBuffer &b) {
 
 struct Row {
   std::string data, what;
-  double hpds_s, peer_s;
+  double hpds_s, peer_s, ratio;  // ratio: median of the paired rounds' ratios (0 without a peer)
   std::string peer;
   std::string note;
 };
 
 std::vector<Row> rows;
 
-void report(const std::string &data, const std::string &what, double hpds_s, const std::string &peer, double peer_s,
+void report(const std::string &data, const std::string &what, const Paired &t, const std::string &peer,
             const std::string &note = "") {
-  rows.push_back({data, what, hpds_s, peer_s, peer, note});
-  std::printf("%-22s %-34s hpds %9.2f ms | %-26s %9.2f ms | ratio %6.2f %s\n", data.c_str(), what.c_str(), hpds_s * 1e3,
-              peer.c_str(), peer_s * 1e3, peer_s > 0 ? hpds_s / peer_s : 0.0, note.c_str());
+  rows.push_back({data, what, t.hpds_s, t.peer_s, t.ratio, peer, note});
+  std::printf("%-22s %-34s hpds %9.2f ms | %-26s %9.2f ms | ratio %6.2f %s\n", data.c_str(), what.c_str(), t.hpds_s * 1e3,
+              peer.c_str(), t.peer_s * 1e3, t.ratio, note.c_str());
   std::fflush(stdout);
+}
+
+/// A row without a peer.
+void report(const std::string &data, const std::string &what, double hpds_s, const std::string &note) {
+  report(data, what, Paired{hpds_s, 0.0, 0.0}, "-", note);
 }
 
 HpdsConfig scanConfig(const Options &o, int threads) {
@@ -131,7 +171,7 @@ void benchFrame(const Options &o, const std::string &name, const Frame &frame) {
   // pipeline per frame also pays their first allocation; both are reported.
   std::size_t hpds_count = 0;
   Pipeline reused(scanConfig(o, 1));
-  const double t_build = medianSeconds(o.repeats, [&] { hpds_count = reused.addFrame(frame).counters.accepted; });
+  const auto build = [&] { hpds_count = reused.addFrame(frame).counters.accepted; };
   const double t_build_fresh = medianSeconds(o.repeats, [&] {
     Pipeline p(scanConfig(o, 1));
     hpds_count = p.addFrame(frame).counters.accepted;
@@ -140,7 +180,7 @@ void benchFrame(const Options &o, const std::string &name, const Frame &frame) {
   std::snprintf(fresh_note, sizeof fresh_note, "[fresh pipeline: %.2f ms]", t_build_fresh * 1e3);
   std::size_t vg_count = 0;
   bool vg_overflow = false;
-  const double t_vg = medianSeconds(o.repeats, [&] {
+  const Paired t_vg = pairedMedians(o.repeats, build, [&] {
     pcl::VoxelGrid<pcl::PointXYZ> vg;
     vg.setInputCloud(cloud);
     vg.setLeafSize(static_cast<float>(leaf), static_cast<float>(leaf), static_cast<float>(leaf));
@@ -149,11 +189,11 @@ void benchFrame(const Options &o, const std::string &name, const Frame &frame) {
     vg_count = out.size();
     vg_overflow = out.size() == cloud->size();  // PCL returns the input when its integer indices would overflow
   });
-  report(name, "build to level " + std::to_string(o.level) + " (" + std::to_string(hpds_count) + ")", t_build,
-         "VoxelGrid c_D (" + std::to_string(vg_count) + ")", t_vg,
+  report(name, "build to level " + std::to_string(o.level) + " (" + std::to_string(hpds_count) + ")", t_vg,
+         "VoxelGrid c_D (" + std::to_string(vg_count) + ")",
          std::string(fresh_note) + (vg_overflow ? " [VoxelGrid overflowed: no-op]" : ""));
   std::size_t us_count = 0;
-  const double t_us = medianSeconds(o.repeats, [&] {
+  const Paired t_us = pairedMedians(o.repeats, build, [&] {
     pcl::UniformSampling<pcl::PointXYZ> us;
     us.setInputCloud(cloud);
     us.setRadiusSearch(radius);
@@ -161,8 +201,7 @@ void benchFrame(const Options &o, const std::string &name, const Frame &frame) {
     us.filter(out);
     us_count = out.size();
   });
-  report(name, "build to level " + std::to_string(o.level), t_build, "UniformSampling r_D (" + std::to_string(us_count) + ")",
-         t_us);
+  report(name, "build to level " + std::to_string(o.level), t_us, "UniformSampling r_D (" + std::to_string(us_count) + ")");
 
   // Normals on the same sample set and neighbourhood (radius 2.5 r_D).
   Pipeline p(scanConfig(o, 1));
@@ -175,8 +214,7 @@ void benchFrame(const Options &o, const std::string &name, const Frame &frame) {
   }
   for (int threads : {1, 2}) {
     NormalParams np = normalParamsFor(scanConfig(o, threads), o.level);
-    const double t_n = medianSeconds(o.repeats, [&] { (void)estimateNormals(p.hierarchy(), ids, np); });
-    const double t_pcl = medianSeconds(o.repeats, [&] {
+    const Paired t_n = pairedMedians(o.repeats, [&] { (void)estimateNormals(p.hierarchy(), ids, np); }, [&] {
       pcl::PointCloud<pcl::Normal> normals;
       pcl::search::KdTree<pcl::PointXYZ>::Ptr tree(new pcl::search::KdTree<pcl::PointXYZ>);
       if (threads == 1) {
@@ -194,7 +232,7 @@ void benchFrame(const Options &o, const std::string &name, const Frame &frame) {
       }
     });
     report(name, "normals, " + std::to_string(threads) + " thread(s) (" + std::to_string(ids.size()) + ")", t_n,
-           threads == 1 ? "NormalEstimation" : "NormalEstimationOMP(2)", t_pcl);
+           threads == 1 ? "NormalEstimation" : "NormalEstimationOMP(2)");
   }
 
   // Whole per-frame path of the node: message bytes in, insert, normals, message bytes out, on one pipeline kept
@@ -205,10 +243,9 @@ void benchFrame(const Options &o, const std::string &name, const Frame &frame) {
   full.normals.enabled = true;
   Pipeline node_pipeline(full);
   std::size_t sink = 0;
-  const double t_path = medianSeconds(o.repeats, [&] { sink += nodePath(node_pipeline, frame).points; });
   // The frame as a driver publishes it, every field included, as pcl_conversions hands it to PCL.
   const pcl::PCLPointCloud2 msg = toPclCloud2(frame.points);
-  const double t_path_pcl = medianSeconds(o.repeats, [&] {
+  const Paired t_path = pairedMedians(o.repeats, [&] { sink += nodePath(node_pipeline, frame).points; }, [&] {
     pcl::PointCloud<pcl::PointXYZ>::Ptr in(new pcl::PointCloud<pcl::PointXYZ>);
     pcl::fromPCLPointCloud2(msg, *in);
     pcl::VoxelGrid<pcl::PointXYZ> vg;
@@ -230,7 +267,7 @@ void benchFrame(const Options &o, const std::string &name, const Frame &frame) {
     sink += out_msg.data.size();
   });
   if (sink == 0) std::printf("(no output)\n");
-  report(name, "frame path: msg->insert+normals->msg", t_path, "conv+VoxelGrid+NormalEst+conv", t_path_pcl);
+  report(name, "frame path: msg->insert+normals->msg", t_path, "conv+VoxelGrid+NormalEst+conv");
 
   // The same path with the shipped defaults (config/hpds.yaml: levels 0..8, refined normals) and normals on: what a
   // user gets out of the box, to hold against the sensor period. No peer: VoxelGrid at 1.6 cm keeps nearly every
@@ -244,7 +281,7 @@ void benchFrame(const Options &o, const std::string &name, const Frame &frame) {
   note.precision(3);
   note << last.points << " points out; last run: insert " << last.insert_s * 1e3 << " ms, normals " << last.normals_s * 1e3
        << " ms";
-  report(name, "frame path, shipped defaults", t_shipped, "-", 0.0, note.str());
+  report(name, "frame path, shipped defaults", t_shipped, note.str());
 }
 
 void benchStream(const Options &o) {
@@ -263,12 +300,11 @@ void benchStream(const Options &o) {
   std::vector<pcl::PointCloud<pcl::PointXYZ>::Ptr> clouds;
   for (const auto &f : frames) clouds.push_back(toPcl(f.points));
   const double leaf = cellEdge(o.cell_size, o.level);
-  const int reps = std::max(1, o.repeats / 2);
-  const double t_build = medianSeconds(reps, [&] {
+  const int reps = o.repeats;
+  const Paired t_build = pairedMedians(reps, [&] {
     Pipeline p(scanConfig(o, 1));
     for (const auto &f : frames) p.addFrame(f);
-  });
-  const double t_vg = medianSeconds(reps, [&] {
+  }, [&] {
     for (const auto &c : clouds) {
       pcl::VoxelGrid<pcl::PointXYZ> vg;
       vg.setInputCloud(c);
@@ -277,7 +313,7 @@ void benchStream(const Options &o) {
       vg.filter(out);
     }
   });
-  report(name, "scan mode, every frame to level " + std::to_string(o.level), t_build, "VoxelGrid c_D per frame", t_vg);
+  report(name, "scan mode, every frame to level " + std::to_string(o.level), t_build, "VoxelGrid c_D per frame");
 
   // 1 vs 2 threads on the same stream (frame-parallel scan mode), and the outputs compared byte for byte.
   auto runThreads = [&](int threads, std::vector<std::vector<std::uint8_t>> *out) {
@@ -290,9 +326,8 @@ void benchStream(const Options &o) {
   std::vector<std::vector<std::uint8_t>> out1, out2;
   runThreads(1, &out1);
   runThreads(2, &out2);
-  const double t_1 = medianSeconds(reps, [&] { runThreads(1, nullptr); });
-  const double t_2 = medianSeconds(reps, [&] { runThreads(2, nullptr); });
-  report(name, "scan mode, 2 threads vs 1 thread", t_2, "hpds 1 thread", t_1,
+  const Paired t_threads = pairedMedians(reps, [&] { runThreads(2, nullptr); }, [&] { runThreads(1, nullptr); });
+  report(name, "scan mode, 2 threads vs 1 thread", t_threads, "hpds 1 thread",
          out1 == out2 ? "[outputs identical]" : "[OUTPUTS DIFFER]");
 
   // Map mode: frames per second and hierarchy bytes per stored sample.
@@ -316,7 +351,7 @@ void benchStream(const Options &o) {
        << " B/sample = " << point_data << " B point data (xyz + record) + "
        << static_cast<double>(bytes) / samples - point_data << " B hierarchy; per-frame scratch " << scratch / 1024
        << " KiB on top";
-  report(name, "map mode (evict 60 m)", t_map, "-", 0.0, note.str());
+  report(name, "map mode (evict 60 m)", t_map, note.str());
 
   // The node's map-mode ~output per frame: the samples of levels 0..D within 2 r_D of the frame just inserted.
   std::size_t selected = 0;
@@ -332,7 +367,7 @@ void benchStream(const Options &o) {
   out_note.precision(3);
   out_note << lc.frames / t_map_out << " frames/s; selection alone " << (t_map_out - t_map) / lc.frames * 1e3
            << " ms/frame, " << selected / lc.frames << " samples/frame";
-  report(name, "map mode + ~output selection", t_map_out, "-", 0.0, out_note.str());
+  report(name, "map mode + ~output selection", t_map_out, out_note.str());
 }
 
 void writeJson(const std::string &path) {
@@ -342,7 +377,7 @@ void writeJson(const std::string &path) {
   for (std::size_t i = 0; i < rows.size(); ++i) {
     const Row &r = rows[i];
     j << "    {\"data\": \"" << r.data << "\", \"what\": \"" << r.what << "\", \"hpds_s\": " << r.hpds_s << ", \"peer\": \""
-      << r.peer << "\", \"peer_s\": " << r.peer_s << ", \"ratio\": " << (r.peer_s > 0 ? r.hpds_s / r.peer_s : 0.0)
+      << r.peer << "\", \"peer_s\": " << r.peer_s << ", \"ratio\": " << r.ratio
       << ", \"note\": \"" << r.note << "\"}" << (i + 1 < rows.size() ? "," : "") << "\n";
   }
   j << "  ]\n}\n";
@@ -366,7 +401,8 @@ int main(int argc, char **argv) {
       return 2;
     }
   }
-  std::printf("hpds performance vs PCL, level D = %d (c_D = %.4g m, r_D = %.4g m), median of %d runs after warm-up\n",
+  std::printf("hpds performance vs PCL, level D = %d (c_D = %.4g m, r_D = %.4g m), median of %d runs after warm-up;\n"
+              "each ratio is the median of per-round ratios, hpds and its peer timed in alternating rounds\n",
               o.level, cellEdge(o.cell_size, o.level), poissonRadius(o.cell_size, o.level), o.repeats);
   if (o.only != "stream") {
     if (std::filesystem::is_directory(o.data_dir)) {
