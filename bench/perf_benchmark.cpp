@@ -425,7 +425,9 @@ int main(int argc, char **argv) {
               o.level, cellEdge(o.cell_size, o.level), poissonRadius(o.cell_size, o.level), o.repeats);
   if (o.only != "stream") {
     if (std::filesystem::is_directory(o.data_dir)) {
-      for (const char *name : {"hdl32_a.pcd", "velodyne_vlp16.pcd", "hesai_ot128.pcd", "velodyne_vls128.pcd"}) {
+      // One frame of every sensor in the data set (hdl32_b.pcd is a second frame of the same HDL-32 scene).
+      for (const char *name : {"hdl32_a.pcd", "velodyne_vlp16.pcd", "velodyne_vlp32.pcd", "hesai_xt32.pcd",
+                               "hesai_64.pcd", "hesai_ot128.pcd", "velodyne_vls128.pcd"}) {
         const auto path = std::filesystem::path(o.data_dir) / name;
         if (!std::filesystem::exists(path)) continue;
         Frame f;
