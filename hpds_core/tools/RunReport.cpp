@@ -22,6 +22,18 @@ std::string num(double v) {
 }
 }  // namespace
 
+RunReport reportFor(const std::string &command, const Pipeline &pipeline) {
+  RunReport r;
+  r.command = command;
+  r.mode = pipeline.config().mode;
+  r.cell_size = pipeline.config().hierarchy.cell_size;
+  r.max_depth = pipeline.config().hierarchy.max_depth;
+  r.output_level = pipeline.outputLevel();
+  r.built_depth = pipeline.buildDepth();
+  r.samples_per_level.assign(static_cast<std::size_t>(r.built_depth) + 1, 0);
+  return r;
+}
+
 std::uint64_t peakMemoryBytes() {
   rusage ru{};
   if (getrusage(RUSAGE_SELF, &ru) != 0) return 0;

@@ -31,6 +31,10 @@ struct RunReport {
   std::vector<std::pair<std::string, std::string>> extra;
 };
 
+/// A report on a run of `pipeline` (command "sample", "replay"): its mode, hierarchy, output level and built depth,
+/// and a zero count for each level built.
+[[nodiscard]] RunReport reportFor(const std::string &command, const Pipeline &pipeline);
+
 /// Peak resident set size of this process in bytes (getrusage), 0 if unknown.
 [[nodiscard]] std::uint64_t peakMemoryBytes();
 

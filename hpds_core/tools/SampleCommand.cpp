@@ -67,14 +67,7 @@ int runSample(const SampleArgs &a) {
     throw std::invalid_argument("--load-map/--save-map need --mode map (scan mode keeps no map)");
   Pipeline pipeline(config);
   if (!a.load_map.empty()) loadMap(a.load_map, pipeline);
-  RunReport report;
-  report.command = "sample";
-  report.mode = config.mode;
-  report.cell_size = config.hierarchy.cell_size;
-  report.max_depth = config.hierarchy.max_depth;
-  report.output_level = pipeline.outputLevel();
-  report.built_depth = pipeline.buildDepth();
-  report.samples_per_level.assign(static_cast<std::size_t>(report.built_depth) + 1, 0);
+  RunReport report = reportFor("sample", pipeline);
 
   const bool scan = config.mode == Mode::Scan;
   const bool frame_field = scan && a.inputs.size() > 1;

@@ -132,14 +132,7 @@ int runReplay(const ReplayArgs &a) {
     for (const rosbag::MessageInstance &m : tf_view) out.write(m.getTopic(), m.getTime(), m);
   }
 
-  RunReport report;
-  report.command = "replay";
-  report.mode = config.hpds.mode;
-  report.cell_size = config.hpds.hierarchy.cell_size;
-  report.max_depth = config.hpds.hierarchy.max_depth;
-  report.output_level = processor.pipeline().outputLevel();
-  report.built_depth = processor.pipeline().buildDepth();
-  report.samples_per_level.assign(static_cast<std::size_t>(report.built_depth) + 1, 0);
+  RunReport report = reportFor("replay", processor.pipeline());
   PointBuffer ply;
   std::uint64_t wrong_type = 0;
   Progress progress(clouds.size());
