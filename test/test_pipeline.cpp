@@ -210,8 +210,6 @@ TEST(Pipeline, LargeCoordinatesThroughThePoseAreExact) {
   EXPECT_EQ(q.addFrame(f).counters.out_of_range, 3u);  // 1e6 m at 2^-21 m cells: refused, counted
 }
 
-// ---------------------------------------------------------------- map mode
-
 TEST(Pipeline, ScanModeBuildsOnlyTheLevelsItsOutputsReadAndTheyComeOutTheSame) {
   HpdsConfig c;
   c.hierarchy.max_depth = 8;
@@ -258,6 +256,8 @@ TEST(Pipeline, ScanModeBuildsOnlyTheLevelsItsOutputsReadAndTheyComeOutTheSame) {
     EXPECT_LT(shallow.hierarchy().sampleCount(), deep.hierarchy().sampleCount());
   }
 }
+
+// ---------------------------------------------------------------- map mode
 
 TEST(Pipeline, MapModeNeverMovesOrRelevelsEarlierSamples) {
   const SyntheticLidar lidar(smallLidar(SceneKind::Urban, 4));
