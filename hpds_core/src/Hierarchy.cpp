@@ -134,7 +134,7 @@ void Hierarchy::release(SampleId id) {
 
 // Forced inline, like the pass loop's other helpers: it runs once per witness-cache miss.
 __attribute__((always_inline)) inline int Hierarchy::checkTry(int d, const double *q, const CellKey &finest,
-                                                              bool pass_valid, int finest_populated,
+                                                              bool pass_valid, int finest_populated, int last,
                                                               SampleId &witness) const {
   const double rd2 = radius2_[d];
   const CellKey key = coarsen(finest, d);
@@ -147,21 +147,21 @@ __attribute__((always_inline)) inline int Hierarchy::checkTry(int d, const doubl
       const double d2 = distance2(position(c), q);
       if ((occupant & kSharedCell) || level_[c] == d || d2 < rd2) {
         witness = c;
-        return nextLevelAfterConflict(d, d2);
+        return nextLevelAfterConflict(d, d2, last);
       }
     }
     const double d2 = passConflict(d, q, key, witness, own);
-    if (d2 >= 0.0) return nextLevelAfterConflict(d, d2);
+    if (d2 >= 0.0) return nextLevelAfterConflict(d, d2, last);
   } else {
     const LevelGrid::KnownBlock own = ownBlock(grids_[d], key);
     const SampleId occupant = ownOccupant(grids_[d], own);
     if (occupant != kNoSample) {
       witness = occupant;
-      return nextLevelAfterConflict(d, distance2(position(occupant), q));
+      return nextLevelAfterConflict(d, distance2(position(occupant), q), last);
     }
     double d2 = conflictIn(grids_[d], edge_[d], q, key, radius_[d], witness, &own);
     for (int l = d - 1; d2 < 0.0 && l >= 0; --l) d2 = conflictAt(l, q, coarsen(finest, l), radius_[d], witness);
-    if (d2 >= 0.0) return nextLevelAfterConflict(d, d2);
+    if (d2 >= 0.0) return nextLevelAfterConflict(d, d2, last);
   }
   // Samples of finer levels (earlier batches) keep their own, smaller radius. A conflict at level l rules out every
   // level <= l, so the point continues at l + 1 (or later, as above). Such a sample is no witness for level d, so it
@@ -169,7 +169,7 @@ __attribute__((always_inline)) inline int Hierarchy::checkTry(int d, const doubl
   SampleId finer = kNoSample;
   for (int l = finest_populated; l > d; --l) {
     const double d2 = conflictAt(l, q, coarsen(finest, l), radius_[l], finer);
-    if (d2 >= 0.0) return std::max(l + 1, nextLevelAfterConflict(d, d2));
+    if (d2 >= 0.0) return std::max(l + 1, nextLevelAfterConflict(d, d2, last));
   }
   return d;
 }
@@ -301,7 +301,7 @@ InsertResult Hierarchy::insert(const InsertBatch &batch) {
         // An empty slot holds (0,0,0) with tag 0: the distance is computed anyway and ignored, one branch less.
         const double d2 = distance2(slot.xyz, q);
         if ((slot.tag == h) & (d2 < rd2)) {
-          schedule(nextLevelAfterConflict(d, d2), rank);
+          schedule(nextLevelAfterConflict(d, d2, last_level), rank);
           continue;
         }
       }
@@ -309,7 +309,7 @@ InsertResult Hierarchy::insert(const InsertBatch &batch) {
       const std::uint32_t pi = batch.order[rank];
       if (batch.records) __builtin_prefetch(batch.records + std::size_t(pi) * batch.record_step);
       SampleId witness = kNoSample;
-      const int next = checkTry(d, q, finest, pass_valid, finest_populated, witness);
+      const int next = checkTry(d, q, finest, pass_valid, finest_populated, last_level, witness);
       if (next == d) {
         store(d, batch, pi, q, finest, pass_valid, result);
         slot.remember(h, q);

@@ -175,12 +175,13 @@ class Hierarchy {
   }
   /// First level after `level` whose radius no longer rules out a point at squared distance d2 from a sample
   /// of levels <= level: every level in between would reject the point for that same sample.
-  int nextLevelAfterConflict(int level, double d2) const {
+  int nextLevelAfterConflict(int level, double d2, int last) const {
     // Same comparison as the spacing test (d2 < r*r), so a skipped level is one that certainly rejects. Radii shrink
     // with the level, so counting the levels that still reject gives the first that does not, without a
     // data-dependent loop exit (a mispredicted branch per rejection otherwise). Inline: it runs once per try.
+    // Counting stops at `last`, the batch's last level: a point sent past it is dropped, however far.
     int next = level + 1;
-    for (int l = level + 1; l <= max_depth_; ++l) next += d2 < radius2_[l] ? 1 : 0;
+    for (int l = level + 1; l <= last; ++l) next += d2 < radius2_[l] ? 1 : 0;
     return next;
   }
   /// Puts the point of `rank` on the schedule of `level`; level max_depth + 1 (at most) means dropped.
@@ -204,8 +205,8 @@ class Hierarchy {
   /// A level-d try of q after a witness-cache miss, against the samples stored so far: d when nothing rules q out,
   /// else the next level to try. `witness` receives a conflicting sample of level <= d (a finer one is no witness
   /// for level d and is not reported). `pass_valid`: the scan-mode pass grid is in use; `finest_populated`: the
-  /// finest level holding samples of earlier batches.
-  int checkTry(int d, const double *q, const CellKey &finest, bool pass_valid, int finest_populated,
+  /// finest level holding samples of earlier batches; `last`: the batch's last level.
+  int checkTry(int d, const double *q, const CellKey &finest, bool pass_valid, int finest_populated, int last,
                SampleId &witness) const;
   /// Stores q (batch point `pi`, finest cell `finest`) as a level-d sample: arrays, level grid, pass grid, result.
   void store(int d, const InsertBatch &batch, std::uint32_t pi, const double *q, const CellKey &finest, bool pass_valid,
