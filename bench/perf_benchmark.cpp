@@ -113,23 +113,13 @@ pcl::PointCloud<pcl::PointXYZ>::Ptr toPcl(const PointBuffer &b) {
   return c;
 }
 
-/// Whether PCL's VoxelGrid at `leaf` would overflow its 32-bit voxel indices on these points (its own check: the
-/// product of the voxel counts per axis over the finite points' bounding box). VoxelGrid<PointXYZ> then returns the
-/// input; VoxelGrid<PCLPointCloud2> warns and carries on with wrapped indices, merging unrelated voxels.
-bool voxelIndicesOverflow(const PointBuffer &b, double leaf) {
-  const PointLayout &l = b.layout();
-  const PointField *f[3] = {l.find("x"), l.find("y"), l.find("z")};
-  float lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
-  for (std::size_t i = 0; i < b.size(); ++i) {
-    float v[3];
-    for (int a = 0; a < 3; ++a) v[a] = static_cast<float>(readAsDouble(b.record(i), *f[a]));
-    if (!std::isfinite(v[0]) || !std::isfinite(v[1]) || !std::isfinite(v[2])) continue;
-    for (int a = 0; a < 3; ++a) {
-      lo[a] = std::min(lo[a], v[a]);
-      hi[a] = std::max(hi[a], v[a]);
-    }
-  }
-  if (!(lo[0] <= hi[0])) return false;
+/// Whether PCL's VoxelGrid at `leaf` would overflow its 32-bit voxel indices on this message: its own check, the
+/// product of the voxel counts per axis over the bounding box its getMinMax3D finds. VoxelGrid<PointXYZ> then returns
+/// the input; VoxelGrid<PCLPointCloud2> warns and carries on with wrapped indices, merging unrelated voxels.
+bool voxelIndicesOverflow(const pcl::PCLPointCloud2::ConstPtr &message, double leaf) {
+  Eigen::Vector4f lo, hi;
+  pcl::getMinMax3D(message, pcl::getFieldIndex(*message, "x"), pcl::getFieldIndex(*message, "y"),
+                   pcl::getFieldIndex(*message, "z"), lo, hi);
   const float inv = 1.0f / static_cast<float>(leaf);
   double cells = 1.0;
   for (int a = 0; a < 3; ++a) cells *= std::floor(double((hi[a] - lo[a]) * inv)) + 1.0;
@@ -192,6 +182,8 @@ NodePathRun nodePath(Pipeline &pipeline, const Frame &frame) {
 void benchFrame(const Options &o, const std::string &name, const Frame &frame) {
   const double leaf = cellEdge(o.cell_size, o.level), radius = poissonRadius(o.cell_size, o.level);
   const auto cloud = toPcl(frame.points);
+  const pcl::PCLPointCloud2::ConstPtr message(new pcl::PCLPointCloud2(toPclCloud2(frame.points)));
+  const bool pcl_overflow = voxelIndicesOverflow(message, leaf);
 
   // Hierarchy build up to D vs VoxelGrid(c_D) and UniformSampling(r_D).
   // Scan mode keeps one pipeline across frames (the node, `hpds sample`): its arrays and grids are reused. A fresh
@@ -222,7 +214,6 @@ void benchFrame(const Options &o, const std::string &name, const Frame &frame) {
   // What the pcl_ros VoxelGrid nodelet runs: VoxelGrid<PCLPointCloud2> on the message as it arrives, every field
   // averaged per voxel. hpds keeps every field too (each sample is one real point with its record); the row above,
   // x/y/z only, is the stricter peer.
-  const pcl::PCLPointCloud2::ConstPtr message(new pcl::PCLPointCloud2(toPclCloud2(frame.points)));
   std::size_t vg_msg_count = 0;
   const Paired t_vg_msg = pairedMedians(o.repeats, build, [&] {
     pcl::VoxelGrid<pcl::PCLPointCloud2> vg;
@@ -235,8 +226,7 @@ void benchFrame(const Options &o, const std::string &name, const Frame &frame) {
   report(name, "build to level " + std::to_string(o.level), t_vg_msg,
          "VoxelGrid msg, all fields (" + std::to_string(vg_msg_count) + ")",
          std::to_string(message->fields.size()) + " fields, as the pcl_ros nodelet" +
-             (voxelIndicesOverflow(frame.points, leaf) ? " [VoxelGrid index overflow: voxels merged, time not comparable]"
-                                                       : ""));
+             (pcl_overflow ? " [VoxelGrid index overflow: voxels merged, time not comparable]" : ""));
   std::size_t us_count = 0;
   const Paired t_us = pairedMedians(o.repeats, build, [&] {
     pcl::UniformSampling<pcl::PointXYZ> us;
@@ -289,10 +279,9 @@ void benchFrame(const Options &o, const std::string &name, const Frame &frame) {
   Pipeline node_pipeline(full);
   std::size_t sink = 0;
   // The frame as a driver publishes it, every field included, as pcl_conversions hands it to PCL.
-  const pcl::PCLPointCloud2 msg = toPclCloud2(frame.points);
   const Paired t_path = pairedMedians(o.repeats, [&] { sink += nodePath(node_pipeline, frame).points; }, [&] {
     pcl::PointCloud<pcl::PointXYZ>::Ptr in(new pcl::PointCloud<pcl::PointXYZ>);
-    pcl::fromPCLPointCloud2(msg, *in);
+    pcl::fromPCLPointCloud2(*message, *in);
     pcl::VoxelGrid<pcl::PointXYZ> vg;
     vg.setInputCloud(in);
     vg.setLeafSize(static_cast<float>(leaf), static_cast<float>(leaf), static_cast<float>(leaf));
@@ -313,9 +302,7 @@ void benchFrame(const Options &o, const std::string &name, const Frame &frame) {
   });
   if (sink == 0) std::printf("(no output)\n");
   report(name, "frame path: msg->insert+normals->msg", t_path, "conv+VoxelGrid+NormalEst+conv",
-         voxelIndicesOverflow(frame.points, leaf)
-             ? "[VoxelGrid overflowed and passed the frame through: PCL's normals ran on every point]"
-             : "");
+         pcl_overflow ? "[VoxelGrid overflowed and passed the frame through: PCL's normals ran on every point]" : "");
 
   // The same path with the shipped defaults (config/hpds.yaml: levels 0..8, refined normals) and normals on: what a
   // user gets out of the box, to hold against the sensor period. No peer: VoxelGrid at 1.6 cm keeps nearly every
