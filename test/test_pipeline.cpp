@@ -534,6 +534,34 @@ TEST(InsertionOrder, RandomIsAPermutationAndSeedDependent) {
   EXPECT_EQ(a, b);
 }
 
+// A seed's order is part of the output users reproduce: it must stay the textbook shuffle of the contract, drawn
+// with a plain 64-bit remainder, on both sides of the division-free remainder's 4096 threshold.
+TEST(InsertionOrder, RandomIsTheContractsFisherYatesForEverySize) {
+  const auto reference = [](std::vector<std::uint32_t> v, std::uint64_t state) {
+    const auto next = [&state] {
+      std::uint64_t z = (state += 0x9E3779B97F4A7C15ull);
+      z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
+      z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
+      return z ^ (z >> 31);
+    };
+    for (std::size_t i = v.size(); i > 1; --i) {
+      const std::uint64_t bound = i, limit = ~std::uint64_t(0) - (~std::uint64_t(0) % bound);
+      std::uint64_t draw = next();
+      while (draw >= limit) draw = next();
+      std::swap(v[i - 1], v[draw % bound]);
+    }
+    return v;
+  };
+  for (const std::size_t n : {0u, 1u, 2u, 3u, 4095u, 4096u, 4097u, 70001u})
+    for (const std::uint64_t seed : {0ull, 1ull, 0x9E3779B97F4A7C15ull, ~0ull}) {
+      std::vector<std::uint32_t> v(n);
+      std::iota(v.begin(), v.end(), 0u);
+      const std::vector<std::uint32_t> expected = reference(v, seed);
+      seededShuffle(v, seed);
+      ASSERT_EQ(v, expected) << "n = " << n << ", seed = " << seed;
+    }
+}
+
 TEST(InsertionOrder, FeatureOrdersSortDescendingByBruteForceFeature) {
   std::mt19937_64 rng(4);
   std::uniform_real_distribution<double> u(-1, 1);

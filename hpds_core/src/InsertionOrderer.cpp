@@ -17,15 +17,30 @@ std::uint64_t splitmix64(std::uint64_t &state) {
   z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
   return z ^ (z >> 31);
 }
+/// v % b for 2^12 <= b < 2^32, without the 64-bit integer divide, which was half of a shuffle's time (0.87 -> 0.45 ms
+/// for 69 k indices). A quotient estimated in floating point is corrected in exact integer arithmetic: the loops
+/// make the result exact whatever the estimate; the estimate (v's top 53 bits, b >= 2^12) only keeps them to a step
+/// or two.
+__extension__ typedef unsigned __int128 Uint128;  // GCC/Clang; __extension__ keeps -Wpedantic quiet
+std::uint64_t remainderOf(std::uint64_t v, std::uint64_t b, double inv_b) {
+  std::uint64_t q = static_cast<std::uint64_t>(static_cast<double>(v >> 11) * (inv_b * 2048.0));
+  Uint128 qb = static_cast<Uint128>(q) * b;
+  while (qb > v) qb -= b;
+  std::uint64_t r = v - static_cast<std::uint64_t>(qb);
+  while (r >= b) r -= b;
+  return r;
+}
 /// Unbiased integer in [0, bound) by rejection: draws at or above the largest multiple of bound are redrawn.
 /// That multiple is at least 2^64 - bound, so it is only computed (a second division) for a draw that high.
+/// The value is v % bound, as before: every seed keeps its order.
 std::uint64_t below(std::uint64_t &state, std::uint64_t bound) {
   std::uint64_t v = splitmix64(state);
   if (v >= std::uint64_t(0) - bound) {
     const std::uint64_t limit = ~std::uint64_t(0) - (~std::uint64_t(0) % bound);
     while (v >= limit) v = splitmix64(state);
   }
-  return v % bound;
+  if (bound < 4096 || bound > 0xFFFFFFFFu) return v % bound;
+  return remainderOf(v, bound, 1.0 / static_cast<double>(bound));
 }
 }  // namespace
 

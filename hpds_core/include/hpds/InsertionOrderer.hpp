@@ -2,6 +2,9 @@
 //
 // Contract
 // - Random: a Fisher-Yates shuffle driven by splitmix64(seed) -- the same on every platform and standard library.
+//   From the last index i down to 1, index i is swapped with v % (i + 1), v the next splitmix64 draw (draws at or
+//   above the largest multiple of i + 1 that fits 64 bits are redrawn). This is fixed: a seed gives the same order
+//   in every version.
 // - Input: the candidates as given.
 // - Sphericity / SurfaceVariation (paper, section 6.2): local PCA of each point's neighbours within
 //   `feature_radius` (metres); points sorted by the feature, descending, so coarse levels take feature points first.
