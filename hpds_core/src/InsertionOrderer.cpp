@@ -22,8 +22,8 @@ std::uint64_t splitmix64(std::uint64_t &state) {
 /// make the result exact whatever the estimate; the estimate (v's top 53 bits, b >= 2^12) only keeps them to a step
 /// or two.
 __extension__ typedef unsigned __int128 Uint128;  // GCC/Clang; __extension__ keeps -Wpedantic quiet
-std::uint64_t remainderOf(std::uint64_t v, std::uint64_t b, double inv_b) {
-  std::uint64_t q = static_cast<std::uint64_t>(static_cast<double>(v >> 11) * (inv_b * 2048.0));
+std::uint64_t remainderOf(std::uint64_t v, std::uint64_t b) {
+  std::uint64_t q = static_cast<std::uint64_t>(static_cast<double>(v >> 11) * (2048.0 / static_cast<double>(b)));
   Uint128 qb = static_cast<Uint128>(q) * b;
   while (qb > v) qb -= b;
   std::uint64_t r = v - static_cast<std::uint64_t>(qb);
@@ -40,7 +40,7 @@ std::uint64_t below(std::uint64_t &state, std::uint64_t bound) {
     while (v >= limit) v = splitmix64(state);
   }
   if (bound < 4096 || bound > 0xFFFFFFFFu) return v % bound;
-  return remainderOf(v, bound, 1.0 / static_cast<double>(bound));
+  return remainderOf(v, bound);
 }
 }  // namespace
 
