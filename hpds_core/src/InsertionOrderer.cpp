@@ -32,7 +32,7 @@ std::uint64_t remainderOf(std::uint64_t v, std::uint64_t b) {
 }
 /// Unbiased integer in [0, bound) by rejection: draws at or above the largest multiple of bound are redrawn.
 /// That multiple is at least 2^64 - bound, so it is only computed (a second division) for a draw that high.
-/// The value is v % bound, as before: every seed keeps its order.
+/// The value is v % bound for every bound (remainderOf is exact): the order of a seed is fixed by the contract.
 std::uint64_t below(std::uint64_t &state, std::uint64_t bound) {
   std::uint64_t v = splitmix64(state);
   if (v >= std::uint64_t(0) - bound) {
