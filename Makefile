@@ -15,7 +15,7 @@ FUZZ_SECONDS ?= 60
 # The node's tests under ASan need more than this build (a sanitized nodelet cannot load into a plain manager):
 # opt in with ASAN_NODE=ON.
 ASAN_NODE ?= OFF
-HPDS := $(BUILD)/hpds_core/hpds
+HPDS := $(BUILD)/hpds
 
 .PHONY: all deps configure build test test-sanitize fuzz demo bench clean
 

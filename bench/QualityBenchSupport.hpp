@@ -11,9 +11,9 @@
 
 #include <Eigen/Geometry>
 
-#include "hpds/Frame.hpp"
-#include "hpds/PointBuffer.hpp"
-#include "hpds/SyntheticLidar.hpp"
+#include "hpds/points/Frame.hpp"
+#include "hpds/points/PointBuffer.hpp"
+#include "hpds/eval/SyntheticLidar.hpp"
 
 namespace hpds::bench {
 

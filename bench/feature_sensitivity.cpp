@@ -17,11 +17,11 @@
 #include <string>
 #include <vector>
 
-#include "hpds/InsertionOrderer.hpp"
-#include "hpds/Pipeline.hpp"
-#include "hpds/PointRender.hpp"
-#include "hpds/SyntheticLidar.hpp"
-#include "hpds/io/PngWriter.hpp"
+#include "hpds/sampling/InsertionOrderer.hpp"
+#include "hpds/pipeline/Pipeline.hpp"
+#include "hpds/eval/PointRender.hpp"
+#include "hpds/eval/SyntheticLidar.hpp"
+#include "hpds/eval/PngWriter.hpp"
 #include "QualityBenchSupport.hpp"
 
 namespace {

@@ -39,13 +39,13 @@
 #include <string>
 #include <vector>
 
-#include "hpds/GridSubsampling.hpp"
-#include "hpds/LocalPca.hpp"
-#include "hpds/NormalEstimator.hpp"
-#include "hpds/Pipeline.hpp"
-#include "hpds/PointRender.hpp"
-#include "hpds/SyntheticLidar.hpp"
-#include "hpds/io/PngWriter.hpp"
+#include "hpds/eval/GridSubsampling.hpp"
+#include "hpds/normals/LocalPca.hpp"
+#include "hpds/normals/NormalEstimator.hpp"
+#include "hpds/pipeline/Pipeline.hpp"
+#include "hpds/eval/PointRender.hpp"
+#include "hpds/eval/SyntheticLidar.hpp"
+#include "hpds/eval/PngWriter.hpp"
 #include "QualityBenchSupport.hpp"
 
 namespace {

@@ -27,12 +27,12 @@
 
 #include <unistd.h>
 
-#include "hpds/NormalEstimator.hpp"
-#include "hpds/Pipeline.hpp"
-#include "hpds/ScanFrames.hpp"
-#include "hpds/SyntheticLidar.hpp"
-#include "hpds/io/PclCloud.hpp"
-#include "hpds/io/PointCloudFile.hpp"
+#include "hpds/normals/NormalEstimator.hpp"
+#include "hpds/pipeline/Pipeline.hpp"
+#include "hpds/pipeline/ScanFrames.hpp"
+#include "hpds/eval/SyntheticLidar.hpp"
+#include "hpds/pcl/PclCloud.hpp"
+#include "hpds/pcl/PointCloudFile.hpp"
 
 namespace {
 

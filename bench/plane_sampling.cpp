@@ -7,7 +7,7 @@
 #include <iostream>
 #include <string>
 
-#include "hpds/Pipeline.hpp"
+#include "hpds/pipeline/Pipeline.hpp"
 #include "hpds/io/PlyWriter.hpp"
 
 int main(int argc, char **argv) {

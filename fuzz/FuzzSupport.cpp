@@ -8,9 +8,9 @@
 #include <fstream>
 #include <stdexcept>
 
-#include "hpds/Pipeline.hpp"
+#include "hpds/pipeline/Pipeline.hpp"
 #include "hpds/io/PlyWriter.hpp"
-#include "hpds/io/PointCloudFile.hpp"
+#include "hpds/pcl/PointCloudFile.hpp"
 
 namespace hpds::fuzz {
 namespace {

@@ -14,7 +14,7 @@
 #include <cstdint>
 #include <string>
 
-#include "hpds/PointBuffer.hpp"
+#include "hpds/points/PointBuffer.hpp"
 
 namespace hpds::fuzz {
 

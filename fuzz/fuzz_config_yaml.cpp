@@ -3,8 +3,8 @@
 #include <stdexcept>
 
 #include "FuzzSupport.hpp"
-#include "hpds/ConfigYaml.hpp"
-#include "hpds/Pipeline.hpp"
+#include "hpds/config/ConfigYaml.hpp"
+#include "hpds/pipeline/Pipeline.hpp"
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t *data, std::size_t size) {
   const std::string text(reinterpret_cast<const char *>(data), size);

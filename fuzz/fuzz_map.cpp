@@ -5,7 +5,7 @@
 #include <vector>
 
 #include "FuzzSupport.hpp"
-#include "hpds/HierarchyFile.hpp"
+#include "hpds/io/HierarchyFile.hpp"
 
 namespace {
 

@@ -9,13 +9,13 @@
 #include <string>
 #include <vector>
 
-#include "hpds/ConfigYaml.hpp"
-#include "hpds/HierarchyFile.hpp"
-#include "hpds/Pipeline.hpp"
-#include "hpds/SyntheticLidar.hpp"
+#include "hpds/config/ConfigYaml.hpp"
+#include "hpds/io/HierarchyFile.hpp"
+#include "hpds/pipeline/Pipeline.hpp"
+#include "hpds/eval/SyntheticLidar.hpp"
 #include "hpds/io/KittiBin.hpp"
 #include "hpds/io/PlyWriter.hpp"
-#include "hpds/io/PointCloudFile.hpp"
+#include "hpds/pcl/PointCloudFile.hpp"
 #include "hpds/io/PoseFile.hpp"
 
 namespace fs = std::filesystem;

@@ -7,7 +7,7 @@ here=$(cd "$(dirname "$0")" && pwd)
 build=$1
 out=$2
 jobs=${3:-2}
-hpds=$build/hpds_core/hpds
+hpds=$build/hpds
 # Debian's interpreter: python3-matplotlib is installed for it, whatever python3 comes first on PATH.
 python=/usr/bin/python3
 mkdir -p "$out"

@@ -11,10 +11,10 @@
 #include <stdexcept>
 #include <vector>
 
-#include "hpds/BlueNoiseAnalysis.hpp"
-#include "hpds/GridSubsampling.hpp"
-#include "hpds/PointRender.hpp"
-#include "hpds/io/PngWriter.hpp"
+#include "hpds/eval/BlueNoiseAnalysis.hpp"
+#include "hpds/eval/GridSubsampling.hpp"
+#include "hpds/eval/PointRender.hpp"
+#include "hpds/eval/PngWriter.hpp"
 
 namespace hpds {
 namespace {

@@ -12,7 +12,7 @@
 #include "TestData.hpp"
 #include "hpds/io/KittiBin.hpp"
 #include "hpds/io/PlyWriter.hpp"
-#include "hpds/io/PointCloudFile.hpp"
+#include "hpds/pcl/PointCloudFile.hpp"
 
 namespace hpds {
 namespace {

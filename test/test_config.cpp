@@ -13,8 +13,8 @@
 #include <vector>
 
 #include "TestData.hpp"
-#include "hpds/Config.hpp"
-#include "hpds/ConfigYaml.hpp"
+#include "hpds/config/Config.hpp"
+#include "hpds/config/ConfigYaml.hpp"
 
 namespace {
 

@@ -10,10 +10,10 @@
 #include <random>
 #include <tuple>
 
-#include "hpds/CellKey.hpp"
-#include "hpds/Hierarchy.hpp"
-#include "hpds/LevelGrid.hpp"
-#include "hpds/ViewDirection.hpp"
+#include "hpds/sampling/CellKey.hpp"
+#include "hpds/sampling/Hierarchy.hpp"
+#include "hpds/sampling/LevelGrid.hpp"
+#include "hpds/points/ViewDirection.hpp"
 
 namespace hpds {
 namespace {

@@ -11,10 +11,10 @@
 #include <tuple>
 
 #include "TestData.hpp"
-#include "hpds/HierarchyFile.hpp"
-#include "hpds/Pipeline.hpp"
-#include "hpds/SyntheticLidar.hpp"
-#include "hpds/io/PointCloudFile.hpp"
+#include "hpds/io/HierarchyFile.hpp"
+#include "hpds/pipeline/Pipeline.hpp"
+#include "hpds/eval/SyntheticLidar.hpp"
+#include "hpds/pcl/PointCloudFile.hpp"
 #include "hpds/io/PoseFile.hpp"
 
 namespace hpds {

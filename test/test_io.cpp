@@ -19,10 +19,10 @@
 #include <vector>
 
 #include "TestData.hpp"
-#include "hpds/PointBuffer.hpp"
+#include "hpds/points/PointBuffer.hpp"
 #include "hpds/io/KittiBin.hpp"
 #include "hpds/io/PlyWriter.hpp"
-#include "hpds/io/PointCloudFile.hpp"
+#include "hpds/pcl/PointCloudFile.hpp"
 #include "hpds/io/PoseFile.hpp"
 
 namespace fs = std::filesystem;

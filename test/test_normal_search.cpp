@@ -11,12 +11,12 @@
 #include <random>
 #include <vector>
 
-#include "../hpds_core/src/BallGrid.hpp"
-#include "hpds/FrameGridIndex.hpp"
-#include "hpds/Hierarchy.hpp"
-#include "hpds/LocalPca.hpp"
-#include "hpds/NormalEstimator.hpp"
-#include "hpds/ParallelFor.hpp"
+#include "sampling/BallGrid.hpp"
+#include "hpds/sampling/FrameGridIndex.hpp"
+#include "hpds/sampling/Hierarchy.hpp"
+#include "hpds/normals/LocalPca.hpp"
+#include "hpds/normals/NormalEstimator.hpp"
+#include "hpds/util/ParallelFor.hpp"
 
 namespace hpds {
 namespace {

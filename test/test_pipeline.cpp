@@ -13,11 +13,11 @@
 #include <set>
 
 #include "TestData.hpp"
-#include "hpds/InsertionOrderer.hpp"
-#include "hpds/NormalEstimator.hpp"
-#include "hpds/Pipeline.hpp"
-#include "hpds/SyntheticLidar.hpp"
-#include "hpds/io/PointCloudFile.hpp"
+#include "hpds/sampling/InsertionOrderer.hpp"
+#include "hpds/normals/NormalEstimator.hpp"
+#include "hpds/pipeline/Pipeline.hpp"
+#include "hpds/eval/SyntheticLidar.hpp"
+#include "hpds/pcl/PointCloudFile.hpp"
 #include "hpds/io/PoseFile.hpp"
 
 namespace hpds {

@@ -8,8 +8,8 @@
 #include <random>
 #include <vector>
 
-#include "hpds/Hierarchy.hpp"
-#include "hpds/NormalEstimator.hpp"
+#include "hpds/sampling/Hierarchy.hpp"
+#include "hpds/normals/NormalEstimator.hpp"
 
 namespace hpds {
 namespace {

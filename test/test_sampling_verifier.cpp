@@ -13,8 +13,8 @@
 #include <stdexcept>
 #include <vector>
 
-#include "hpds/PointBuffer.hpp"
-#include "hpds/SamplingVerifier.hpp"
+#include "hpds/points/PointBuffer.hpp"
+#include "hpds/eval/SamplingVerifier.hpp"
 
 namespace hpds {
 namespace {

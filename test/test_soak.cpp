@@ -8,9 +8,9 @@
 #include <chrono>
 #include <cmath>
 
-#include "hpds/Pipeline.hpp"
-#include "hpds/SamplingVerifier.hpp"
-#include "hpds/SyntheticLidar.hpp"
+#include "hpds/pipeline/Pipeline.hpp"
+#include "hpds/eval/SamplingVerifier.hpp"
+#include "hpds/eval/SyntheticLidar.hpp"
 
 #if defined(__SANITIZE_ADDRESS__)
 #define HPDS_SOAK_SANITIZED 1

@@ -7,7 +7,7 @@
 #include <cstring>
 #include <stdexcept>
 
-#include "hpds/SyntheticLidar.hpp"
+#include "hpds/eval/SyntheticLidar.hpp"
 
 namespace hpds {
 namespace {

@@ -19,11 +19,11 @@
 
 #include "Commands.hpp"
 #include "QualityIo.hpp"
-#include "hpds/BlueNoiseAnalysis.hpp"
-#include "hpds/Config.hpp"
-#include "hpds/GridSubsampling.hpp"
-#include "hpds/InsertionOrderer.hpp"
-#include "hpds/PointRender.hpp"
+#include "hpds/eval/BlueNoiseAnalysis.hpp"
+#include "hpds/config/Config.hpp"
+#include "hpds/eval/GridSubsampling.hpp"
+#include "hpds/sampling/InsertionOrderer.hpp"
+#include "hpds/eval/PointRender.hpp"
 
 namespace hpds::cli {
 

@@ -1,6 +1,6 @@
 #include "CliOptions.hpp"
 
-#include "hpds/ConfigYaml.hpp"
+#include "hpds/config/ConfigYaml.hpp"
 
 namespace hpds::cli {
 

@@ -6,7 +6,7 @@
 #include <optional>
 #include <string>
 
-#include "hpds/Config.hpp"
+#include "hpds/config/Config.hpp"
 
 namespace hpds::cli {
 

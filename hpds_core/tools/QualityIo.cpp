@@ -6,7 +6,7 @@
 #include <cmath>
 #include <stdexcept>
 
-#include "hpds/io/PointCloudFile.hpp"
+#include "hpds/pcl/PointCloudFile.hpp"
 #include "hpds/io/PoseFile.hpp"
 
 namespace hpds::cli {

@@ -9,9 +9,9 @@
 
 #include "Commands.hpp"
 #include "QualityIo.hpp"
-#include "hpds/BlueNoiseAnalysis.hpp"
-#include "hpds/InsertionOrderer.hpp"
-#include "hpds/PointRender.hpp"
+#include "hpds/eval/BlueNoiseAnalysis.hpp"
+#include "hpds/sampling/InsertionOrderer.hpp"
+#include "hpds/eval/PointRender.hpp"
 
 namespace hpds::cli {
 

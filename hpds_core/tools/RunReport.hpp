@@ -5,7 +5,7 @@
 #include <string>
 #include <vector>
 
-#include "hpds/Pipeline.hpp"
+#include "hpds/pipeline/Pipeline.hpp"
 
 namespace hpds::cli {
 

@@ -8,12 +8,12 @@
 #include "CliOptions.hpp"
 #include "Commands.hpp"
 #include "RunReport.hpp"
-#include "hpds/HierarchyFile.hpp"
-#include "hpds/ParallelFor.hpp"
-#include "hpds/Pipeline.hpp"
-#include "hpds/ScanFrames.hpp"
+#include "hpds/io/HierarchyFile.hpp"
+#include "hpds/util/ParallelFor.hpp"
+#include "hpds/pipeline/Pipeline.hpp"
+#include "hpds/pipeline/ScanFrames.hpp"
 #include "hpds/io/PlyWriter.hpp"
-#include "hpds/io/PointCloudFile.hpp"
+#include "hpds/pcl/PointCloudFile.hpp"
 #include "hpds/io/PoseFile.hpp"
 
 namespace hpds::cli {

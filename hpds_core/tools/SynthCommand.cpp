@@ -5,8 +5,8 @@
 #include <stdexcept>
 
 #include "Commands.hpp"
-#include "hpds/SyntheticLidar.hpp"
-#include "hpds/io/PointCloudFile.hpp"
+#include "hpds/eval/SyntheticLidar.hpp"
+#include "hpds/pcl/PointCloudFile.hpp"
 #include "hpds/io/PoseFile.hpp"
 
 namespace hpds::cli {

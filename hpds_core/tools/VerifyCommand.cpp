@@ -3,8 +3,8 @@
 #include <iostream>
 
 #include "Commands.hpp"
-#include "hpds/SamplingVerifier.hpp"
-#include "hpds/io/PointCloudFile.hpp"
+#include "hpds/eval/SamplingVerifier.hpp"
+#include "hpds/pcl/PointCloudFile.hpp"
 
 namespace hpds::cli {
 

@@ -5,7 +5,7 @@
 
 #include "Commands.hpp"
 #ifdef HPDS_WITH_ROS
-#include "hpds_node/ReplayCommand.hpp"
+#include "ReplayCommand.hpp"
 #endif
 
 int main(int argc, char **argv) {

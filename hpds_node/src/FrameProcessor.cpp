@@ -7,7 +7,7 @@
 #include <cmath>
 #include <stdexcept>
 
-#include "hpds/HierarchyFile.hpp"
+#include "hpds/io/HierarchyFile.hpp"
 
 namespace hpds_node {
 

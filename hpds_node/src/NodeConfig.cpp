@@ -11,7 +11,7 @@
 #include <sstream>
 #include <stdexcept>
 
-#include "hpds/ConfigYaml.hpp"
+#include "hpds/config/ConfigYaml.hpp"
 
 namespace hpds_node {
 

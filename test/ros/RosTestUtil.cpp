@@ -8,7 +8,7 @@
 #include <iterator>
 #include <unordered_map>
 
-#include "hpds/io/PointCloudFile.hpp"
+#include "hpds/pcl/PointCloudFile.hpp"
 #include "hpds_node/CloudConversion.hpp"
 
 namespace hpds_test {

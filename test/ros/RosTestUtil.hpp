@@ -16,8 +16,8 @@
 #include <string>
 #include <vector>
 
-#include "hpds/PointBuffer.hpp"
-#include "hpds/SyntheticLidar.hpp"
+#include "hpds/points/PointBuffer.hpp"
+#include "hpds/eval/SyntheticLidar.hpp"
 
 namespace hpds_test {
 

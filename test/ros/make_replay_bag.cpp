@@ -1,4 +1,4 @@
-// Writes the replay test's input bag: a synthetic lidar drive (hpds/SyntheticLidar.hpp) as PointCloud2 on
+// Writes the replay test's input bag: a synthetic lidar drive (hpds/eval/SyntheticLidar.hpp) as PointCloud2 on
 // /velodyne_points in frame "velodyne", its poses on /tf (odom -> base_link, at each cloud's stamp) and a static
 // base_link -> velodyne mount on /tf_static, plus one truncated cloud that both the node and `hpds replay` must
 // drop and count.
@@ -11,7 +11,7 @@
 #include <iostream>
 #include <string>
 
-#include "hpds/SyntheticLidar.hpp"
+#include "hpds/eval/SyntheticLidar.hpp"
 #include "hpds_node/CloudConversion.hpp"
 
 namespace {

@@ -10,7 +10,7 @@
 #include <limits>
 
 #include "RosTestUtil.hpp"
-#include "hpds/SyntheticLidar.hpp"
+#include "hpds/eval/SyntheticLidar.hpp"
 #include "hpds_node/FrameProcessor.hpp"
 
 namespace {

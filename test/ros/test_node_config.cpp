@@ -4,7 +4,7 @@
 #include <fstream>
 #include <tuple>
 
-#include "hpds/ConfigYaml.hpp"
+#include "hpds/config/ConfigYaml.hpp"
 #include "hpds_node/NodeConfig.hpp"
 
 namespace {

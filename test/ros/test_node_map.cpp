@@ -11,7 +11,7 @@
 #include <fstream>
 
 #include "RosTestUtil.hpp"
-#include "hpds/Pipeline.hpp"
+#include "hpds/pipeline/Pipeline.hpp"
 #include "hpds_node/HpdsServer.hpp"
 
 namespace {

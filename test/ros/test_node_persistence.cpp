@@ -18,9 +18,9 @@
 #include <filesystem>
 
 #include "RosTestUtil.hpp"
-#include "hpds/HierarchyFile.hpp"
-#include "hpds/Pipeline.hpp"
-#include "hpds/SyntheticLidar.hpp"
+#include "hpds/io/HierarchyFile.hpp"
+#include "hpds/pipeline/Pipeline.hpp"
+#include "hpds/eval/SyntheticLidar.hpp"
 #include "hpds_node/FrameProcessor.hpp"
 #include "hpds_node/HpdsServer.hpp"
 

@@ -9,7 +9,7 @@
 #include <tuple>
 
 #include "RosTestUtil.hpp"
-#include "hpds/Pipeline.hpp"
+#include "hpds/pipeline/Pipeline.hpp"
 #include "hpds_node/HpdsServer.hpp"
 
 namespace {

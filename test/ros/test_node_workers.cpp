@@ -6,7 +6,7 @@
 #include <gtest/gtest.h>
 
 #include "RosTestUtil.hpp"
-#include "hpds/SyntheticLidar.hpp"
+#include "hpds/eval/SyntheticLidar.hpp"
 #include "hpds_node/FrameProcessor.hpp"
 #include "hpds_node/HpdsServer.hpp"
 

@@ -1,4 +1,4 @@
-#include "FileAccess.hpp"
+#include "io/FileAccess.hpp"
 
 #include <cerrno>
 #include <cstring>

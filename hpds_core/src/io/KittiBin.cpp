@@ -1,6 +1,6 @@
 #include "hpds/io/KittiBin.hpp"
 
-#include "FileAccess.hpp"
+#include "io/FileAccess.hpp"
 
 #include <algorithm>
 #include <cerrno>

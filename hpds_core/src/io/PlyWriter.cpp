@@ -1,6 +1,6 @@
 #include "hpds/io/PlyWriter.hpp"
 
-#include "FileAccess.hpp"
+#include "io/FileAccess.hpp"
 
 #include <algorithm>
 #include <cerrno>

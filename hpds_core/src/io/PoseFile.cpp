@@ -1,6 +1,6 @@
 #include "hpds/io/PoseFile.hpp"
 
-#include "FileAccess.hpp"
+#include "io/FileAccess.hpp"
 
 #include <Eigen/SVD>
 #include <array>

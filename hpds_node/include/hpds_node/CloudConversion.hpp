@@ -21,7 +21,7 @@
 
 #include <string>
 
-#include "hpds/PointBuffer.hpp"
+#include "hpds/points/PointBuffer.hpp"
 
 namespace hpds_node {
 

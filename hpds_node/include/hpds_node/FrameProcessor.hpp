@@ -36,7 +36,7 @@
 #include <string>
 #include <vector>
 
-#include "hpds/Pipeline.hpp"
+#include "hpds/pipeline/Pipeline.hpp"
 #include "hpds_node/CloudConversion.hpp"
 #include "hpds_node/NodeConfig.hpp"
 

@@ -42,12 +42,9 @@
 
 #include "hpds_node/FrameProcessor.hpp"
 #include "hpds_node/NodeConfig.hpp"
+#include "hpds_node/ParamBridge.hpp"
 
 namespace hpds_node {
-
-/// Defaults, then the YAML file in ~config_file (if set), then every other private parameter, all through
-/// applyNodeConfigYaml. Throws std::invalid_argument naming the parameter.
-[[nodiscard]] NodeConfig loadNodeConfigFromParams(const ros::NodeHandle &private_nh);
 
 class HpdsServer {
  public:

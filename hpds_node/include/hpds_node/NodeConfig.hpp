@@ -15,7 +15,7 @@
 #include <string>
 #include <vector>
 
-#include "hpds/Config.hpp"
+#include "hpds/config/Config.hpp"
 
 namespace hpds_node {
 

@@ -15,7 +15,7 @@
 
 #include <string>
 
-#include "hpds/PointBuffer.hpp"
+#include "hpds/points/PointBuffer.hpp"
 
 namespace hpds {
 

@@ -1,0 +1,40 @@
+# What `cmake --install` (and `catkin_make install`) puts in the prefix: the libraries hpds::core and hpds::pcl with
+# their headers and a CMake package (find_package(hpds)), the `hpds` tool, the license, and for the ROS package the
+# node, nodelet plugin, launch and config files (package.xml comes from catkin_package()).
+include(CMakePackageConfigHelpers)
+set(HPDS_CMAKE_DIR ${CMAKE_INSTALL_LIBDIR}/cmake/hpds)
+
+set(HPDS_INSTALLED_LIBS hpds_core)
+if(HPDS_WITH_PCL)
+  list(APPEND HPDS_INSTALLED_LIBS hpds_pcl)
+endif()
+install(TARGETS ${HPDS_INSTALLED_LIBS} EXPORT hpdsTargets
+  LIBRARY DESTINATION ${CMAKE_INSTALL_LIBDIR}
+  ARCHIVE DESTINATION ${CMAKE_INSTALL_LIBDIR}
+  RUNTIME DESTINATION ${CMAKE_INSTALL_BINDIR}
+  INCLUDES DESTINATION ${CMAKE_INSTALL_INCLUDEDIR})
+# Public headers; the evaluation library is not installed, nor are its headers.
+set(HPDS_HEADER_EXCLUDES PATTERN eval EXCLUDE)
+if(NOT HPDS_WITH_PCL)
+  list(APPEND HPDS_HEADER_EXCLUDES PATTERN pcl EXCLUDE PATTERN pcl.hpp EXCLUDE)
+endif()
+install(DIRECTORY hpds_core/include/hpds DESTINATION ${CMAKE_INSTALL_INCLUDEDIR} ${HPDS_HEADER_EXCLUDES})
+install(EXPORT hpdsTargets NAMESPACE hpds:: DESTINATION ${HPDS_CMAKE_DIR})
+configure_package_config_file(cmake/hpdsConfig.cmake.in ${CMAKE_CURRENT_BINARY_DIR}/hpdsConfig.cmake
+  INSTALL_DESTINATION ${HPDS_CMAKE_DIR})
+write_basic_package_version_file(${CMAKE_CURRENT_BINARY_DIR}/hpdsConfigVersion.cmake
+  COMPATIBILITY SameMinorVersion)
+install(FILES ${CMAKE_CURRENT_BINARY_DIR}/hpdsConfig.cmake ${CMAKE_CURRENT_BINARY_DIR}/hpdsConfigVersion.cmake
+  DESTINATION ${HPDS_CMAKE_DIR})
+install(FILES LICENSE DESTINATION ${CMAKE_INSTALL_DATADIR}/doc/hpds)
+
+if(HPDS_WITH_PCL)
+  install(TARGETS hpds RUNTIME DESTINATION ${CMAKE_INSTALL_BINDIR})
+endif()
+
+if(HPDS_BUILD_NODE)
+  # `rosrun hpds hpds ...` looks in lib/hpds; the launch and config files in share/hpds.
+  install(TARGETS hpds RUNTIME DESTINATION ${CATKIN_PACKAGE_BIN_DESTINATION})
+  install(DIRECTORY launch config DESTINATION ${CATKIN_PACKAGE_SHARE_DESTINATION})
+  install(FILES LICENSE DESTINATION ${CATKIN_PACKAGE_SHARE_DESTINATION})
+endif()

@@ -1,0 +1,66 @@
+// HierarchyFile: saving a map-mode hierarchy to disk and loading it back (persistence across runs).
+//
+// Contract
+// - Format (version 1, all numbers little-endian), see HierarchyFile.cpp for the byte layout:
+//   header  = magic "HPDSMAP\0", version, cell_size, max_depth, next frame index, sample count, record layout
+//             (point_step and every field: name, offset, datatype, count), CRC-32 of the header;
+//   body    = one fixed-size entry per live sample: x y z (float64), level (uint8), frame index (uint32),
+//             to_viewpoint (3 x float32), the record (point_step bytes); then CRC-32 of the body.
+//   The file size is fully determined by the header, so truncation and trailing bytes are detected before any
+//   sample is read, and nothing is allocated beyond what the file holds.
+// - saveHierarchy writes atomically: a temporary file in the same directory, flushed and fsync'ed, then renamed over
+//   `path`. A failure (or an exception) leaves any previous file at `path` untouched and removes the temporary.
+// - Samples are written in increasing id order and get ids 0..n-1 in that order when loaded: ids are not kept
+//   (evicted slots are compacted), everything else (positions bit for bit, levels, frame indices, viewpoint vectors,
+//   record bytes) is.
+// - loadHierarchy never half-loads: the samples go into a fresh Hierarchy that is returned only when the whole file
+//   checked out. Errors are std::runtime_error "<path>: <problem>": missing/unreadable file, not a map file (magic),
+//   unsupported version, corrupt header or body (checksum), truncated or oversized file, invalid layout or
+//   parameters, a sample the hierarchy refuses (level out of range, non-finite or out-of-range position, two samples
+//   in one cell), and, when `expected` is given, a cell_size or max_depth that differs from it.
+// - Pipeline integration: saveMap / loadMap below carry the frame counter as well, so that a loaded map continues
+//   with the same frame indices and random-order seeds as an uninterrupted run.
+// - Thread-safety: reentrant; concurrent saves to the same path leave one complete file.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <string>
+
+#include "hpds/config/Config.hpp"
+#include "hpds/sampling/Hierarchy.hpp"
+
+namespace hpds {
+
+class Pipeline;
+
+inline constexpr std::uint32_t kHierarchyFileVersion = 1;
+
+/// A hierarchy read from a file, with the frame index the next inserted frame should get.
+struct LoadedHierarchy {
+  Hierarchy hierarchy;
+  std::uint32_t next_frame = 0;
+};
+
+/// Writes `hierarchy` to `path` atomically (see contract); `next_frame` is stored for the loader.
+void saveHierarchy(const std::string &path, const Hierarchy &hierarchy, std::uint32_t next_frame = 0);
+
+/// Reads a file written by saveHierarchy. With `expected`, a file whose cell_size or max_depth differ is refused.
+[[nodiscard]] LoadedHierarchy loadHierarchy(const std::string &path, const HierarchyConfig *expected = nullptr);
+
+/// Same as loadHierarchy from bytes held in memory (`name` stands for the path in messages).
+[[nodiscard]] LoadedHierarchy loadHierarchyBytes(const std::uint8_t *data, std::size_t size,
+                                                 const std::string &name, const HierarchyConfig *expected = nullptr);
+
+/// Saves the pipeline's map and its frame counter (framesProcessed()).
+void saveMap(const std::string &path, const Pipeline &pipeline);
+
+/// Map mode only: loads `path`, checked against the pipeline's hierarchy config, and replaces the pipeline's map with
+/// it (strong guarantee: on any error the pipeline is unchanged). Throws std::runtime_error for file problems and
+/// std::invalid_argument when the pipeline is not in map mode.
+void loadMap(const std::string &path, Pipeline &pipeline);
+
+/// CRC-32 (IEEE 802.3, reflected, as zlib's crc32): pass the previous value to continue over several buffers.
+[[nodiscard]] std::uint32_t crc32(const void *data, std::size_t size, std::uint32_t crc = 0);
+
+}  // namespace hpds

@@ -1,0 +1,59 @@
+// Normals and curvature of hierarchy samples by local PCA, with neighbourhoods taken from the hierarchy itself.
+//
+// Contract
+// - Neighbours of a sample are the samples of levels 0..`level` within `radius`, and with k > 0 the k nearest of
+//   those; with radius = 0 the radius grows from 2 r_level until k are found (or it reaches twice the level-0 cell
+//   edge). A fixed radius is searched for all ids at once (samples and queries sorted by cell once, the queries of
+//   a cell sharing one search); radius 0 walks the level grids per sample.
+// - PCA by LocalPca's solveNormal (eigenvalues and normal agree with an iterative eigensolver to ~1e-15).
+// - The normal is oriented toward the viewpoint of the frame that contributed the sample.
+// - Fewer than `min_neighbors` neighbours (the sample included) or a degenerate neighbourhood gives valid = false
+//   and NaN normal/curvature (PCL's convention for "not estimated"); never a garbage direction marked valid.
+// - curvature = l0 / (l0 + l1 + l2). Results are per id, independent of the thread count.
+// - Refinements (both off by default; see RefinedNormals.cpp):
+//   - neighborhood_level_offset o > 0: the footprint is chosen as above at `level` (the radius, or the distance of
+//     the k-th nearest sample of levels 0..level), then every sample of levels 0..level+o inside it is used. Finer
+//     levels average the range noise, which a single Poisson-disk level cannot.
+//   - max_growth g > 1: a neighbourhood that is line-like (l1 < line_ratio * l2: one scan line) or has fewer than
+//     min_neighbors samples doubles its footprint, up to g times the first one (and twice the level-0 cell edge).
+//     A grown neighbourhood is used only if it is no longer line-like and flat (RMS distance to its plane <=
+//     max_plane_rms * its radius); the first non-flat one stops the growth, and if none qualifies the first
+//     neighbourhood is kept. The line test needs a footprint long against the range noise (~20 sigma), as at the
+//     usual output levels.
+//   Measured gains and costs: bench/README_QUALITY.md.
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include "hpds/config/Config.hpp"
+#include "hpds/sampling/Hierarchy.hpp"
+
+namespace hpds {
+
+struct NormalParams {
+  int level = 0;            ///< neighbourhoods from levels 0..level
+  double radius = 0.0;      ///< [m]; 0 with k > 0: adaptive
+  int k = 0;                ///< 0: every neighbour within radius
+  int min_neighbors = 5;
+  int threads = 1;
+  int neighborhood_level_offset = 0;  ///< also take neighbours from levels level+1..level+offset (0 = off)
+  double max_growth = 1.0;            ///< grow line-like/too small neighbourhoods up to this factor (1 = off)
+  double line_ratio = 0.05;           ///< l1 / l2 below this counts as line-like
+  double max_plane_rms = 0.02;        ///< a grown neighbourhood must fit its plane within this * its radius (RMS)
+};
+
+struct SampleNormal {
+  float normal[3];
+  float curvature;
+  bool valid;
+};
+
+/// Resolves the config's defaults (radius 0 and k 0 -> 2.5 r_level) for output level `level`.
+[[nodiscard]] NormalParams normalParamsFor(const HpdsConfig &config, int level);
+
+/// One result per id in `ids` (same order).
+[[nodiscard]] std::vector<SampleNormal> estimateNormals(const Hierarchy &hierarchy, const std::vector<SampleId> &ids,
+                                                        const NormalParams &params);
+
+}  // namespace hpds

@@ -1,0 +1,110 @@
+// Pipeline: the per-frame flow shared by the CLI and the ROS node.
+//
+// Contract
+// - Scan mode: every frame is sampled on its own (the hierarchy is cleared first), and only levels 0..buildDepth()
+//   are built: down to the output level, or to output level + normals.neighborhood_level_offset with normals on, or
+//   to a level asked for by requireLevel, never past max_depth. Those levels are exactly what building to max_depth
+//   gives; points rejected down to buildDepth() count as dropped_depth. Map mode: one persistent
+//   hierarchy in the fixed frame; earlier samples never move or change level; samples farther than
+//   map.evict_distance from the latest sensor position are evicted before the frame is inserted, and the store is
+//   cut back to map.max_samples (farthest first), so memory is bounded by the cap plus one frame.
+// - Points are transformed by frame.sensor_to_fixed (identity = sensor frame). NaN/Inf coordinates, exact (0,0,0)
+//   no-returns (input.skip_zero_points) and points outside input.min_range/max_range are skipped and counted.
+// - A frame without x/y/z fields, or (map mode) whose field layout differs from the first frame's, throws
+//   std::invalid_argument before anything changes.
+// - Same config (seed) and same frames give identical samples, whatever `threads` is.
+// - Not thread-safe: one thread drives a Pipeline.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <vector>
+
+#include "hpds/config/Config.hpp"
+#include "hpds/points/Frame.hpp"
+#include "hpds/sampling/Hierarchy.hpp"
+#include "hpds/normals/NormalEstimator.hpp"
+#include "hpds/points/PointBuffer.hpp"
+
+namespace hpds {
+
+struct FrameCounters {
+  std::uint64_t input = 0;            ///< points in the frame
+  std::uint64_t skipped_invalid = 0;  ///< NaN/Inf coordinates
+  std::uint64_t skipped_zero = 0;     ///< exact (0,0,0) no-return points
+  std::uint64_t skipped_range = 0;    ///< outside input.min_range / input.max_range
+  std::uint64_t out_of_range = 0;     ///< coordinates beyond the hierarchy's exact key range
+  std::uint64_t dropped_depth = 0;    ///< rejected at every level down to buildDepth()
+  std::uint64_t accepted = 0;
+  std::uint64_t evicted = 0;  ///< samples removed from the map before this frame
+  std::array<std::uint64_t, kMaxDepthLimit + 1> accepted_per_level{};
+
+  FrameCounters &operator+=(const FrameCounters &o);
+};
+
+struct FrameResult {
+  FrameCounters counters;
+  std::vector<SampleId> new_samples;  ///< accepted from this frame, all levels, acceptance order
+  double seconds_order = 0.0;         ///< insertion order (features included)
+  double seconds_insert = 0.0;
+};
+
+class Pipeline {
+ public:
+  /// Validates the config (std::invalid_argument naming the key).
+  explicit Pipeline(const HpdsConfig &config);
+
+  /// Inserts one frame (see contract).
+  FrameResult addFrame(const Frame &frame);
+
+  /// Samples of levels 0..outputLevel(), increasing id order.
+  [[nodiscard]] std::vector<SampleId> outputSamples() const;
+  /// Of `ids`, those at levels <= outputLevel().
+  [[nodiscard]] std::vector<SampleId> atOutputLevels(const std::vector<SampleId> &ids) const;
+  /// Output-level samples strictly within `radius` of `center` (fixed frame).
+  [[nodiscard]] std::vector<SampleId> outputSamplesNear(const double center[3], double radius) const;
+  /// Samples of levels min_level..max_level that the last frame "hit": at least one of its inserted candidates
+  /// (the points that passed the skip rules, in the fixed frame) lies strictly within `radius`. With radius 2 r_L
+  /// every candidate has a hit sample (coverage), so this is the map as that sweep saw it. Increasing id order.
+  [[nodiscard]] std::vector<SampleId> samplesHitByLastFrame(int min_level, int max_level, double radius) const;
+  /// Output cloud of `ids` (normals estimated when normals.enabled), layout of OutputCloud.hpp.
+  [[nodiscard]] PointBuffer makeCloud(const std::vector<SampleId> &ids, bool with_frame_field,
+                                      double *seconds_normals = nullptr) const;
+
+  [[nodiscard]] const HpdsConfig &config() const { return config_; }
+  [[nodiscard]] const Hierarchy &hierarchy() const { return hierarchy_; }
+  [[nodiscard]] int outputLevel() const { return output_level_; }
+  /// Deepest level a frame is inserted down to: max_depth in map mode (any level may be read later); in scan mode the
+  /// deepest level this pipeline's outputs read (see contract).
+  [[nodiscard]] int buildDepth() const { return config_.mode == Mode::Map ? config_.hierarchy.max_depth : scan_depth_; }
+  /// Scan mode: build levels 0..level too (e.g. levels a node publishes besides the output). std::invalid_argument
+  /// outside 0..max_depth. No effect in map mode, which builds every level.
+  void requireLevel(int level);
+  [[nodiscard]] const FrameCounters &totals() const { return totals_; }
+  [[nodiscard]] std::uint32_t framesProcessed() const { return frames_; }
+  /// Bytes held: the hierarchy (samples, grids, insertion scratch) and the per-frame scratch. Scratch grown for a
+  /// rare huge frame is given back once recent frames are far smaller (bounded memory in long runs).
+  [[nodiscard]] std::size_t memUsage() const;
+  /// Index the next frame gets (its `frame` tag and its random-order seed offset). Scan-mode workers that share a
+  /// stream set it to the input index, so the output does not depend on which worker took the frame.
+  void setNextFrameIndex(std::uint32_t index) { frames_ = index; }
+
+  /// Map mode: replaces the map with `map` (e.g. read by loadMap in HierarchyFile.hpp) and numbers the next frame
+  /// `next_frame`, as if the frames that built `map` had gone through this pipeline. Throws std::invalid_argument,
+  /// leaving the pipeline unchanged, outside map mode or when the map's cell_size/max_depth differ from the config.
+  void replaceMap(Hierarchy &&map, std::uint32_t next_frame);
+
+ private:
+  HpdsConfig config_;
+  int output_level_;
+  int scan_depth_;  // scan mode's buildDepth()
+  Hierarchy hierarchy_;
+  FrameCounters totals_;
+  std::uint32_t frames_ = 0;
+  // Per-frame scratch, and a slowly decaying peak of recent frame sizes that decides when to give it back.
+  std::vector<double> xyz_;
+  std::vector<std::uint32_t> candidates_;
+  double recent_points_ = 0.0;
+};
+
+}  // namespace hpds

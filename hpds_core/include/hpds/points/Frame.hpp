@@ -1,0 +1,22 @@
+// Frame: one sensor sweep as it enters the pipeline.
+//
+// Contract
+// - `points` are in the sensor frame, in metres, with x/y/z fields of any float or integer type plus any other fields.
+// - `sensor_to_fixed` maps sensor coordinates into the fixed (map) frame; identity in scan mode or without poses.
+//   Its translation is the viewpoint that normals of this frame's samples are oriented toward.
+// - `stamp` is seconds (any epoch); it is carried to outputs, never interpreted.
+#pragma once
+
+#include <Eigen/Geometry>
+
+#include "hpds/points/PointBuffer.hpp"
+
+namespace hpds {
+
+struct Frame {
+  PointBuffer points;
+  double stamp = 0.0;
+  Eigen::Isometry3d sensor_to_fixed = Eigen::Isometry3d::Identity();
+};
+
+}  // namespace hpds

@@ -1,0 +1,451 @@
+#include "hpds/io/HierarchyFile.hpp"
+
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <array>
+#include <atomic>
+#include <cerrno>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <limits>
+#include <stdexcept>
+#include <vector>
+
+#include "hpds/pipeline/Pipeline.hpp"
+
+// Byte layout of version 1 (little-endian, no padding):
+//   0  char[8] magic "HPDSMAP\0"      8  u32 version          12 u32 header_size (bytes, CRC included)
+//   16 f64 cell_size                  24 u32 max_depth        28 u32 next_frame
+//   32 u64 sample_count               40 u32 point_step       44 u32 field_count
+//   48 per field: u32 name_len, name bytes, u32 offset, u8 datatype, u32 count
+//   header_size - 4: u32 CRC-32 of bytes [0, header_size - 4)
+//   body: sample_count entries of kEntryFixedBytes + point_step bytes:
+//         f64 x y z, u8 level, u32 frame_index, f32 to_viewpoint[3] (unit direction since the map keeps only
+//         that; older files' full vectors load the same), record bytes
+//   last 4 bytes: u32 CRC-32 of the body entries
+
+namespace hpds {
+namespace {
+
+constexpr char kMagic[8] = {'H', 'P', 'D', 'S', 'M', 'A', 'P', '\0'};
+constexpr std::size_t kFixedHeaderBytes = 48;
+constexpr std::size_t kEntryFixedBytes = 3 * 8 + 1 + 4 + 3 * 4;
+// Far above any real layout; they keep every size computed below from overflowing and bound the header read.
+constexpr std::uint32_t kMaxHeaderBytes = 1u << 24;
+constexpr std::uint32_t kMaxPointStep = 1u << 24;
+constexpr std::uint32_t kMaxFieldNameBytes = 1u << 12;
+// Bytes per read/write chunk: few system calls, a small buffer whatever the record size (records may be 16 MiB).
+constexpr std::size_t kChunkBytes = 1u << 20;
+
+std::size_t entriesPerChunk(std::size_t entry_bytes) { return std::max<std::size_t>(1, kChunkBytes / entry_bytes); }
+
+static_assert(std::numeric_limits<double>::is_iec559 && sizeof(double) == 8 && sizeof(float) == 4,
+              "the file stores IEEE-754 doubles and floats by their bytes");
+
+bool hostIsLittleEndian() {
+  const std::uint16_t probe = 1;
+  std::uint8_t first = 0;
+  std::memcpy(&first, &probe, 1);
+  return first == 1;
+}
+
+constexpr std::array<std::uint32_t, 256> makeCrcTable() {
+  std::array<std::uint32_t, 256> table{};
+  for (std::uint32_t i = 0; i < 256; ++i) {
+    std::uint32_t c = i;
+    for (int k = 0; k < 8; ++k) c = (c & 1u) ? 0xEDB88320u ^ (c >> 1) : c >> 1;
+    table[i] = c;
+  }
+  return table;
+}
+constexpr std::array<std::uint32_t, 256> kCrcTable = makeCrcTable();
+
+[[noreturn]] void fail(const std::string &path, const std::string &what) {
+  throw std::runtime_error(path + ": " + what);
+}
+
+// Appends fixed-size values in file order (the host is little-endian, checked before any file is touched).
+class ByteWriter {
+ public:
+  template <typename T>
+  void put(const T &value) {
+    const auto *p = reinterpret_cast<const std::uint8_t *>(&value);
+    bytes.insert(bytes.end(), p, p + sizeof(T));
+  }
+  void putBytes(const void *data, std::size_t n) {
+    const auto *p = static_cast<const std::uint8_t *>(data);
+    bytes.insert(bytes.end(), p, p + n);
+  }
+  std::vector<std::uint8_t> bytes;
+};
+
+// Reads fixed-size values from a byte range; running past the end is reported, never read.
+class ByteReader {
+ public:
+  ByteReader(const std::uint8_t *data, std::size_t size) : data_(data), size_(size) {}
+  template <typename T>
+  bool get(T &value) {
+    if (size_ - pos_ < sizeof(T)) return false;
+    std::memcpy(&value, data_ + pos_, sizeof(T));
+    pos_ += sizeof(T);
+    return true;
+  }
+  bool getString(std::string &s, std::size_t n) {
+    if (size_ - pos_ < n) return false;
+    s.assign(reinterpret_cast<const char *>(data_ + pos_), n);
+    pos_ += n;
+    return true;
+  }
+  std::size_t pos() const { return pos_; }
+
+ private:
+  const std::uint8_t *data_;
+  std::size_t size_;
+  std::size_t pos_ = 0;
+};
+
+// Sequential byte source over either a file descriptor or memory, so one parser serves both loaders.
+class Source {
+ public:
+  virtual ~Source() = default;
+  /// Reads exactly n bytes or returns false.
+  virtual bool read(std::uint8_t *dst, std::size_t n) = 0;
+};
+
+class MemorySource final : public Source {
+ public:
+  MemorySource(const std::uint8_t *data, std::size_t size) : data_(data), size_(size) {}
+  bool read(std::uint8_t *dst, std::size_t n) override {
+    if (size_ - pos_ < n) return false;
+    if (n) std::memcpy(dst, data_ + pos_, n);
+    pos_ += n;
+    return true;
+  }
+
+ private:
+  const std::uint8_t *data_;
+  std::size_t size_;
+  std::size_t pos_ = 0;
+};
+
+class FdSource final : public Source {
+ public:
+  explicit FdSource(int fd) : fd_(fd) {}
+  bool read(std::uint8_t *dst, std::size_t n) override {
+    while (n > 0) {
+      const ::ssize_t got = ::read(fd_, dst, n);
+      if (got < 0 && errno == EINTR) continue;
+      if (got <= 0) return false;
+      dst += got;
+      n -= static_cast<std::size_t>(got);
+    }
+    return true;
+  }
+
+ private:
+  int fd_;
+};
+
+class Fd {
+ public:
+  explicit Fd(int fd = -1) : fd_(fd) {}
+  ~Fd() {
+    if (fd_ >= 0) ::close(fd_);
+  }
+  Fd(const Fd &) = delete;
+  Fd &operator=(const Fd &) = delete;
+  int get() const { return fd_; }
+  /// Closes now and reports the result (close can be where a delayed write error surfaces).
+  bool close() {
+    const int fd = fd_;
+    fd_ = -1;
+    return fd < 0 || ::close(fd) == 0;
+  }
+
+ private:
+  int fd_;
+};
+
+std::string describeConfig(double cell_size, int max_depth) {
+  char buf[96];
+  std::snprintf(buf, sizeof buf, "cell_size %.17g, max_depth %d", cell_size, max_depth);
+  return buf;
+}
+
+LoadedHierarchy parse(Source &src, std::uint64_t total_size, const std::string &name,
+                      const HierarchyConfig *expected) {
+  if (total_size == 0) fail(name, "empty file (0 bytes), not an hpds map");
+  std::array<std::uint8_t, 16> start{};
+  const std::size_t got = static_cast<std::size_t>(std::min<std::uint64_t>(total_size, start.size()));
+  if (!src.read(start.data(), got)) fail(name, "read failed at the start of the file");
+  if (std::memcmp(start.data(), kMagic, std::min<std::size_t>(got, 8)) != 0) fail(name, "not an hpds map file (bad magic)");
+  if (got < start.size())
+    fail(name, "truncated: " + std::to_string(total_size) + " bytes cannot hold an hpds map header");
+  std::uint32_t version = 0, header_size = 0;
+  std::memcpy(&version, start.data() + 8, 4);
+  std::memcpy(&header_size, start.data() + 12, 4);
+  if (version != kHierarchyFileVersion)
+    fail(name, "unsupported hpds map version " + std::to_string(version) + " (this build reads version " +
+                   std::to_string(kHierarchyFileVersion) + ")");
+  if (header_size < kFixedHeaderBytes + 4 || header_size > kMaxHeaderBytes)
+    fail(name, "corrupt header: header size " + std::to_string(header_size) + " is impossible");
+  if (header_size + std::uint64_t(4) > total_size)
+    fail(name, "truncated: the header needs " + std::to_string(header_size) + " bytes but the file holds " +
+                   std::to_string(total_size));
+
+  std::vector<std::uint8_t> header(header_size);
+  std::memcpy(header.data(), start.data(), start.size());
+  if (!src.read(header.data() + start.size(), header_size - start.size())) fail(name, "read failed in the header");
+  std::uint32_t stored_crc = 0;
+  std::memcpy(&stored_crc, header.data() + header_size - 4, 4);
+  if (crc32(header.data(), header_size - 4) != stored_crc) fail(name, "corrupt header (checksum mismatch)");
+
+  // The checksum matched, so from here a bad value is a file written wrong, not a flipped bit.
+  ByteReader r(header.data() + 16, header_size - 4 - 16);
+  double cell_size = 0.0;
+  std::uint32_t max_depth = 0, next_frame = 0, point_step = 0, field_count = 0;
+  std::uint64_t sample_count = 0;
+  r.get(cell_size);
+  r.get(max_depth);
+  r.get(next_frame);
+  r.get(sample_count);
+  r.get(point_step);
+  r.get(field_count);
+  if (!(cell_size > 0.0) || !std::isfinite(cell_size) || max_depth > std::uint32_t(kMaxDepthLimit))
+    fail(name, "invalid hierarchy parameters (" +
+                   describeConfig(cell_size, static_cast<int>(std::min<std::uint32_t>(max_depth, 1u << 30))) + ")");
+  if (point_step > kMaxPointStep) fail(name, "invalid record layout: point_step " + std::to_string(point_step));
+  PointLayout layout;
+  layout.point_step = point_step;
+  for (std::uint32_t i = 0; i < field_count; ++i) {
+    std::uint32_t name_len = 0, offset = 0, count = 0;
+    std::uint8_t type = 0;
+    PointField f;
+    if (!r.get(name_len) || name_len > kMaxFieldNameBytes || !r.getString(f.name, name_len) || !r.get(offset) ||
+        !r.get(type) || !r.get(count))
+      fail(name, "corrupt header: field " + std::to_string(i) + " of " + std::to_string(field_count) +
+                     " runs past the header");
+    if (!isValidFieldType(type))
+      fail(name, "invalid record layout: field '" + f.name + "' has datatype " + std::to_string(type));
+    f.offset = offset;
+    f.type = static_cast<FieldType>(type);
+    f.count = count;
+    layout.fields.push_back(std::move(f));
+  }
+  if (r.pos() != header_size - 4 - 16) fail(name, "corrupt header: unexpected bytes after the field list");
+  try {
+    layout.validate();
+  } catch (const std::invalid_argument &e) {
+    fail(name, std::string("invalid record layout: ") + e.what());
+  }
+
+  if (expected && (expected->cell_size != cell_size || expected->max_depth != static_cast<int>(max_depth)))
+    fail(name, "the map was built with " + describeConfig(cell_size, static_cast<int>(max_depth)) +
+                   " but the configuration has " + describeConfig(expected->cell_size, expected->max_depth) +
+                   " (hierarchy.cell_size and hierarchy.max_depth must match the map's)");
+
+  const std::uint64_t entry_bytes = kEntryFixedBytes + point_step;
+  const std::uint64_t body_bytes = total_size - header_size - 4;
+  if (sample_count >= kNoSample || sample_count > body_bytes / entry_bytes ||
+      sample_count * entry_bytes != body_bytes) {
+    const bool fits = sample_count <= body_bytes / entry_bytes;
+    fail(name, std::string(fits ? "unexpected trailing bytes" : "truncated") + ": the header declares " +
+                   std::to_string(sample_count) + " samples of " + std::to_string(entry_bytes) + " bytes but " +
+                   std::to_string(body_bytes) + " body bytes follow it");
+  }
+
+  LoadedHierarchy out{Hierarchy(cell_size, static_cast<int>(max_depth)), next_frame};
+  out.hierarchy.setRecordLayout(layout);
+  std::vector<std::uint8_t> chunk;
+  std::uint32_t crc = 0;
+  // A sample the hierarchy refuses is only reported once the checksum has passed: a damaged body should be called
+  // damaged, not blamed on whichever sample the damage happened to hit first.
+  std::string refused;
+  for (std::uint64_t done = 0; done < sample_count;) {
+    const std::size_t n =
+        static_cast<std::size_t>(std::min<std::uint64_t>(entriesPerChunk(entry_bytes), sample_count - done));
+    chunk.resize(n * entry_bytes);
+    if (!src.read(chunk.data(), chunk.size())) fail(name, "read failed in the samples (file changed while reading?)");
+    crc = crc32(chunk.data(), chunk.size(), crc);
+    for (std::size_t i = 0; i < n && refused.empty(); ++i) {
+      const std::uint8_t *e = chunk.data() + i * entry_bytes;
+      double xyz[3];
+      float to_view[3];
+      std::uint32_t frame = 0;
+      std::memcpy(xyz, e, 24);
+      const int level = e[24];
+      std::memcpy(&frame, e + 25, 4);
+      std::memcpy(to_view, e + 29, 12);
+      try {
+        if (!std::isfinite(xyz[0]) || !std::isfinite(xyz[1]) || !std::isfinite(xyz[2]))
+          throw std::invalid_argument("position is not finite");
+        out.hierarchy.restoreSample(xyz, level, frame, to_view, e + kEntryFixedBytes);
+      } catch (const std::exception &ex) {
+        refused = "sample " + std::to_string(done + i) + ": " + ex.what();
+      }
+    }
+    done += n;
+  }
+  std::uint8_t tail[4];
+  if (!src.read(tail, 4)) fail(name, "read failed at the body checksum");
+  std::memcpy(&stored_crc, tail, 4);
+  if (crc != stored_crc) fail(name, "corrupt sample data (checksum mismatch)");
+  if (!refused.empty()) fail(name, "invalid map: " + refused);
+  return out;
+}
+
+bool writeAll(int fd, const std::uint8_t *data, std::size_t n) {
+  while (n > 0) {
+    const ::ssize_t put = ::write(fd, data, n);
+    if (put < 0 && errno == EINTR) continue;
+    if (put <= 0) return false;
+    data += put;
+    n -= static_cast<std::size_t>(put);
+  }
+  return true;
+}
+
+// Opens a fresh temporary beside `path` (same file system, so the final rename is atomic); returns its name.
+std::string openTemporary(const std::string &path, int &fd) {
+  static std::atomic<unsigned> counter{0};
+  for (int attempt = 0; attempt < 100; ++attempt) {
+    std::string tmp = path + ".tmp." + std::to_string(::getpid()) + "." + std::to_string(counter++);
+    fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0666);
+    if (fd >= 0) return tmp;
+    if (errno != EEXIST) fail(path, std::string("cannot create a temporary file beside it: ") + std::strerror(errno));
+  }
+  fail(path, "cannot create a temporary file beside it: too many stale temporaries");
+}
+
+}  // namespace
+
+std::uint32_t crc32(const void *data, std::size_t size, std::uint32_t crc) {
+  const auto *p = static_cast<const std::uint8_t *>(data);
+  crc = ~crc;
+  for (std::size_t i = 0; i < size; ++i) crc = kCrcTable[(crc ^ p[i]) & 0xFFu] ^ (crc >> 8);
+  return ~crc;
+}
+
+void saveHierarchy(const std::string &path, const Hierarchy &hierarchy, std::uint32_t next_frame) {
+  if (!hostIsLittleEndian()) fail(path, "map files are little-endian; this host is not");
+  const PointLayout &layout = hierarchy.recordLayout();
+  if (layout.point_step > kMaxPointStep) fail(path, "cannot save: records of more than 16 MiB");
+  for (const PointField &f : layout.fields)
+    if (f.name.size() > kMaxFieldNameBytes) fail(path, "cannot save: a field name longer than 4096 bytes");
+
+  ByteWriter h;
+  h.putBytes(kMagic, sizeof kMagic);
+  h.put(kHierarchyFileVersion);
+  h.put(std::uint32_t(0));  // header_size, patched below
+  h.put(hierarchy.cellSize());
+  h.put(static_cast<std::uint32_t>(hierarchy.maxDepth()));
+  h.put(next_frame);
+  h.put(static_cast<std::uint64_t>(hierarchy.sampleCount()));
+  h.put(layout.point_step);
+  h.put(static_cast<std::uint32_t>(layout.fields.size()));
+  for (const PointField &f : layout.fields) {
+    h.put(static_cast<std::uint32_t>(f.name.size()));
+    h.putBytes(f.name.data(), f.name.size());
+    h.put(f.offset);
+    h.put(static_cast<std::uint8_t>(f.type));
+    h.put(f.count);
+  }
+  const auto header_size = static_cast<std::uint32_t>(h.bytes.size() + 4);
+  std::memcpy(h.bytes.data() + 12, &header_size, 4);
+  h.put(crc32(h.bytes.data(), h.bytes.size()));
+
+  int raw_fd = -1;
+  const std::string tmp = openTemporary(path, raw_fd);
+  Fd fd(raw_fd);
+  auto abandon = [&](const char *what) { fail(path, std::string(what) + ": " + std::strerror(errno)); };
+  try {
+    if (!writeAll(fd.get(), h.bytes.data(), h.bytes.size())) abandon("write failed");
+    const std::size_t step = layout.point_step;
+    const std::size_t entry_bytes = kEntryFixedBytes + step;
+    std::vector<std::uint8_t> chunk;
+    const std::size_t chunk_entries = entriesPerChunk(entry_bytes);
+    chunk.reserve(chunk_entries * entry_bytes);
+    std::uint32_t crc = 0;
+    auto flush = [&] {
+      crc = crc32(chunk.data(), chunk.size(), crc);
+      if (!writeAll(fd.get(), chunk.data(), chunk.size())) abandon("write failed");
+      chunk.clear();
+    };
+    for (SampleId id = 0; id < hierarchy.idBound(); ++id) {
+      if (!hierarchy.isLive(id)) continue;
+      const std::size_t at = chunk.size();
+      chunk.resize(at + entry_bytes);
+      std::uint8_t *e = chunk.data() + at;
+      std::memcpy(e, hierarchy.position(id), 24);
+      e[24] = static_cast<std::uint8_t>(hierarchy.level(id));
+      const std::uint32_t frame = hierarchy.frameIndex(id);
+      std::memcpy(e + 25, &frame, 4);
+      std::memcpy(e + 29, hierarchy.toViewpoint(id).data(), 12);
+      if (step) std::memcpy(e + kEntryFixedBytes, hierarchy.record(id), step);
+      if (chunk.size() >= chunk_entries * entry_bytes) flush();
+    }
+    flush();
+    std::uint8_t c[4];
+    std::memcpy(c, &crc, 4);
+    if (!writeAll(fd.get(), c, 4)) abandon("write failed");
+    // Data must be on disk before the rename publishes it, or a crash could leave a complete-looking empty file.
+    if (::fsync(fd.get()) != 0) abandon("fsync failed");
+    if (!fd.close()) abandon("close failed");
+  } catch (...) {
+    fd.close();
+    ::unlink(tmp.c_str());
+    throw;
+  }
+  if (std::rename(tmp.c_str(), path.c_str()) != 0) {
+    const int err = errno;
+    ::unlink(tmp.c_str());
+    fail(path, std::string("cannot rename the temporary file into place: ") + std::strerror(err));
+  }
+  // Makes the rename itself durable; failing here only weakens durability, the file is complete.
+  std::string dir = std::filesystem::path(path).parent_path().string();
+  if (dir.empty()) dir = ".";
+  const int dfd = ::open(dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+  if (dfd >= 0) {
+    ::fsync(dfd);
+    ::close(dfd);
+  }
+}
+
+LoadedHierarchy loadHierarchy(const std::string &path, const HierarchyConfig *expected) {
+  if (!hostIsLittleEndian()) fail(path, "map files are little-endian; this host is not");
+  Fd fd(::open(path.c_str(), O_RDONLY | O_CLOEXEC));
+  if (fd.get() < 0) {
+    if (errno == ENOENT) fail(path, "file not found");
+    fail(path, std::string("cannot open: ") + std::strerror(errno));
+  }
+  struct stat st {};
+  if (::fstat(fd.get(), &st) != 0) fail(path, std::string("cannot stat: ") + std::strerror(errno));
+  if (!S_ISREG(st.st_mode)) fail(path, "not a regular file");
+  FdSource src(fd.get());
+  return parse(src, static_cast<std::uint64_t>(st.st_size), path, expected);
+}
+
+LoadedHierarchy loadHierarchyBytes(const std::uint8_t *data, std::size_t size, const std::string &name,
+                                   const HierarchyConfig *expected) {
+  if (!hostIsLittleEndian()) fail(name, "map files are little-endian; this host is not");
+  MemorySource src(data, size);
+  return parse(src, size, name, expected);
+}
+
+void saveMap(const std::string &path, const Pipeline &pipeline) {
+  saveHierarchy(path, pipeline.hierarchy(), pipeline.framesProcessed());
+}
+
+void loadMap(const std::string &path, Pipeline &pipeline) {
+  if (pipeline.config().mode != Mode::Map)
+    throw std::invalid_argument("loading a map needs mode: map (scan mode starts every frame on an empty hierarchy)");
+  LoadedHierarchy loaded = loadHierarchy(path, &pipeline.config().hierarchy);
+  pipeline.replaceMap(std::move(loaded.hierarchy), loaded.next_frame);
+}
+
+}  // namespace hpds

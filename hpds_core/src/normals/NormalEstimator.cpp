@@ -1,0 +1,150 @@
+#include "hpds/normals/NormalEstimator.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <utility>
+
+#include "hpds/normals/LocalPca.hpp"
+#include "hpds/util/ParallelFor.hpp"
+#include "sampling/BallGrid.hpp"
+#include "normals/RefinedNormals.hpp"
+
+namespace hpds {
+
+NormalParams normalParamsFor(const HpdsConfig &config, int level) {
+  NormalParams p;
+  p.level = level;
+  p.k = config.normals.k;
+  p.radius = config.normals.radius;
+  if (p.radius <= 0.0 && p.k == 0) p.radius = 2.5 * poissonRadius(config.hierarchy.cell_size, level);
+  p.min_neighbors = config.normals.min_neighbors;
+  p.neighborhood_level_offset = config.normals.neighborhood_level_offset;
+  p.max_growth = config.normals.max_growth;
+  p.threads = config.threads;
+  return p;
+}
+
+SampleNormal invalidNormal() {
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  return SampleNormal{{nan, nan, nan}, nan, false};
+}
+
+SampleNormal unorientedNormal(const LocalPca &pca) {
+  if (!pca.valid) return invalidNormal();
+  return SampleNormal{{static_cast<float>(pca.normal[0]), static_cast<float>(pca.normal[1]),
+                       static_cast<float>(pca.normal[2])},
+                      static_cast<float>(pca.surfaceVariation()), true};
+}
+
+void orientTowardViewpoints(const Hierarchy &h, const std::vector<SampleId> &ids, std::vector<SampleNormal> &normals,
+                            int threads) {
+  // ~20 ns per sample: a thread only pays for itself from tens of thousands.
+  parallelFor(ids.size(), threads, [&](std::size_t b, std::size_t e) {
+    for (std::size_t i = b; i < e; ++i) {
+      SampleNormal &n = normals[i];
+      if (!n.valid) continue;
+      const std::array<float, 3> v = h.toViewpoint(ids[i]);
+      // On the float normal: it can decide otherwise than the double one only for a normal within ~1e-7 rad of
+      // perpendicular to the view, where either side is as right.
+      const double dot = double(n.normal[0]) * v[0] + double(n.normal[1]) * v[1] + double(n.normal[2]) * v[2];
+      if (dot < 0.0) n.normal[0] = -n.normal[0], n.normal[1] = -n.normal[1], n.normal[2] = -n.normal[2];
+    }
+  }, /*grain=*/std::size_t(1) << 15);
+}
+
+namespace {
+void gather(const Hierarchy &h, const double *q, double radius, int level,
+            std::vector<std::pair<double, SampleId>> &out) {
+  out.clear();
+  h.forEachInBall(q, radius, level, [&](SampleId id, double d2) { out.emplace_back(d2, id); });
+}
+}  // namespace
+
+std::vector<SampleNormal> estimateNormals(const Hierarchy &h, const std::vector<SampleId> &ids,
+                                          const NormalParams &params) {
+  if (params.neighborhood_level_offset > 0 || params.max_growth > 1.0) return estimateNormalsRefined(h, ids, params);
+  std::vector<SampleNormal> result(ids.size(), invalidNormal());
+  if (ids.empty()) return result;
+  const int level = std::min(params.level, h.maxDepth());
+
+  // Normals are stored unoriented and turned toward the viewpoints at the end (orientTowardViewpoints).
+  auto store = [&](std::size_t i, const PcaAccumulator &acc) { result[i] = unorientedNormal(acc.solveNormal()); };
+
+  if (params.radius > 0.0) {
+    // Fixed radius: the union samples of levels 0..level near the queried ids and the queries, both sorted by cell
+    // once (BallGrid); queries of one cell share the search of their 27 cells, and each is one pass over them.
+    double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+    for (SampleId id : ids) {
+      const double *p = h.position(id);
+      for (int a = 0; a < 3; ++a) {
+        lo[a] = std::min(lo[a], p[a] - params.radius);
+        hi[a] = std::max(hi[a], p[a] + params.radius);
+      }
+    }
+    // Candidates in increasing id order (ties of the k nearest resolve by this index).
+    std::vector<SampleId> inside = h.samplesUpTo(level);
+    inside.erase(std::remove_if(inside.begin(), inside.end(),
+                                [&](SampleId id) {
+                                  const double *p = h.position(id);
+                                  return !(p[0] >= lo[0] && p[0] <= hi[0] && p[1] >= lo[1] && p[1] <= hi[1] &&
+                                           p[2] >= lo[2] && p[2] <= hi[2]);
+                                }),
+                 inside.end());
+    // Usually the queries are exactly the candidates (all output samples): then one sort serves both.
+    const double *base = h.position(0);
+    const PointSet points{base, inside.data(), inside.size()};
+    const BallGrid grid(points, inside == ids ? points : PointSet{base, ids.data(), ids.size()}, params.radius);
+    const std::size_t k = params.k > 0 ? static_cast<std::size_t>(params.k) : 0;
+    const std::size_t min_n = static_cast<std::size_t>(std::max(params.min_neighbors, 0));
+    parallelFor(grid.cellCount(), params.threads, [&](std::size_t b, std::size_t e) {
+      std::vector<std::pair<double, std::uint32_t>> nb;
+      grid.visit(b, e, [&](std::size_t i, const BallView &v) {
+        if (v.count < min_n || v.count < 3) return;
+        PcaAccumulator acc(v.q);
+        if (k == 0 || v.count <= k) {
+          // Every neighbour: the sums straight from the scan, no neighbour list.
+          for (std::size_t t = 0; t < v.count; ++t) acc.add(&v.xyz[3 * std::size_t(v.inside[t])]);
+        } else {
+          // (distance, index) pairs: ties resolve by index, so the neighbourhood is deterministic.
+          nb.clear();
+          for (std::size_t t = 0; t < v.count; ++t) nb.emplace_back(v.d2[t], v.point[v.inside[t]]);
+          std::nth_element(nb.begin(), nb.begin() + static_cast<std::ptrdiff_t>(k), nb.end());
+          if (k < min_n) return;
+          for (std::size_t t = 0; t < k; ++t) acc.add(h.position(inside[nb[t].second]));
+        }
+        store(i, acc);
+      }, std::max<std::size_t>(min_n, 3));
+    }, /*grain=*/1024);  // ~0.4 us per cell: a thread per ~0.4 ms of work at least
+    orientTowardViewpoints(h, ids, result, params.threads);
+    return result;
+  }
+
+  // Adaptive radius (k nearest, no radius): grow the ball over the level grids until k are found.
+  const double max_radius = 2.0 * h.cellSize();
+  parallelFor(ids.size(), params.threads, [&](std::size_t b, std::size_t e) {
+    std::vector<std::pair<double, SampleId>> nb;
+    for (std::size_t i = b; i < e; ++i) {
+      const double *q = h.position(ids[i]);
+      for (double r = 2.0 * h.radius(level);; r *= 2.0) {
+        gather(h, q, r, level, nb);
+        if (static_cast<int>(nb.size()) >= params.k || r >= max_radius) break;
+      }
+      if (params.k > 0 && nb.size() > static_cast<std::size_t>(params.k)) {
+        std::nth_element(nb.begin(), nb.begin() + params.k, nb.end());
+        nb.resize(static_cast<std::size_t>(params.k));
+      }
+      // Summed nearest first: the normal's last bits then depend on the neighbours alone, not on the order the
+      // grid walk met them in (a full scan of a level follows its hash slots).
+      std::sort(nb.begin(), nb.end());
+      if (static_cast<int>(nb.size()) < params.min_neighbors) continue;
+      PcaAccumulator acc(q);
+      for (const auto &n : nb) acc.add(h.position(n.second));
+      store(i, acc);
+    }
+  });
+  orientTowardViewpoints(h, ids, result, params.threads);
+  return result;
+}
+
+}  // namespace hpds

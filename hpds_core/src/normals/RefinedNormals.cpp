@@ -1,0 +1,168 @@
+// Why this variant exists (measured by bench/normal_accuracy against exact normals):
+// - One Poisson-disk level keeps one raw point per r_D, so PCA over it sees the full range noise, where a voxel
+//   centroid has averaged it away. The finer levels of the same hierarchy hold the averaging points; the footprint
+//   stays the output level's, so the neighbourhood keeps the level's isotropic extent.
+// - Where the input is sparser than r_D (far ground, few beams) a level holds whole scan lines and a neighbourhood
+//   may lie on one of them: its smallest-eigenvalue direction is then arbitrary about the line. Doubling the
+//   footprint until it spans two lines is what choosing a coarser level locally amounts to.
+#include "normals/RefinedNormals.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <utility>
+
+#include "hpds/normals/LocalPca.hpp"
+#include "hpds/util/ParallelFor.hpp"
+#include "sampling/BallGrid.hpp"
+
+namespace hpds {
+
+std::vector<SampleNormal> estimateNormalsRefined(const Hierarchy &h, const std::vector<SampleId> &ids,
+                                                 const NormalParams &params) {
+  std::vector<SampleNormal> result(ids.size(), invalidNormal());
+  if (ids.empty()) return result;
+  const int level = std::min(params.level, h.maxDepth());
+  const int finest = std::min(level + std::max(0, params.neighborhood_level_offset), h.maxDepth());
+  const double max_radius = 2.0 * h.cellSize();
+  const double growth = std::max(1.0, params.max_growth);
+  const double base = params.radius > 0.0 ? params.radius : 2.5 * h.radius(level);
+
+  // Points: samples of levels 0..finest near the queried ids (a map may hold far more than a query needs), and
+  // those of levels 0..level for k-NN footprints.
+  const double margin = std::min(max_radius, base * growth * 4.0);
+  double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+  for (SampleId id : ids)
+    for (int a = 0; a < 3; ++a) {
+      lo[a] = std::min(lo[a], h.position(id)[a] - margin);
+      hi[a] = std::max(hi[a], h.position(id)[a] + margin);
+    }
+  std::vector<SampleId> fine = h.samplesUpTo(finest), coarse;
+  fine.erase(std::remove_if(fine.begin(), fine.end(),
+                            [&](SampleId id) {
+                              const double *p = h.position(id);
+                              return p[0] < lo[0] || p[0] > hi[0] || p[1] < lo[1] || p[1] > hi[1] || p[2] < lo[2] ||
+                                     p[2] > hi[2];
+                            }),
+             fine.end());
+  if (params.k > 0)
+    for (SampleId id : fine)
+      if (h.level(id) <= level) coarse.push_back(id);
+  const double *hbase = h.position(0);
+  const PointSet fine_set{hbase, fine.data(), fine.size()}, coarse_set{hbase, coarse.data(), coarse.size()};
+
+  // Search radii: one per doubling of the base radius up to twice the level-0 cell edge. A footprint rho is searched
+  // with the smallest of them >= rho, all queries of one radius at once (BallGrid), round after round: a query
+  // whose footprint doubles waits for the next round. Each query's result depends only on its own neighbourhoods.
+  std::vector<double> radii;
+  for (double r = base;; r *= 2.0) {
+    radii.push_back(r);
+    if (r >= max_radius) break;
+  }
+  auto gridFor = [&](double rho) {
+    std::size_t g = 0;
+    while (radii[g] < rho && g + 1 < radii.size()) ++g;
+    return g;
+  };
+  // Calls fn(i, view, scratch) for the queries ids[subset[...]] with their neighbours of `points` within `radius`.
+  auto sweep = [&](const PointSet &points, const std::vector<std::uint32_t> &subset, double radius, auto &&fn) {
+    std::vector<SampleId> qids(subset.size());
+    for (std::size_t t = 0; t < subset.size(); ++t) qids[t] = ids[subset[t]];
+    const BallGrid grid(points, PointSet{hbase, qids.data(), qids.size()}, radius);
+    parallelFor(grid.cellCount(), params.threads, [&](std::size_t b, std::size_t e) {
+      std::vector<double> scratch;
+      grid.visit(b, e, [&](std::size_t t, const BallView &v) { fn(subset[t], v, scratch); });
+    });
+  };
+  std::vector<std::uint32_t> pending(ids.size());
+  for (std::size_t i = 0; i < ids.size(); ++i) pending[i] = static_cast<std::uint32_t>(i);
+  std::vector<std::uint8_t> again(ids.size(), 0);
+  auto keepPending = [&] {
+    pending.erase(std::remove_if(pending.begin(), pending.end(), [&](std::uint32_t i) { return !again[i]; }),
+                  pending.end());
+  };
+
+  // 1. Footprint at the output level: the radius, or the k-th nearest sample of levels 0..level within it.
+  std::vector<double> rho(ids.size(), params.radius > 0.0 ? params.radius : max_radius);
+  if (params.k > 0) {
+    const std::size_t k = static_cast<std::size_t>(params.k);
+    for (std::size_t g = 0; g < radii.size() && !pending.empty(); ++g) {
+      const bool last = g + 1 == radii.size();
+      sweep(coarse_set, pending, radii[g], [&](std::uint32_t i, const BallView &v, std::vector<double> &d2s) {
+        const bool enough = v.count >= k;
+        again[i] = 0;
+        if (enough) {
+          d2s.assign(v.d2, v.d2 + v.count);
+          std::nth_element(d2s.begin(), d2s.begin() + static_cast<std::ptrdiff_t>(k - 1), d2s.end());
+          // Just past the k-th distance, so that neighbour itself is inside the strict ball.
+          rho[i] = std::min(rho[i], std::sqrt(d2s[k - 1]) * (1.0 + 1e-9) + 1e-12);
+        } else if (params.radius > 0.0 && radii[g] >= params.radius) {
+          rho[i] = std::min(rho[i], radii[g]);
+        } else if (last) {
+          rho[i] = std::min(rho[i], 2.0 * radii[g]);  // every radius tried: the footprint stays the search limit
+        } else {
+          again[i] = 1;
+        }
+      });
+      keepPending();
+    }
+    // Queries outside every search grid (far outliers) saw no callback: their footprint stays as initialised.
+    pending.resize(ids.size());
+    for (std::size_t i = 0; i < ids.size(); ++i) pending[i] = static_cast<std::uint32_t>(i);
+  }
+
+  // 2. Every sample of levels 0..finest inside the footprint. A line-like result grows the footprint; a grown
+  //    neighbourhood is only taken if it resolves the line and is flat (RMS distance to its plane <=
+  //    max_plane_rms * radius): a ball reaching from a scan line on the ground into a wall would average two
+  //    surfaces, and a longer piece of the same line is no better than the first.
+  std::vector<double> limit(ids.size());
+  for (std::size_t i = 0; i < ids.size(); ++i) limit[i] = std::min(max_radius, rho[i] * growth);
+  std::vector<LocalPca> chosen(ids.size());
+  std::vector<std::uint8_t> have(ids.size(), 0);
+  std::vector<std::uint32_t> round;
+  while (!pending.empty()) {
+    std::size_t g = radii.size();
+    for (std::uint32_t i : pending) g = std::min(g, gridFor(rho[i]));
+    round.clear();
+    double radius = radii[g];
+    for (std::uint32_t i : pending)
+      if (gridFor(rho[i]) == g) {
+        round.push_back(i);
+        radius = std::max(radius, rho[i]);
+        again[i] = 0;
+      } else {
+        again[i] = 1;  // a later round
+      }
+    sweep(fine_set, round, radius, [&](std::uint32_t i, const BallView &v, std::vector<double> &) {
+      const double r2 = rho[i] * rho[i];
+      PcaAccumulator acc(v.q);
+      for (std::size_t t = 0; t < v.count; ++t)
+        if (v.d2[t] < r2) acc.add(&v.xyz[3 * std::size_t(v.inside[t])]);
+      // Too few neighbours: nothing is chosen and only the limit stops growth, whatever the PCA says (a
+      // neighbourhood only gains points as it grows, so no earlier round chose one either), so it is not solved.
+      // Most first rounds at fine levels are such: a footprint of a few centimetres holds a short piece of one line.
+      bool settled = false;
+      if (static_cast<int>(acc.count()) >= params.min_neighbors) {
+        const LocalPca pca = acc.solveNormal();
+        const bool flat = pca.l0 <= params.max_plane_rms * params.max_plane_rms * r2;
+        const bool not_line = pca.l1 >= params.line_ratio * pca.l2;
+        if (pca.valid && (!have[i] || (flat && not_line))) {
+          chosen[i] = pca;
+          have[i] = 1;
+          if (not_line) return;
+        }
+        settled = have[i] && !flat;
+      }
+      if (settled || rho[i] * 2.0 > limit[i] * (1.0 + 1e-12)) return;
+      rho[i] *= 2.0;
+      again[i] = 1;
+    });
+    keepPending();
+  }
+  for (std::size_t i = 0; i < ids.size(); ++i)
+    if (have[i]) result[i] = unorientedNormal(chosen[i]);
+  orientTowardViewpoints(h, ids, result, params.threads);
+  return result;
+}
+
+}  // namespace hpds

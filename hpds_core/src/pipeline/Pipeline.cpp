@@ -1,0 +1,234 @@
+#include "hpds/pipeline/Pipeline.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstring>
+#include <stdexcept>
+#include <string>
+
+#include "hpds/sampling/FrameGridIndex.hpp"
+#include "hpds/sampling/InsertionOrderer.hpp"
+#include "hpds/pipeline/OutputCloud.hpp"
+
+namespace hpds {
+
+namespace {
+double secondsSince(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+}  // namespace
+
+FrameCounters &FrameCounters::operator+=(const FrameCounters &o) {
+  input += o.input;
+  skipped_invalid += o.skipped_invalid;
+  skipped_zero += o.skipped_zero;
+  skipped_range += o.skipped_range;
+  out_of_range += o.out_of_range;
+  dropped_depth += o.dropped_depth;
+  accepted += o.accepted;
+  evicted += o.evicted;
+  for (std::size_t i = 0; i < accepted_per_level.size(); ++i) accepted_per_level[i] += o.accepted_per_level[i];
+  return *this;
+}
+
+namespace {
+/// Scan mode's deepest level read: the output levels, and the finer levels the normals average over.
+int scanDepthFor(const HpdsConfig &config, int output_level) {
+  const int normals = config.normals.enabled ? output_level + std::max(0, config.normals.neighborhood_level_offset) : 0;
+  return std::min(config.hierarchy.max_depth, std::max(output_level, normals));
+}
+}  // namespace
+
+Pipeline::Pipeline(const HpdsConfig &config)
+    : config_((validateConfig(config), config)),
+      output_level_(resolveOutputLevel(config)),
+      scan_depth_(scanDepthFor(config, output_level_)),
+      hierarchy_(config.hierarchy.cell_size, config.hierarchy.max_depth) {}
+
+void Pipeline::requireLevel(int level) {
+  if (level < 0 || level > config_.hierarchy.max_depth)
+    throw std::invalid_argument("required level " + std::to_string(level) + " is outside 0..hierarchy.max_depth (" +
+                                std::to_string(config_.hierarchy.max_depth) + ")");
+  scan_depth_ = std::max(scan_depth_, level);
+}
+
+FrameResult Pipeline::addFrame(const Frame &frame) {
+  FrameResult result;
+  FrameCounters &c = result.counters;
+  const PointBuffer &pts = frame.points;
+  const PointLayout &layout = pts.layout();
+  const PointField *fx = layout.find("x"), *fy = layout.find("y"), *fz = layout.find("z");
+  if (!fx || !fy || !fz) throw std::invalid_argument("frame has no x/y/z fields");
+  if (fx->count != 1 || fy->count != 1 || fz->count != 1) throw std::invalid_argument("x/y/z fields must have count 1");
+  layout.validate();
+  if (!frame.sensor_to_fixed.matrix().allFinite()) throw std::invalid_argument("frame pose is not finite");
+  const bool map_mode = config_.mode == Mode::Map;
+  if (map_mode && hierarchy_.idBound() > 0 && layout != hierarchy_.recordLayout())
+    throw std::invalid_argument("frame's point fields differ from the map's (the first frame's) fields");
+
+  // 1. Scan mode starts every frame on an empty hierarchy.
+  if (!map_mode) hierarchy_.clear();
+  hierarchy_.setRecordLayout(layout);
+  // Capacity kept from a frame far larger than any recent one (the peak decays by 10% per frame) is released
+  // instead of being held for the life of the pipeline.
+  recent_points_ = std::max(static_cast<double>(pts.size()), 0.9 * recent_points_);
+  if (static_cast<double>(candidates_.capacity()) > 4.0 * recent_points_ + 65536.0) {
+    std::vector<double>().swap(xyz_);  // `= {}` would keep the capacity
+    std::vector<std::uint32_t>().swap(candidates_);
+    hierarchy_.shrink();
+  }
+
+  // 2. Sensor-frame filtering, then into the fixed frame.
+  const auto t_order = std::chrono::steady_clock::now();
+  const std::size_t n = pts.size();
+  c.input = n;
+  xyz_.resize(3 * n);
+  candidates_.clear();
+  candidates_.reserve(n);
+  const Eigen::Matrix3d R = frame.sensor_to_fixed.linear();
+  const Eigen::Vector3d t = frame.sensor_to_fixed.translation();
+  const double min_r2 = config_.input.min_range * config_.input.min_range;
+  const double max_r2 = config_.input.max_range > 0.0 ? config_.input.max_range * config_.input.max_range : INFINITY;
+  // Drivers almost always send float32 x/y/z: read those directly instead of through the per-type switch.
+  const bool f32 = fx->type == FieldType::Float32 && fy->type == FieldType::Float32 && fz->type == FieldType::Float32;
+  const auto loadF32 = [](const std::uint8_t *p) {
+    float v;
+    std::memcpy(&v, p, sizeof v);
+    return static_cast<double>(v);
+  };
+  for (std::size_t i = 0; i < n; ++i) {
+    const std::uint8_t *rec = pts.record(i);
+    const double x = f32 ? loadF32(rec + fx->offset) : readAsDouble(rec, *fx);
+    const double y = f32 ? loadF32(rec + fy->offset) : readAsDouble(rec, *fy);
+    const double z = f32 ? loadF32(rec + fz->offset) : readAsDouble(rec, *fz);
+    if (!std::isfinite(x) || !std::isfinite(y) || !std::isfinite(z)) {
+      ++c.skipped_invalid;
+      continue;
+    }
+    if (config_.input.skip_zero_points && x == 0.0 && y == 0.0 && z == 0.0) {
+      ++c.skipped_zero;
+      continue;
+    }
+    const double r2 = x * x + y * y + z * z;
+    if (r2 < min_r2 || r2 > max_r2) {
+      ++c.skipped_range;
+      continue;
+    }
+    const double wx = R(0, 0) * x + R(0, 1) * y + R(0, 2) * z + t.x();
+    const double wy = R(1, 0) * x + R(1, 1) * y + R(1, 2) * z + t.y();
+    const double wz = R(2, 0) * x + R(2, 1) * y + R(2, 2) * z + t.z();
+    if (!std::isfinite(wx) || !std::isfinite(wy) || !std::isfinite(wz)) {  // a finite point can overflow through a huge pose
+      ++c.skipped_invalid;
+      continue;
+    }
+    xyz_[3 * i] = wx;
+    xyz_[3 * i + 1] = wy;
+    xyz_[3 * i + 2] = wz;
+    candidates_.push_back(static_cast<std::uint32_t>(i));
+  }
+
+  // 3. Map mode: keep memory bounded around the sensor before adding more.
+  const double viewpoint[3] = {t.x(), t.y(), t.z()};
+  if (map_mode) {
+    if (config_.map.evict_distance > 0.0) c.evicted += hierarchy_.evictOutside(viewpoint, config_.map.evict_distance);
+    if (config_.map.max_samples > 0)
+      c.evicted += hierarchy_.evictToCap(viewpoint, static_cast<std::size_t>(config_.map.max_samples));
+  }
+
+  // 4. Insertion order (random, input or feature-sensitive).
+  const double feature_radius = config_.order.feature_radius > 0.0
+                                    ? config_.order.feature_radius
+                                    : 2.0 * poissonRadius(config_.hierarchy.cell_size, output_level_);
+  const std::vector<std::uint32_t> order =
+      insertionOrder(xyz_.data(), candidates_, config_.order.type, config_.order.seed + frames_, feature_radius,
+                     config_.threads);
+  result.seconds_order = secondsSince(t_order);
+
+  // 5. Breadth-first insertion into the hierarchy.
+  const auto t_insert = std::chrono::steady_clock::now();
+  InsertBatch batch;
+  batch.xyz = xyz_.data();
+  batch.size = n;
+  batch.order = order.data();
+  batch.order_size = order.size();
+  batch.records = pts.bytes().data();
+  batch.record_step = layout.point_step;
+  for (int a = 0; a < 3; ++a) batch.viewpoint[a] = viewpoint[a];
+  batch.frame_index = frames_;
+  batch.max_level = buildDepth();
+  InsertResult inserted = hierarchy_.insert(batch);
+  result.seconds_insert = secondsSince(t_insert);
+
+  c.out_of_range = inserted.out_of_range;
+  c.dropped_depth = inserted.dropped_depth;
+  c.accepted = inserted.accepted.size();
+  c.accepted_per_level = inserted.accepted_per_level;
+  result.new_samples = std::move(inserted.accepted);
+  totals_ += c;
+  ++frames_;
+  return result;
+}
+
+std::size_t Pipeline::memUsage() const {
+  return hierarchy_.memUsage() + hierarchy_.scratchBytes() + xyz_.capacity() * sizeof(double) +
+         candidates_.capacity() * sizeof(std::uint32_t);
+}
+
+void Pipeline::replaceMap(Hierarchy &&map, std::uint32_t next_frame) {
+  if (config_.mode != Mode::Map) throw std::invalid_argument("mode: replacing the map needs map mode");
+  if (map.cellSize() != config_.hierarchy.cell_size || map.maxDepth() != config_.hierarchy.max_depth)
+    throw std::invalid_argument("hierarchy: the map's cell_size/max_depth differ from the configuration's");
+  hierarchy_ = std::move(map);
+  frames_ = next_frame;
+}
+
+std::vector<SampleId> Pipeline::outputSamples() const { return hierarchy_.samplesUpTo(output_level_); }
+
+std::vector<SampleId> Pipeline::atOutputLevels(const std::vector<SampleId> &ids) const {
+  std::vector<SampleId> out;
+  out.reserve(ids.size());
+  for (SampleId id : ids)
+    if (hierarchy_.isLive(id) && hierarchy_.level(id) <= output_level_) out.push_back(id);
+  return out;
+}
+
+std::vector<SampleId> Pipeline::outputSamplesNear(const double center[3], double radius) const {
+  std::vector<SampleId> out;
+  hierarchy_.forEachInBall(center, radius, output_level_, [&](SampleId id, double) { out.push_back(id); });
+  std::sort(out.begin(), out.end());
+  return out;
+}
+
+std::vector<SampleId> Pipeline::samplesHitByLastFrame(int min_level, int max_level, double radius) const {
+  std::vector<SampleId> hit;
+  if (candidates_.empty() || !(radius > 0.0)) return hit;
+  // The last frame's candidates are still in xyz_ (fixed frame): bucket them once, then test each sample near
+  // them against its 27 buckets.
+  const FrameGridIndex index(xyz_.data(), candidates_, radius);
+  double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+  for (std::uint32_t i : candidates_)
+    for (int a = 0; a < 3; ++a) {
+      lo[a] = std::min(lo[a], xyz_[3 * std::size_t(i) + a] - radius);
+      hi[a] = std::max(hi[a], xyz_[3 * std::size_t(i) + a] + radius);
+    }
+  for (SampleId id = 0; id < hierarchy_.idBound(); ++id) {
+    if (!hierarchy_.isLive(id)) continue;
+    const int l = hierarchy_.level(id);
+    if (l < min_level || l > max_level) continue;
+    const double *p = hierarchy_.position(id);
+    if (p[0] < lo[0] || p[0] > hi[0] || p[1] < lo[1] || p[1] > hi[1] || p[2] < lo[2] || p[2] > hi[2]) continue;
+    if (index.anyWithin(p)) hit.push_back(id);
+  }
+  return hit;
+}
+
+PointBuffer Pipeline::makeCloud(const std::vector<SampleId> &ids, bool with_frame_field, double *seconds_normals) const {
+  if (!config_.normals.enabled) return buildOutputCloud(hierarchy_, ids, nullptr, with_frame_field);
+  const auto t0 = std::chrono::steady_clock::now();
+  const std::vector<SampleNormal> normals = estimateNormals(hierarchy_, ids, normalParamsFor(config_, output_level_));
+  if (seconds_normals) *seconds_normals = secondsSince(t0);
+  return buildOutputCloud(hierarchy_, ids, &normals, with_frame_field);
+}
+
+}  // namespace hpds

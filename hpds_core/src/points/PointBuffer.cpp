@@ -1,0 +1,175 @@
+#include "hpds/points/PointBuffer.hpp"
+
+#include <cmath>
+#include <limits>
+#include <set>
+#include <stdexcept>
+
+namespace hpds {
+
+std::size_t fieldTypeSize(FieldType type) {
+  switch (type) {
+    case FieldType::Int8:
+    case FieldType::UInt8:
+      return 1;
+    case FieldType::Int16:
+    case FieldType::UInt16:
+      return 2;
+    case FieldType::Int32:
+    case FieldType::UInt32:
+    case FieldType::Float32:
+      return 4;
+    case FieldType::Float64:
+      return 8;
+  }
+  return 0;
+}
+
+bool isValidFieldType(std::uint8_t raw) { return raw >= 1 && raw <= 8; }
+
+const char *fieldTypeName(FieldType type) {
+  switch (type) {
+    case FieldType::Int8:
+      return "int8";
+    case FieldType::UInt8:
+      return "uint8";
+    case FieldType::Int16:
+      return "int16";
+    case FieldType::UInt16:
+      return "uint16";
+    case FieldType::Int32:
+      return "int32";
+    case FieldType::UInt32:
+      return "uint32";
+    case FieldType::Float32:
+      return "float32";
+    case FieldType::Float64:
+      return "float64";
+  }
+  return "invalid";
+}
+
+const PointField *PointLayout::find(const std::string &name) const {
+  for (const auto &f : fields)
+    if (f.name == name) return &f;
+  return nullptr;
+}
+
+void PointLayout::append(const std::string &name, FieldType type, std::uint32_t count) {
+  PointField f;
+  f.name = name;
+  f.offset = point_step;
+  f.type = type;
+  f.count = count;
+  point_step += static_cast<std::uint32_t>(f.byteSize());
+  fields.push_back(std::move(f));
+}
+
+void PointLayout::validate() const {
+  std::set<std::string> names;
+  for (const auto &f : fields) {
+    if (!isValidFieldType(static_cast<std::uint8_t>(f.type)))
+      throw std::invalid_argument("field '" + f.name + "' has an invalid datatype " +
+                                  std::to_string(static_cast<int>(f.type)));
+    if (f.count == 0) throw std::invalid_argument("field '" + f.name + "' has count 0");
+    const std::uint64_t end = std::uint64_t(f.offset) + std::uint64_t(f.count) * fieldTypeSize(f.type);
+    if (end > point_step)
+      throw std::invalid_argument("field '" + f.name + "' ends at byte " + std::to_string(end) +
+                                  " beyond point_step " + std::to_string(point_step));
+    if (!names.insert(f.name).second) throw std::invalid_argument("field '" + f.name + "' appears twice");
+  }
+}
+
+void PointBuffer::setOrganization(std::uint32_t width, std::uint32_t height) {
+  if (std::uint64_t(width) * height != size())
+    throw std::invalid_argument("organisation " + std::to_string(width) + "x" + std::to_string(height) +
+                                " does not match " + std::to_string(size()) + " points");
+  width_ = width;
+  height_ = height;
+}
+
+void PointBuffer::resize(std::size_t n) {
+  data_.resize(n * layout_.point_step, 0);
+  width_ = static_cast<std::uint32_t>(n);
+  height_ = 1;
+}
+
+void PointBuffer::pushBack(const std::uint8_t *record) {
+  data_.insert(data_.end(), record, record + layout_.point_step);
+  width_ = static_cast<std::uint32_t>(size());
+  height_ = 1;
+}
+
+namespace {
+template <typename T>
+T loadAs(const std::uint8_t *p) {
+  T v;
+  std::memcpy(&v, p, sizeof(T));
+  return v;
+}
+template <typename T>
+void storeSaturated(std::uint8_t *p, double value) {
+  T v;
+  if constexpr (std::is_floating_point_v<T>) {
+    v = static_cast<T>(value);
+  } else {
+    if (std::isnan(value)) {
+      v = 0;
+    } else {
+      const double lo = static_cast<double>(std::numeric_limits<T>::lowest());
+      const double hi = static_cast<double>(std::numeric_limits<T>::max());
+      const double r = std::nearbyint(value);
+      v = r <= lo ? std::numeric_limits<T>::lowest()
+                  : (r >= hi ? std::numeric_limits<T>::max() : static_cast<T>(r));
+    }
+  }
+  std::memcpy(p, &v, sizeof(T));
+}
+}  // namespace
+
+double readAsDouble(const std::uint8_t *record, const PointField &field, std::uint32_t element) {
+  const std::uint8_t *p = record + field.offset + element * fieldTypeSize(field.type);
+  switch (field.type) {
+    case FieldType::Int8:
+      return loadAs<std::int8_t>(p);
+    case FieldType::UInt8:
+      return loadAs<std::uint8_t>(p);
+    case FieldType::Int16:
+      return loadAs<std::int16_t>(p);
+    case FieldType::UInt16:
+      return loadAs<std::uint16_t>(p);
+    case FieldType::Int32:
+      return loadAs<std::int32_t>(p);
+    case FieldType::UInt32:
+      return loadAs<std::uint32_t>(p);
+    case FieldType::Float32:
+      return loadAs<float>(p);
+    case FieldType::Float64:
+      return loadAs<double>(p);
+  }
+  return std::numeric_limits<double>::quiet_NaN();
+}
+
+void writeFromDouble(std::uint8_t *record, const PointField &field, double value, std::uint32_t element) {
+  std::uint8_t *p = record + field.offset + element * fieldTypeSize(field.type);
+  switch (field.type) {
+    case FieldType::Int8:
+      return storeSaturated<std::int8_t>(p, value);
+    case FieldType::UInt8:
+      return storeSaturated<std::uint8_t>(p, value);
+    case FieldType::Int16:
+      return storeSaturated<std::int16_t>(p, value);
+    case FieldType::UInt16:
+      return storeSaturated<std::uint16_t>(p, value);
+    case FieldType::Int32:
+      return storeSaturated<std::int32_t>(p, value);
+    case FieldType::UInt32:
+      return storeSaturated<std::uint32_t>(p, value);
+    case FieldType::Float32:
+      return storeSaturated<float>(p, value);
+    case FieldType::Float64:
+      return storeSaturated<double>(p, value);
+  }
+}
+
+}  // namespace hpds

@@ -1,0 +1,179 @@
+#include "sampling/BallGrid.hpp"
+
+#include "sampling/KeyRadixSort.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <utility>
+
+namespace hpds {
+
+namespace {
+constexpr std::int64_t kAxisCells = std::int64_t(1) << 21;
+
+inline void prefetch(const void *p) {
+#if defined(__GNUC__)
+  __builtin_prefetch(p);
+#else
+  (void)p;
+#endif
+}
+
+/// Calls emit(keyOf(r), indexOf(r)) for the sorted records r of `v`. The caller reads each element's position in this
+/// (spatial) order, scattered in memory: fetch a few ahead.
+template <typename Rec, typename KeyOf, typename IndexOf, typename Emit>
+void emitInOrder(const PointSet &set, const std::vector<Rec> &v, KeyOf keyOf, IndexOf indexOf, Emit &emit) {
+  constexpr std::size_t kAhead = 8;
+  for (std::size_t t = 0; t < v.size(); ++t) {
+    if (t + kAhead < v.size()) prefetch(set.at(indexOf(v[t + kAhead])));
+    emit(keyOf(v[t]), indexOf(v[t]));
+  }
+}
+
+/// Calls emit(key, i) for the elements of `set` with a cell (keyOf true), by ascending (key, i): stable LSD radix
+/// passes of at most 11 bits over the key, the index ascending to begin with. Keys below 2^32 (up to 2^32 cells in
+/// the bounding box) travel packed with the index in one word; wider ones (fine radii over a whole frame: a
+/// 3.4 cm radius over a 200 m VLS-128 frame needs 39 bits) as (key, index) records (sortByKeyStable), where a
+/// comparison sort took 18% of that frame's default normals.
+template <typename KeyOf, typename Emit>
+void forEachSorted(const PointSet &set, const KeyOf &keyOf, int key_bits, Emit &&emit) {
+  if (key_bits <= 32) {
+    std::vector<std::uint64_t> v(set.size);
+    std::size_t kept = 0;
+    for (std::size_t i = 0; i < set.size; ++i) {
+      std::uint64_t key;
+      if (keyOf(set.at(i), key)) v[kept++] = key << 32 | i;
+    }
+    v.resize(kept);
+    // The index, in the low word, is already ascending.
+    const auto packedKey = [](std::uint64_t x) { return x >> 32; };
+    sortByKeyStable(v, key_bits, packedKey);
+    emitInOrder(set, v, packedKey, [](std::uint64_t x) { return static_cast<std::uint32_t>(x); }, emit);
+  } else {
+    std::vector<KeyedIndex> v;
+    v.reserve(set.size);
+    for (std::size_t i = 0; i < set.size; ++i) {
+      std::uint64_t key;
+      if (keyOf(set.at(i), key)) v.push_back(KeyedIndex{key, static_cast<std::uint32_t>(i)});
+    }
+    sortByKeyStable(v, key_bits);
+    emitInOrder(set, v, [](const KeyedIndex &x) { return x.key; }, [](const KeyedIndex &x) { return x.index; }, emit);
+  }
+}
+
+/// The elements of `set` that have a cell, sorted by cell: positions and element index by slot, the distinct cell
+/// keys and the slot each starts at (one more entry than keys, closing the last cell).
+template <typename KeyOf>
+void sortIntoCells(const PointSet &set, const KeyOf &keyOf, int key_bits, std::vector<double> &pos,
+                   std::vector<std::uint32_t> &index, std::vector<std::uint64_t> &keys,
+                   std::vector<std::uint32_t> &starts) {
+  pos.resize(3 * set.size);
+  index.resize(set.size);
+  std::size_t slot = 0;
+  forEachSorted(set, keyOf, key_bits, [&](std::uint64_t key, std::uint32_t i) {
+    if (keys.empty() || key != keys.back()) {
+      keys.push_back(key);
+      starts.push_back(static_cast<std::uint32_t>(slot));
+    }
+    const double *p = set.at(i);
+    double *o = &pos[3 * slot];
+    o[0] = p[0], o[1] = p[1], o[2] = p[2];
+    index[slot++] = i;
+  });
+  pos.resize(3 * slot);
+  index.resize(slot);
+  starts.push_back(static_cast<std::uint32_t>(slot));
+}
+}  // namespace
+
+BallGrid::BallGrid(const PointSet &points, const PointSet &queries, double radius) : r2_(radius * radius) {
+  if (!(radius > 0.0) || !std::isfinite(radius) || queries.size == 0) return;
+  same_ = points == queries;
+  // Cells a hair wider than the radius, so that round-off in the cell computation cannot put a point within the
+  // radius two cells away from the query's.
+  const double edge = radius * (1.0 + 1e-8), inv = 1.0 / edge;
+  double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+  auto extend = [&](const PointSet &set) {
+    for (std::size_t i = 0; i < set.size; ++i) {
+      const double *p = set.at(i);
+      if (!(std::isfinite(p[0]) && std::isfinite(p[1]) && std::isfinite(p[2]))) continue;
+      for (int a = 0; a < 3; ++a) lo[a] = std::min(lo[a], p[a]), hi[a] = std::max(hi[a], p[a]);
+    }
+  };
+  extend(points);
+  if (!same_) extend(queries);
+  if (!(lo[0] <= hi[0])) return;  // nothing finite
+  // Two cells of margin below and one above: every cell c of a point has c - 1 >= 0 and c + 1 < dims, so the 27
+  // neighbours of a cell are plain key offsets. Keys are linear, x-major and z fastest.
+  double origin[3], limit[3];
+  std::uint64_t dims[3];
+  for (int a = 0; a < 3; ++a) {
+    origin[a] = lo[a] - 2.0 * edge;
+    const double top = std::floor((hi[a] - origin[a]) * inv) + 2.0;  // largest cell + 2
+    dims[a] = static_cast<std::uint64_t>(std::min(top, static_cast<double>(kAxisCells)));
+    limit[a] = static_cast<double>(dims[a] - 1);
+  }
+  const std::uint64_t stride_y = dims[2], stride_x = dims[1] * dims[2];
+  const int key_bits = bitWidth(dims[0] * stride_x - 1);
+  // Far outliers (beyond 2^21 cells) and non-finite coordinates have no cell. Positive, so truncation is floor.
+  auto keyOf = [&](const double *p, std::uint64_t &key) {
+    const double fx = (p[0] - origin[0]) * inv, fy = (p[1] - origin[1]) * inv, fz = (p[2] - origin[2]) * inv;
+    if (!(fx >= 1.0 && fx < limit[0] && fy >= 1.0 && fy < limit[1] && fz >= 1.0 && fz < limit[2])) return false;
+    key = static_cast<std::uint64_t>(fx) * stride_x + static_cast<std::uint64_t>(fy) * stride_y +
+          static_cast<std::uint64_t>(fz);
+    return true;
+  };
+  int col = 0;
+  for (std::int64_t dx = -1; dx <= 1; ++dx)
+    for (std::int64_t dy = -1; dy <= 1; ++dy)
+      column_offset_[col++] = static_cast<std::uint64_t>(dx * std::int64_t(stride_x) + dy * std::int64_t(stride_y) - 1);
+
+  sortIntoCells(points, keyOf, key_bits, pos_, pidx_, ckey_, cstart_);
+  cells_ = ckey_.size();
+  ckey_.insert(ckey_.end(), 3, ~std::uint64_t(0));  // sentinels: above any key (keys stay below 2^63)
+
+  if (same_) {
+    qorder_ = pidx_.data();
+    qcell_key_ = ckey_.data();
+    qcell_start_ = cstart_.data();
+    qcells_ = cells_;
+    return;
+  }
+  sortIntoCells(queries, keyOf, key_bits, qpos_, qorder_own_, qkey_own_, qstart_own_);
+  qorder_ = qorder_own_.data();
+  qcell_key_ = qkey_own_.data();
+  qcell_start_ = qstart_own_.data();
+  qcells_ = qkey_own_.size();
+}
+
+void BallGrid::initCursors(std::size_t c, std::size_t cursor[9]) const {
+  const std::uint64_t *ckey = ckey_.data();
+  for (int col = 0; col < 9; ++col)
+    cursor[col] = static_cast<std::size_t>(std::lower_bound(ckey, ckey + cells_, qcell_key_[c] + column_offset_[col]) - ckey);
+}
+
+std::size_t BallGrid::columns(std::size_t c, std::size_t cursor[9], std::uint32_t b[9], std::uint32_t e[9]) const {
+  const std::uint64_t key = qcell_key_[c];
+  const std::uint64_t *ckey = ckey_.data();  // followed by 3 sentinels, so ckey[cur + 2] is readable
+  std::size_t total = 0;
+  for (int col = 0; col < 9; ++col) {
+    const std::uint64_t lo = key + column_offset_[col], hi = lo + 2;
+    std::size_t cur = cursor[col];
+    // Forward: usually 0..2 cells (branch-free), else a few more steps or a binary search over a long gap.
+    cur += ckey[cur] < lo ? 1 : 0;
+    cur += ckey[cur] < lo ? 1 : 0;
+    if (ckey[cur] < lo) {
+      if (ckey[cur + 2] < lo) cur = static_cast<std::size_t>(std::lower_bound(ckey + cur + 2, ckey + cells_, lo) - ckey);
+      while (ckey[cur] < lo) ++cur;
+    }
+    cursor[col] = cur;
+    // The column's cells lo..hi are among the next 3 keys (sorted, distinct).
+    const std::size_t end = cur + (ckey[cur] <= hi ? 1 : 0) + (ckey[cur + 1] <= hi ? 1 : 0) + (ckey[cur + 2] <= hi ? 1 : 0);
+    b[col] = cstart_[cur];
+    e[col] = cstart_[end];
+    total += e[col] - b[col];
+  }
+  return total;
+}
+
+}  // namespace hpds

@@ -1,0 +1,238 @@
+#include "ReplayCommand.hpp"
+
+#include <rosbag/bag.h>
+#include <rosbag/view.h>
+#include <tf2/buffer_core.h>
+#include <tf2_msgs/TFMessage.h>
+
+#include <chrono>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <optional>
+#include <sstream>
+#include <stdexcept>
+
+#include "CliOptions.hpp"
+#include "RunReport.hpp"
+#include "hpds/config/ConfigYaml.hpp"
+#include "hpds/io/PlyWriter.hpp"
+#include "hpds_node/FrameProcessor.hpp"
+
+namespace hpds::cli {
+
+namespace {
+
+struct ReplayArgs {
+  std::string bag;
+  std::string topic;
+  std::string output;
+  std::string stats;
+  std::string ns = "/hpds";
+  std::optional<std::string> fixed_frame, output_frame;
+  std::optional<double> local_map_radius, local_map_rate;
+  std::optional<std::vector<int>> publish_levels;
+  SamplingOptions sampling;
+};
+
+double since(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+
+bool endsWith(const std::string &s, const std::string &suffix) {
+  if (s.size() < suffix.size()) return false;
+  std::string tail = s.substr(s.size() - suffix.size());
+  for (char &c : tail) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  return tail == suffix;
+}
+
+// The node's YAML gives the ros: settings; the config keys and the sampling flags go through the same path as
+// `hpds sample` (the core loader skips `ros:`); then the ROS flags.
+hpds_node::NodeConfig resolveNodeConfig(const ReplayArgs &a) {
+  hpds_node::NodeConfig config;
+  if (!a.sampling.config_file.empty()) config = hpds_node::loadNodeConfigFile(a.sampling.config_file);
+  config.hpds = resolveConfig(a.sampling);
+  if (a.fixed_frame) config.ros.fixed_frame = *a.fixed_frame;
+  if (a.output_frame) config.ros.output_frame = *a.output_frame;
+  if (a.local_map_radius) config.ros.local_map_radius = *a.local_map_radius;
+  if (a.local_map_rate) config.ros.local_map_rate = *a.local_map_rate;
+  if (a.publish_levels) config.ros.publish_levels = *a.publish_levels;
+  // The flags bypass the YAML parser, which is where leading slashes are dropped.
+  for (std::string *id : {&config.ros.fixed_frame, &config.ros.output_frame})
+    while (!id->empty() && id->front() == '/') id->erase(id->begin());
+  hpds_node::validateRosConfig(config.ros, config.hpds);
+  return config;
+}
+
+void appendCloud(PointBuffer &all, const PointBuffer &part) {
+  if (all.layout().point_step == 0) {
+    all = PointBuffer(part.layout());
+  } else if (all.layout() != part.layout()) {
+    throw std::invalid_argument("scan mode writes every frame into one PLY, but the clouds on the topic change "
+                                "their point fields; write a .bag instead");
+  }
+  all.bytes().insert(all.bytes().end(), part.bytes().begin(), part.bytes().end());
+  all.setOrganization(static_cast<std::uint32_t>(all.size()), 1);
+}
+
+std::string messagesJson(const hpds_node::ProcessorStats &s, std::uint64_t wrong_type) {
+  std::ostringstream j;
+  j << "{\"received\": " << s.received << ", \"processed\": " << s.processed << ", \"empty\": " << s.empty
+    << ", \"not_pointcloud2\": " << wrong_type << ", \"dropped\": {";
+  j << "\"malformed\": {";
+  for (int e = 1; e < hpds_node::kCloudErrorCount; ++e)
+    j << (e > 1 ? ", " : "") << "\"" << hpds_node::toString(hpds_node::CloudError(e)) << "\": " << s.malformed[e];
+  j << "}";
+  for (int r = 0; r < hpds_node::kDropReasonCount; ++r)
+    j << ", \"" << hpds_node::toString(hpds_node::DropReason(r)) << "\": " << s.dropped[r];
+  j << "}}";
+  return j.str();
+}
+
+int runReplay(const ReplayArgs &a) {
+  const hpds_node::NodeConfig config = resolveNodeConfig(a);
+  const bool to_bag = endsWith(a.output, ".bag");
+  if (!to_bag && !endsWith(a.output, ".ply"))
+    throw std::invalid_argument("-o: '" + a.output + "' must end in .bag or .ply");
+  const bool scan = config.hpds.mode == Mode::Scan;
+
+  rosbag::Bag in;
+  try {
+    in.open(a.bag, rosbag::bagmode::Read);
+  } catch (const rosbag::BagException &e) {
+    throw std::runtime_error("'" + a.bag + "': " + e.what());
+  }
+
+  hpds_node::FrameProcessor processor(config);
+  const std::string target = processor.targetFrame();
+
+  // 1. Every transform of the bag, before any cloud (see the contract).
+  const std::vector<std::string> tf_topics = {"/tf", "/tf_static"};
+  rosbag::View tf_view(in, rosbag::TopicQuery(tf_topics));
+  const double span = tf_view.size() ? (tf_view.getEndTime() - tf_view.getBeginTime()).toSec() : 0.0;
+  tf2::BufferCore tf_buffer(ros::Duration(std::max(10.0, span + 10.0)));
+  if (!target.empty()) {
+    for (const rosbag::MessageInstance &m : tf_view) {
+      const auto tf = m.instantiate<tf2_msgs::TFMessage>();
+      if (!tf) continue;
+      for (const auto &t : tf->transforms) tf_buffer.setTransform(t, "bag", m.getTopic() == "/tf_static");
+    }
+  }
+
+  rosbag::View clouds(in, rosbag::TopicQuery(a.topic));
+  if (clouds.size() == 0) throw std::invalid_argument("'" + a.bag + "' has no messages on --topic " + a.topic);
+
+  rosbag::Bag out;
+  if (to_bag) {
+    try {
+      out.open(a.output, rosbag::bagmode::Write);
+    } catch (const rosbag::BagException &e) {
+      throw std::runtime_error("'" + a.output + "': " + e.what());
+    }
+    for (const rosbag::MessageInstance &m : tf_view) out.write(m.getTopic(), m.getTime(), m);
+  }
+
+  RunReport report = reportFor("replay", processor.pipeline());
+  PointBuffer ply;
+  std::uint64_t wrong_type = 0;
+  Progress progress(clouds.size());
+  std::size_t index = 0;
+  const auto t_run = std::chrono::steady_clock::now();
+  for (const rosbag::MessageInstance &m : clouds) {
+    progress.step(++index, a.topic);
+    const auto msg = m.instantiate<sensor_msgs::PointCloud2>();
+    if (!msg) {
+      ++wrong_type;
+      continue;
+    }
+    // 2. The node's steps: validate, transform at the stamp, shared processing.
+    if (processor.check(*msg) != hpds_node::CloudError::None) continue;
+    Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
+    if (!target.empty() &&
+        !hpds_node::lookupSensorPose(tf_buffer, target, msg->header.frame_id, msg->header.stamp, pose)) {
+      processor.countDrop(hpds_node::DropReason::NoTransform);
+      continue;
+    }
+    hpds_node::ProcessedFrame frame = processor.process(*msg, pose, hpds_node::OutputRequest::all());
+    if (!frame.processed) continue;
+    if (scan)
+      for (std::size_t d = 0; d < report.samples_per_level.size(); ++d)
+        report.samples_per_level[d] += frame.counters.accepted_per_level[d];
+
+    // 3. Outputs.
+    const auto t_write = std::chrono::steady_clock::now();
+    if (to_bag) {
+      if (frame.has_output) out.write(a.ns + "/output", m.getTime(), frame.output);
+      if (frame.has_new_samples) out.write(a.ns + "/new_samples", m.getTime(), frame.new_samples);
+      if (frame.has_local_map) out.write(a.ns + "/local_map", m.getTime(), frame.local_map);
+      for (const auto &[level, cloud] : frame.levels)
+        out.write(a.ns + "/level_" + std::to_string(level), m.getTime(), cloud);
+    } else if (scan && frame.has_output) {
+      PointBuffer part;
+      if (hpds_node::fromRosCloud(frame.output, part) != hpds_node::CloudError::None)
+        throw std::logic_error("replay: an output cloud does not convert back");
+      appendCloud(ply, part);
+    }
+    report.seconds.write += since(t_write);
+  }
+  progress.finish();
+  report.seconds.insert = since(t_run) - report.seconds.write;
+
+  const hpds::Pipeline &pipeline = processor.pipeline();
+  if (!scan)
+    for (std::size_t d = 0; d < report.samples_per_level.size(); ++d)
+      report.samples_per_level[d] = pipeline.hierarchy().countAtLevel(static_cast<int>(d));
+  const auto t_write = std::chrono::steady_clock::now();
+  if (to_bag) {
+    out.close();
+  } else {
+    if (!scan) ply = pipeline.makeCloud(pipeline.outputSamples(), false, &report.seconds.normals);
+    report.output_points = ply.size();
+    writePly(a.output, ply);
+  }
+  report.seconds.write += since(t_write);
+  report.frames = processor.stats().processed;
+  report.totals = pipeline.totals();
+  report.hierarchy_bytes = pipeline.hierarchy().memUsage();
+
+  const hpds_node::ProcessorStats &s = processor.stats();
+  std::cout << levelSummary(report);
+  std::cout << "messages: " << clouds.size() << " on " << a.topic << ", " << s.processed << " processed, "
+            << s.malformedTotal() << " malformed, " << s.dropped[int(hpds_node::DropReason::NoTransform)]
+            << " without transform to '" << target << "', " << s.dropped[int(hpds_node::DropReason::LayoutChanged)]
+            << " with other fields than the map, " << wrong_type << " not PointCloud2\n";
+  std::cout << "wrote " << a.output << "\n";
+  if (!a.stats.empty()) {
+    // The report of `hpds sample`, plus the message counts only a replay has.
+    report.extra.emplace_back("messages", messagesJson(s, wrong_type));
+    writeJsonFile(a.stats, report);
+  }
+  return s.processed > 0 ? 0 : 1;
+}
+
+}  // namespace
+
+void addReplayCommand(CLI::App &app) {
+  auto args = std::make_shared<ReplayArgs>();
+  CLI::App *cmd = app.add_subcommand(
+      "replay", "run the ROS node's processing on a bag, offline and deterministically (no master needed)");
+  cmd->add_option("bag", args->bag, "input bag")->required()->check(CLI::ExistingFile);
+  cmd->add_option("--topic", args->topic, "sensor_msgs/PointCloud2 topic to sample")->required();
+  cmd->add_option("-o,--output", args->output,
+                  "OUT.bag (the node's output topics + /tf) or OUT.ply (map: final map; scan: all outputs)")
+      ->required();
+  cmd->add_option("--stats", args->stats, "write run statistics (incl. dropped messages) as JSON");
+  cmd->add_option("--fixed-frame", args->fixed_frame, "map mode: frame of the map (ros.fixed_frame)");
+  cmd->add_option("--output-frame", args->output_frame, "scan mode: output frame via tf (ros.output_frame)");
+  cmd->add_option("--local-map-radius", args->local_map_radius, "[m] ros.local_map_radius");
+  cmd->add_option("--local-map-rate", args->local_map_rate, "[Hz] ros.local_map_rate (bag time), 0 = off");
+  cmd->add_option("--publish-levels", args->publish_levels, "levels D written as <ns>/level_D (ros.publish_levels)");
+  cmd->add_option("--ns", args->ns, "namespace of the output topics in OUT.bag")->capture_default_str();
+  addSamplingOptions(*cmd, args->sampling);
+  cmd->callback([args] {
+    const int rc = runReplay(*args);
+    if (rc != 0) throw CLI::RuntimeError(rc);
+  });
+}
+
+}  // namespace hpds::cli

@@ -1,0 +1,92 @@
+#include "hpds_node/ParamBridge.hpp"
+
+#include <yaml-cpp/yaml.h>
+
+#include <algorithm>
+#include <charconv>
+#include <cmath>
+#include <string>
+#include <system_error>
+
+#include "hpds_node/NodeConfig.hpp"
+
+namespace hpds_node {
+
+namespace {
+
+void emitParam(YAML::Emitter &out, XmlRpc::XmlRpcValue &v) {
+  switch (v.getType()) {
+    case XmlRpc::XmlRpcValue::TypeStruct:
+      out << YAML::BeginMap;
+      for (auto &item : v) {
+        out << YAML::Key << item.first << YAML::Value;
+        emitParam(out, item.second);
+      }
+      out << YAML::EndMap;
+      break;
+    case XmlRpc::XmlRpcValue::TypeArray:
+      out << YAML::Flow << YAML::BeginSeq;
+      for (int i = 0; i < v.size(); ++i) emitParam(out, v[i]);
+      out << YAML::EndSeq;
+      break;
+    case XmlRpc::XmlRpcValue::TypeInt:
+      out << static_cast<int>(v);
+      break;
+    case XmlRpc::XmlRpcValue::TypeDouble: {
+      // Shortest round-trip text, so the value the loader sees is the double rosparam holds.
+      const double d = static_cast<double>(v);
+      char buf[64];
+      const auto [end, ec] = std::to_chars(buf, buf + sizeof buf, d);
+      std::string text = std::isnan(d) ? ".nan" : std::isinf(d) ? (d > 0 ? ".inf" : "-.inf") : std::string(buf, end);
+      if (ec == std::errc() && std::isfinite(d) && text.find_first_of(".e") == std::string::npos) text += ".0";
+      out << text;
+      break;
+    }
+    case XmlRpc::XmlRpcValue::TypeBoolean:
+      out << (static_cast<bool>(v) ? "true" : "false");
+      break;
+    case XmlRpc::XmlRpcValue::TypeString:
+      // Quoted: a string parameter "4.0" must reach the loader as a string, which it refuses for a number key.
+      out << YAML::DoubleQuoted << static_cast<std::string &>(v);
+      break;
+    default:
+      out << YAML::DoubleQuoted << "<unsupported parameter type>";
+      break;
+  }
+}
+
+}  // namespace
+
+NodeConfig loadNodeConfigFromParams(const ros::NodeHandle &private_nh) {
+  NodeConfig config;
+  const std::string ns = private_nh.getNamespace();
+  std::string file;
+  if (private_nh.getParam("config_file", file) && !file.empty()) {
+    try {
+      config = loadNodeConfigFile(file);
+    } catch (const std::invalid_argument &e) {
+      throw std::invalid_argument(std::string(e.what()) + " [parameter " + ns + "/config_file]");
+    }
+  }
+  XmlRpc::XmlRpcValue params;
+  if (private_nh.getParam(ns, params) && params.getType() == XmlRpc::XmlRpcValue::TypeStruct) {
+    YAML::Emitter out;
+    emitParam(out, params);
+    try {
+      applyNodeConfigYaml(out.c_str(), config, "");
+    } catch (const std::invalid_argument &e) {
+      // The loader names the dotted key ("hierarchy.max_depth: ..."); say which parameter that is.
+      const std::string what = e.what();
+      const std::size_t colon = what.find(": ");
+      const std::string key = what.substr(0, colon);
+      if (colon == std::string::npos || key.empty() || key.find_first_of(" ()'") != std::string::npos)
+        throw std::invalid_argument(what + " (in the private parameters of " + ns + ")");
+      std::string param = key;
+      std::replace(param.begin(), param.end(), '.', '/');
+      throw std::invalid_argument("parameter " + ns + "/" + param + what.substr(colon));
+    }
+  }
+  return config;
+}
+
+}  // namespace hpds_node
