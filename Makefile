@@ -53,7 +53,7 @@ bench: build
 demo: build
 	@scripts/demo.sh $(HPDS) $(DEMO_DIR)
 
-# Sampling quality, measured (bench/README_QUALITY.md): normal accuracy against ground truth, feature-sensitive
+# Sampling quality, measured (docs/quality.md): normal accuracy against ground truth, feature-sensitive
 # levels, blue-noise analysis against grid baselines; tables, plots and pictures in $(BUILD)/quality/.
 .PHONY: quality
 quality: build

@@ -1,4 +1,4 @@
-// Hostile input, row by row of docs/BAD_INPUT.md: what the `hpds` CLI (exit code, message) and the core Pipeline do
+// Hostile input, row by row of docs/reliability.md: what the `hpds` CLI (exit code, message) and the core Pipeline do
 // with truncated and garbage files, unusual field types, NaN/Inf, degenerate and huge coordinates, empty and
 // 10-million-point frames, stamps, and invalid configs; plus every crash input the fuzzers found
 // (test/regressions/<target>/), replayed through the same entry point the fuzzer used.

@@ -20,7 +20,7 @@
 //     max_plane_rms * its radius); the first non-flat one stops the growth, and if none qualifies the first
 //     neighbourhood is kept. The line test needs a footprint long against the range noise (~20 sigma), as at the
 //     usual output levels.
-//   Measured gains and costs: bench/README_QUALITY.md.
+//   Measured gains and costs: docs/quality.md.
 #pragma once
 
 #include <cstdint>
