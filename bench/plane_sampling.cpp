@@ -8,6 +8,7 @@
 #include <string>
 
 #include "hpds/pipeline/Pipeline.hpp"
+#include "hpds/util/SplitMix64.hpp"
 #include "hpds/io/PlyWriter.hpp"
 
 int main(int argc, char **argv) {
@@ -35,12 +36,7 @@ int main(int argc, char **argv) {
   Frame frame;
   frame.points = PointBuffer(layout, points);
   std::uint64_t state = 12345;
-  auto uniform = [&state] {
-    std::uint64_t z = (state += 0x9E3779B97F4A7C15ull);
-    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
-    z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
-    return static_cast<double>((z ^ (z >> 31)) >> 11) * 0x1.0p-53;
-  };
+  auto uniform = [&state] { return unitInterval(splitMix64(state)); };
   for (std::size_t i = 0; i < points; ++i) {
     writeFromDouble(frame.points.record(i), layout.fields[0], 16.0 * uniform() - 8.0);
     writeFromDouble(frame.points.record(i), layout.fields[1], 16.0 * uniform() - 8.0);

@@ -6,6 +6,7 @@
 
 #include "FuzzSupport.hpp"
 #include "hpds/io/HierarchyFile.hpp"
+#include "hpds/util/Crc32.hpp"
 
 namespace {
 

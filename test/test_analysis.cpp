@@ -15,6 +15,7 @@
 #include "hpds/eval/GridSubsampling.hpp"
 #include "hpds/eval/PointRender.hpp"
 #include "hpds/eval/PngWriter.hpp"
+#include "hpds/util/Crc32.hpp"
 
 namespace hpds {
 namespace {

@@ -16,6 +16,7 @@
 #include "hpds/eval/SyntheticLidar.hpp"
 #include "hpds/pcl/PointCloudFile.hpp"
 #include "hpds/io/PoseFile.hpp"
+#include "hpds/util/Crc32.hpp"
 
 namespace hpds {
 namespace {

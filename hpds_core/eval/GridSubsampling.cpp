@@ -1,4 +1,5 @@
 #include "hpds/eval/GridSubsampling.hpp"
+#include "hpds/util/SplitMix64.hpp"
 
 #include <algorithm>
 #include <array>
@@ -30,11 +31,6 @@ bool keyOf(const Eigen::Vector3d &p, const Eigen::Vector3d &origin, double inv, 
   return true;
 }
 
-std::uint64_t mix(std::uint64_t z) {
-  z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
-  z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
-  return z ^ (z >> 31);
-}
 
 // Per cell, the index minimising score(i) (ties: lower index): the one selection rule behind both index baselines.
 template <typename Score>
@@ -67,7 +63,7 @@ std::vector<std::uint32_t> gridRandom(const std::vector<Eigen::Vector3d> &points
                                       const Eigen::Vector3d &origin) {
   // The minimum of i.i.d. hashes is a uniform pick among the cell's points.
   return pickPerCell(points, cell, origin, [&](std::uint32_t i, const Key &) {
-    return static_cast<double>(mix(seed * 0x9E3779B97F4A7C15ull + i + 1) >> 11);
+    return static_cast<double>(splitMix64Mix(seed * kSplitMix64Increment + i + 1) >> 11);
   });
 }
 

@@ -1,4 +1,5 @@
 #include "hpds/eval/PngWriter.hpp"
+#include "hpds/util/Crc32.hpp"
 
 #include <algorithm>
 #include <array>
@@ -14,21 +15,6 @@ RgbImage::RgbImage(int w, int h, std::uint8_t r, std::uint8_t g, std::uint8_t b)
   if (w <= 0 || h <= 0) throw std::invalid_argument("RgbImage: width and height must be > 0");
   rgb.resize(3 * static_cast<std::size_t>(w) * static_cast<std::size_t>(h));
   for (std::size_t i = 0; i < rgb.size(); i += 3) rgb[i] = r, rgb[i + 1] = g, rgb[i + 2] = b;
-}
-
-std::uint32_t crc32(const std::uint8_t *data, std::size_t size, std::uint32_t crc) {
-  static const std::array<std::uint32_t, 256> table = [] {
-    std::array<std::uint32_t, 256> t{};
-    for (std::uint32_t n = 0; n < 256; ++n) {
-      std::uint32_t c = n;
-      for (int k = 0; k < 8; ++k) c = (c & 1u) ? 0xEDB88320u ^ (c >> 1) : c >> 1;
-      t[n] = c;
-    }
-    return t;
-  }();
-  crc = ~crc;
-  for (std::size_t i = 0; i < size; ++i) crc = table[(crc ^ data[i]) & 0xFFu] ^ (crc >> 8);
-  return ~crc;
 }
 
 std::uint32_t adler32(const std::uint8_t *data, std::size_t size) {

@@ -1,4 +1,5 @@
 #include "hpds/eval/SyntheticLidar.hpp"
+#include "hpds/util/SplitMix64.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -35,21 +36,15 @@ constexpr double kSculptureLipschitz = 1.0 + kRipple1Amp * kRipple1K + kRipple2A
 constexpr double kTraceEpsilon = 1e-4;              // [m] of SDF value at which tracing stops
 constexpr int kTraceMaxSteps = 256;
 
-// splitmix64 finaliser: cheap, portable, good avalanche; everything random derives from it.
-std::uint64_t mix64(std::uint64_t x) {
-  x += 0x9E3779B97F4A7C15ull;
-  x = (x ^ (x >> 30)) * 0xBF58476D1CE4E5B9ull;
-  x = (x ^ (x >> 27)) * 0x94D049BB133111EBull;
-  return x ^ (x >> 31);
-}
-double unitFromBits(std::uint64_t h) { return static_cast<double>(h >> 11) * 0x1.0p-53; }  // [0, 1)
+// Everything random derives from SplitMix64: cheap, portable, good avalanche.
+std::uint64_t mix64(std::uint64_t x) { return splitMix64Mix(x + kSplitMix64Increment); }
 
 class Rng {
  public:
   explicit Rng(std::uint64_t seed) : state_(seed) {}
   double uniform(double lo, double hi) {
-    state_ += 0x9E3779B97F4A7C15ull;
-    return lo + (hi - lo) * unitFromBits(mix64(state_));
+    state_ += kSplitMix64Increment;
+    return lo + (hi - lo) * unitInterval(mix64(state_));
   }
   bool chance(double p) { return uniform(0.0, 1.0) < p; }
 
@@ -62,7 +57,7 @@ double truncatedGaussian(std::uint64_t key) {
   const std::uint64_t h1 = mix64(key);
   const std::uint64_t h2 = mix64(h1 ^ 0xD1B54A32D192ED03ull);
   const double u1 = (static_cast<double>(h1 >> 11) + 1.0) * 0x1.0p-53;  // (0, 1]: log stays finite
-  const double z = std::sqrt(-2.0 * std::log(u1)) * std::cos(kTwoPi * unitFromBits(h2));
+  const double z = std::sqrt(-2.0 * std::log(u1)) * std::cos(kTwoPi * unitInterval(h2));
   return std::clamp(z, -kNoiseTruncation, kNoiseTruncation);
 }
 

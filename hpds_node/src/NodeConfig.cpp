@@ -12,6 +12,7 @@
 #include <stdexcept>
 
 #include "hpds/config/ConfigYaml.hpp"
+#include "hpds/config/YamlScalar.hpp"
 
 namespace hpds_node {
 
@@ -31,30 +32,19 @@ std::string describe(const YAML::Node &n) {
   return isQuoted(n) ? "the quoted string '" + n.Scalar() + "'" : "'" + n.Scalar() + "'";
 }
 
+// Numbers, integers and booleans go through the core's one strict scalar parser, so the node accepts and refuses
+// the same text as a config file.
+const std::string &scalarText(const YAML::Node &n, const std::string &key, const char *expected) {
+  if (!n.IsScalar()) fail(key, std::string("expected ") + expected + ", got " + describe(n));
+  return n.Scalar();
+}
+
 double parseNumber(const YAML::Node &n, const std::string &key) {
-  if (!n.IsScalar() || isQuoted(n)) fail(key, "expected a number, got " + describe(n));
-  const std::string &text = n.Scalar();
-  if (text == ".inf" || text == "+.inf") return std::numeric_limits<double>::infinity();
-  if (text == "-.inf") return -std::numeric_limits<double>::infinity();
-  if (text == ".nan") return std::numeric_limits<double>::quiet_NaN();
-  const char *begin = text.data() + (!text.empty() && text[0] == '+' ? 1 : 0);
-  double value = 0.0;
-  const auto [end, ec] = std::from_chars(begin, text.data() + text.size(), value);
-  // from_chars also takes "inf"/"nan" and hex-less forms YAML would read as strings; digits are required.
-  const bool has_digit = std::any_of(text.begin(), text.end(), [](char c) { return c >= '0' && c <= '9'; });
-  if (ec != std::errc() || end != text.data() + text.size() || !has_digit)
-    fail(key, "expected a number, got '" + text + "'");
-  return value;
+  return hpds::yaml::parseNumber(scalarText(n, key, "a number"), isQuoted(n), key);
 }
 
 int parseInt(const YAML::Node &n, const std::string &key) {
-  if (!n.IsScalar() || isQuoted(n)) fail(key, "expected an integer, got " + describe(n));
-  const std::string &text = n.Scalar();
-  const char *begin = text.data() + (!text.empty() && text[0] == '+' ? 1 : 0);
-  int value = 0;
-  const auto [end, ec] = std::from_chars(begin, text.data() + text.size(), value);
-  if (ec != std::errc() || end != text.data() + text.size()) fail(key, "expected an integer, got '" + text + "'");
-  return value;
+  return hpds::yaml::parseInt(scalarText(n, key, "an integer"), isQuoted(n), key);
 }
 
 std::string parseString(const YAML::Node &n, const std::string &key) {
@@ -64,11 +54,7 @@ std::string parseString(const YAML::Node &n, const std::string &key) {
 }
 
 bool parseBool(const YAML::Node &n, const std::string &key) {
-  // Only plain true/false, as hpds::applyConfigYaml: yes/no/on/off and quoted strings are refused.
-  if (!n.IsScalar() || isQuoted(n)) fail(key, "expected true or false, got " + describe(n));
-  if (n.Scalar() == "true") return true;
-  if (n.Scalar() == "false") return false;
-  fail(key, "expected true or false, got '" + n.Scalar() + "'");
+  return hpds::yaml::parseBool(scalarText(n, key, "true or false"), isQuoted(n), key);
 }
 
 std::string parseFrameId(const YAML::Node &n, const std::string &key) {
@@ -154,15 +140,7 @@ void emit(YAML::Emitter &out, const YAML::Node &n) {
   }
 }
 
-std::string formatDouble(double v) {
-  if (std::isnan(v)) return ".nan";
-  if (std::isinf(v)) return v > 0 ? ".inf" : "-.inf";
-  char buf[64];
-  const auto [end, ec] = std::to_chars(buf, buf + sizeof buf, v);
-  std::string s(buf, ec == std::errc() ? end : buf);
-  if (s.find_first_of(".e") == std::string::npos) s += ".0";
-  return s;
-}
+std::string formatDouble(double v) { return hpds::yaml::formatNumber(v); }
 
 std::string quoted(const std::string &s) {
   YAML::Emitter e;

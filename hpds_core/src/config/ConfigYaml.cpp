@@ -1,10 +1,9 @@
 #include "hpds/config/ConfigYaml.hpp"
+#include "hpds/config/YamlScalar.hpp"
 
 #include <yaml-cpp/yaml.h>
 
 #include <algorithm>
-#include <cctype>
-#include <charconv>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
@@ -14,7 +13,6 @@
 #include <limits>
 #include <stdexcept>
 #include <string_view>
-#include <type_traits>
 #include <variant>
 
 namespace hpds {
@@ -176,95 +174,29 @@ std::size_t editDistance(std::string_view a, std::string_view b) {
 }
 
 // ---------------------------------------------------------------------------------------------------------------
-// Scalars. Parsed from the scalar text rather than with yaml-cpp's as<T>(), whose stream conversions accept
-// things this file must reject (yes/no, 1.5 for an int, hex) and depend on the global locale.
+// Scalars. Parsed from the scalar text (YamlScalar.hpp) rather than with yaml-cpp's as<T>(), whose stream
+// conversions accept things this file must reject (yes/no, 1.5 for an int, hex) and depend on the global locale.
 
-// Numbers and booleans must be plain scalars: in YAML a quoted "4.0" is a string, and accepting it would hide
-// a quoting mistake in whatever generated the text.
-const std::string &plainScalar(const YAML::Node &node, const std::string &key, const char *expected) {
-  if (!node.IsScalar() || node.Tag() == "!") fail(key, std::string("expected ") + expected + ", got " + describe(node));
+// A number or boolean must be a scalar; the text itself goes to the one strict scalar parser (YamlScalar.hpp).
+const std::string &scalarText(const YAML::Node &node, const std::string &key, const char *expected) {
+  if (!node.IsScalar()) fail(key, std::string("expected ") + expected + ", got " + describe(node));
   return node.Scalar();
 }
 
-bool isDigit(char c) { return std::isdigit(static_cast<unsigned char>(c)) != 0; }
-
-// YAML 1.2 core-schema decimal number: [-+]? ( . digits | digits ( . digits? )? ) ( [eE] [-+]? digits )?
-bool isDecimalNumber(std::string_view s) {
-  std::size_t i = 0;
-  if (i < s.size() && (s[i] == '+' || s[i] == '-')) ++i;
-  std::size_t mantissa_digits = 0;
-  while (i < s.size() && isDigit(s[i])) ++i, ++mantissa_digits;
-  if (i < s.size() && s[i] == '.') {
-    ++i;
-    while (i < s.size() && isDigit(s[i])) ++i, ++mantissa_digits;
-  }
-  if (mantissa_digits == 0) return false;
-  if (i < s.size() && (s[i] == 'e' || s[i] == 'E')) {
-    ++i;
-    if (i < s.size() && (s[i] == '+' || s[i] == '-')) ++i;
-    std::size_t exponent_digits = 0;
-    while (i < s.size() && isDigit(s[i])) ++i, ++exponent_digits;
-    if (exponent_digits == 0) return false;
-  }
-  return i == s.size();
-}
+// yaml-cpp tags quoted scalars "!".
+bool isQuoted(const YAML::Node &node) { return node.Tag() == "!"; }
 
 void parseValue(const YAML::Node &node, const std::string &key, double *out) {
-  const std::string &text = plainScalar(node, key, "a number");
-  std::string_view body = text;
-  const bool negative = !body.empty() && body[0] == '-';
-  if (!body.empty() && (body[0] == '+' || body[0] == '-')) body.remove_prefix(1);
-  // Non-finite values parse so that validateConfig, not the parser, reports them with the key's own rule.
-  if (body == ".inf" || body == ".Inf" || body == ".INF") {
-    *out = negative ? -std::numeric_limits<double>::infinity() : std::numeric_limits<double>::infinity();
-    return;
-  }
-  if (text == ".nan" || text == ".NaN" || text == ".NAN") {
-    *out = std::numeric_limits<double>::quiet_NaN();
-    return;
-  }
-  if (!isDecimalNumber(text)) fail(key, "expected a number, got '" + text + "'");
-  double value = 0.0;
-  const auto [end, ec] = std::from_chars(body.data(), body.data() + body.size(), value);
-  if (ec == std::errc::result_out_of_range) fail(key, "number out of the range of a double, got '" + text + "'");
-  if (ec != std::errc() || end != body.data() + body.size()) fail(key, "expected a number, got '" + text + "'");
-  *out = negative ? -value : value;
+  *out = yaml::parseNumber(scalarText(node, key, "a number"), isQuoted(node), key);
 }
-
-template <typename Int>
-void parseInteger(const YAML::Node &node, const std::string &key, Int *out) {
-  constexpr bool kUnsigned = std::is_unsigned_v<Int>;
-  const char *expected = kUnsigned ? "a non-negative integer" : "an integer";
-  const std::string &text = plainScalar(node, key, expected);
-  std::string_view number = text;
-  if (!number.empty() && number[0] == '+') number.remove_prefix(1);
-  std::string_view digits = number;
-  if (!kUnsigned && !digits.empty() && digits[0] == '-') digits.remove_prefix(1);
-  if (digits.empty() || !std::all_of(digits.begin(), digits.end(), isDigit))
-    fail(key, std::string("expected ") + expected + ", got '" + text + "'");
-  Int value{};
-  const auto [end, ec] = std::from_chars(number.data(), number.data() + number.size(), value);
-  if (ec == std::errc::result_out_of_range)
-    fail(key, "integer out of range " + std::to_string(std::numeric_limits<Int>::min()) + ".." +
-                  std::to_string(std::numeric_limits<Int>::max()) + ", got '" + text + "'");
-  if (ec != std::errc() || end != number.data() + number.size())
-    fail(key, std::string("expected ") + expected + ", got '" + text + "'");
-  *out = value;
+void parseValue(const YAML::Node &node, const std::string &key, int *out) {
+  *out = yaml::parseInt(scalarText(node, key, "an integer"), isQuoted(node), key);
 }
-
-void parseValue(const YAML::Node &node, const std::string &key, int *out) { parseInteger(node, key, out); }
-void parseValue(const YAML::Node &node, const std::string &key, std::uint64_t *out) { parseInteger(node, key, out); }
-
+void parseValue(const YAML::Node &node, const std::string &key, std::uint64_t *out) {
+  *out = yaml::parseUInt64(scalarText(node, key, "a non-negative integer"), isQuoted(node), key);
+}
 void parseValue(const YAML::Node &node, const std::string &key, bool *out) {
-  // Only true/false: YAML 1.1's yes/no/on/off are a classic source of silently flipped switches.
-  const std::string &text = plainScalar(node, key, "true or false");
-  if (text == "true") {
-    *out = true;
-  } else if (text == "false") {
-    *out = false;
-  } else {
-    fail(key, "expected true or false, got '" + text + "'");
-  }
+  *out = yaml::parseBool(scalarText(node, key, "true or false"), isQuoted(node), key);
 }
 
 const std::string &enumScalar(const YAML::Node &node, const std::string &key) {
@@ -280,16 +212,7 @@ void parseValue(const YAML::Node &node, const std::string &key, InsertionOrder *
   *out = parseInsertionOrder(enumScalar(node, key), key);
 }
 
-std::string formatValue(double v) {
-  if (std::isnan(v)) return ".nan";
-  if (std::isinf(v)) return v > 0 ? ".inf" : "-.inf";
-  char buffer[64];
-  const auto [end, ec] = std::to_chars(buffer, buffer + sizeof buffer, v);  // shortest text that round-trips
-  std::string text(buffer, ec == std::errc() ? end : buffer);
-  // "4" would read as an integer to people and to other YAML tools; the loader takes either for a double.
-  if (text.find_first_of(".e") == std::string::npos) text += ".0";
-  return text;
-}
+std::string formatValue(double v) { return yaml::formatNumber(v); }
 std::string formatValue(int v) { return std::to_string(v); }
 std::string formatValue(std::uint64_t v) { return std::to_string(v); }
 std::string formatValue(bool v) { return v ? "true" : "false"; }

@@ -7,16 +7,11 @@
 #include "hpds/sampling/FrameGridIndex.hpp"
 #include "hpds/normals/LocalPca.hpp"
 #include "hpds/util/ParallelFor.hpp"
+#include "hpds/util/SplitMix64.hpp"
 
 namespace hpds {
 
 namespace {
-std::uint64_t splitmix64(std::uint64_t &state) {
-  std::uint64_t z = (state += 0x9E3779B97F4A7C15ull);
-  z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
-  z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
-  return z ^ (z >> 31);
-}
 /// v % b for 2^12 <= b < 2^32, without the 64-bit integer divide, which was half of a shuffle's time (0.87 -> 0.45 ms
 /// for 69 k indices). A quotient estimated in floating point is corrected in exact integer arithmetic: the loops
 /// make the result exact whatever the estimate; the estimate (v's top 53 bits, b >= 2^12) only keeps them to a step
@@ -34,10 +29,10 @@ std::uint64_t remainderOf(std::uint64_t v, std::uint64_t b) {
 /// That multiple is at least 2^64 - bound, so it is only computed (a second division) for a draw that high.
 /// The value is v % bound for every bound (remainderOf is exact): the order of a seed is fixed by the contract.
 std::uint64_t below(std::uint64_t &state, std::uint64_t bound) {
-  std::uint64_t v = splitmix64(state);
+  std::uint64_t v = splitMix64(state);
   if (v >= std::uint64_t(0) - bound) {
     const std::uint64_t limit = ~std::uint64_t(0) - (~std::uint64_t(0) % bound);
-    while (v >= limit) v = splitmix64(state);
+    while (v >= limit) v = splitMix64(state);
   }
   if (bound < 4096 || bound > 0xFFFFFFFFu) return v % bound;
   return remainderOf(v, bound);

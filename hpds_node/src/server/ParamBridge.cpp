@@ -3,11 +3,9 @@
 #include <yaml-cpp/yaml.h>
 
 #include <algorithm>
-#include <charconv>
-#include <cmath>
 #include <string>
-#include <system_error>
 
+#include "hpds/config/YamlScalar.hpp"
 #include "hpds_node/NodeConfig.hpp"
 
 namespace hpds_node {
@@ -32,16 +30,10 @@ void emitParam(YAML::Emitter &out, XmlRpc::XmlRpcValue &v) {
     case XmlRpc::XmlRpcValue::TypeInt:
       out << static_cast<int>(v);
       break;
-    case XmlRpc::XmlRpcValue::TypeDouble: {
+    case XmlRpc::XmlRpcValue::TypeDouble:
       // Shortest round-trip text, so the value the loader sees is the double rosparam holds.
-      const double d = static_cast<double>(v);
-      char buf[64];
-      const auto [end, ec] = std::to_chars(buf, buf + sizeof buf, d);
-      std::string text = std::isnan(d) ? ".nan" : std::isinf(d) ? (d > 0 ? ".inf" : "-.inf") : std::string(buf, end);
-      if (ec == std::errc() && std::isfinite(d) && text.find_first_of(".e") == std::string::npos) text += ".0";
-      out << text;
+      out << hpds::yaml::formatNumber(static_cast<double>(v));
       break;
-    }
     case XmlRpc::XmlRpcValue::TypeBoolean:
       out << (static_cast<bool>(v) ? "true" : "false");
       break;

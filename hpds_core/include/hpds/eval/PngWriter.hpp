@@ -38,8 +38,7 @@ void writePng(const std::string &path, const RgbImage &image);
 /// zlib-format compression (deflate + Adler-32) of `data` with the encoder above; exposed for tests.
 [[nodiscard]] std::vector<std::uint8_t> zlibCompress(const std::vector<std::uint8_t> &data);
 
-/// CRC-32 (ISO-HDLC, as PNG uses) and Adler-32 of a byte range; exposed for tests.
-[[nodiscard]] std::uint32_t crc32(const std::uint8_t *data, std::size_t size, std::uint32_t crc = 0);
+/// Adler-32 of a byte range (the zlib trailer); exposed for tests. CRC-32 lives in hpds/util/Crc32.hpp.
 [[nodiscard]] std::uint32_t adler32(const std::uint8_t *data, std::size_t size);
 
 }  // namespace hpds

@@ -60,7 +60,4 @@ void saveMap(const std::string &path, const Pipeline &pipeline);
 /// std::invalid_argument when the pipeline is not in map mode.
 void loadMap(const std::string &path, Pipeline &pipeline);
 
-/// CRC-32 (IEEE 802.3, reflected, as zlib's crc32): pass the previous value to continue over several buffers.
-[[nodiscard]] std::uint32_t crc32(const void *data, std::size_t size, std::uint32_t crc = 0);
-
 }  // namespace hpds

@@ -1,0 +1,45 @@
+// hpds: the one-call API. Downsample one point cloud to a hierarchical additive Poisson-disk sampling, optionally
+// with normals, in one call; `hpds::Pipeline` (hpds/pipeline/Pipeline.hpp) is the streaming interface behind it
+// (frames with poses, map mode).
+//
+// Contract
+// - `points` are in the sensor frame, metres; the sensor (the viewpoint normals face) is at the origin. NaN/Inf
+//   points, exact (0,0,0) no-returns (input.skip_zero_points) and points outside input.min_range/max_range are
+//   skipped; they never appear in the result.
+// - The samples are those `hpds sample` writes for the same points and config (one frame, its mode and seed), in
+//   the same order: levels 0..D of the output level D (output.level / output.spacing).
+// - Deterministic: the same points and config give the same samples, whatever config.threads is.
+// - Throws std::invalid_argument for an invalid config (the message names the key, as the CLI does) or more than
+//   2^32 - 1 points.
+// - Thread-safe: calls share no state; each call may use config.threads worker threads.
+#pragma once
+
+#include <Eigen/Core>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "hpds/config/Config.hpp"
+
+namespace hpds {
+
+/// The result of downsample(): one entry per sample in every vector.
+struct Samples {
+  std::vector<std::uint32_t> index;  ///< position of the sample in the input
+  std::vector<std::uint8_t> level;   ///< hierarchy level 0..D of the sample
+  /// With config.normals.enabled (else empty): unit normal facing the sensor, and curvature l0 / (l0 + l1 + l2);
+  /// NaN where a normal could not be estimated (too few neighbours, degenerate neighbourhood), as in PCL.
+  std::vector<Eigen::Vector3f> normal;
+  std::vector<float> curvature;
+
+  [[nodiscard]] std::size_t size() const { return index.size(); }
+};
+
+/// Downsamples `points` with `config` (see the contract).
+[[nodiscard]] Samples downsample(const std::vector<Eigen::Vector3f> &points, const HpdsConfig &config = HpdsConfig{});
+
+/// Reads a config file in config/hpds.yaml's format over the defaults, with the same validation as the CLI and the
+/// node. Throws std::invalid_argument naming the key (or the file, when it cannot be read or parsed).
+[[nodiscard]] HpdsConfig loadConfig(const std::string &path);
+
+}  // namespace hpds

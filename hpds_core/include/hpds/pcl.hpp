@@ -1,0 +1,58 @@
+// hpds::downsample for PCL clouds (target hpds::pcl): the one-call API of hpds/hpds.hpp over pcl::PointCloud.
+//
+// Contract
+// - Any PCL point type with x/y/z. The cloud is in the sensor frame (normals face the origin); NaN points are
+//   skipped, as are the other points hpds::downsample skips.
+// - Returns the real input points, every field copied (intensity, ring, time, ...), in sample order: the same
+//   samples, in the same order, as hpds::downsample on the cloud's x/y/z. header is the input's; the result is
+//   unorganised (height 1) and dense.
+// - `normals` (optional): resized and filled in the same order (normal_x/y/z and curvature; NaN where not
+//   estimable). Normals are estimated only when it is given, whatever config.normals.enabled says.
+// - Throws std::invalid_argument as hpds::downsample does.
+#pragma once
+
+#include <pcl/point_cloud.h>
+#include <pcl/point_types.h>
+
+#include <vector>
+
+#include "hpds/hpds.hpp"
+
+namespace hpds {
+
+template <typename PointT>
+typename pcl::PointCloud<PointT>::Ptr downsample(const pcl::PointCloud<PointT> &cloud, const HpdsConfig &config,
+                                                 pcl::PointCloud<pcl::Normal> *normals = nullptr) {
+  std::vector<Eigen::Vector3f> xyz(cloud.size());
+  for (std::size_t i = 0; i < cloud.size(); ++i) xyz[i] = Eigen::Vector3f(cloud[i].x, cloud[i].y, cloud[i].z);
+  HpdsConfig run = config;
+  run.normals.enabled = normals != nullptr;
+  const Samples samples = downsample(xyz, run);
+
+  typename pcl::PointCloud<PointT>::Ptr out(new pcl::PointCloud<PointT>);
+  out->header = cloud.header;
+  out->sensor_origin_ = cloud.sensor_origin_;
+  out->sensor_orientation_ = cloud.sensor_orientation_;
+  out->resize(samples.size());
+  for (std::size_t i = 0; i < samples.size(); ++i) (*out)[i] = cloud[samples.index[i]];
+  out->width = static_cast<std::uint32_t>(samples.size());
+  out->height = 1;
+  out->is_dense = true;
+  if (normals) {
+    normals->header = cloud.header;
+    normals->resize(samples.size());
+    for (std::size_t i = 0; i < samples.size(); ++i) {
+      pcl::Normal &n = (*normals)[i];
+      n.normal_x = samples.normal[i].x();
+      n.normal_y = samples.normal[i].y();
+      n.normal_z = samples.normal[i].z();
+      n.curvature = samples.curvature[i];
+    }
+    normals->width = static_cast<std::uint32_t>(samples.size());
+    normals->height = 1;
+    normals->is_dense = false;
+  }
+  return out;
+}
+
+}  // namespace hpds

@@ -1,0 +1,67 @@
+#include <limits>
+#include <stdexcept>
+
+#include "hpds/config/ConfigYaml.hpp"
+#include "hpds/hpds.hpp"
+#include "hpds/normals/NormalEstimator.hpp"
+#include "hpds/pipeline/Pipeline.hpp"
+
+namespace hpds {
+
+namespace {
+
+// Each record carries the point's input position next to x/y/z, so a sample names the point it came from.
+constexpr std::uint32_t kIndexOffset = 12;
+
+Frame frameOf(const std::vector<Eigen::Vector3f> &points) {
+  PointLayout layout;
+  layout.append("x", FieldType::Float32);
+  layout.append("y", FieldType::Float32);
+  layout.append("z", FieldType::Float32);
+  layout.append("index", FieldType::UInt32);
+  Frame frame;
+  frame.points = PointBuffer(layout, points.size());
+  for (std::size_t i = 0; i < points.size(); ++i) {
+    std::uint8_t *rec = frame.points.record(i);
+    std::memcpy(rec, points[i].data(), 3 * sizeof(float));
+    const auto index = static_cast<std::uint32_t>(i);
+    std::memcpy(rec + kIndexOffset, &index, sizeof index);
+  }
+  return frame;
+}
+
+}  // namespace
+
+Samples downsample(const std::vector<Eigen::Vector3f> &points, const HpdsConfig &config) {
+  if (points.size() > std::numeric_limits<std::uint32_t>::max())
+    throw std::invalid_argument("downsample: " + std::to_string(points.size()) +
+                                " points, at most 2^32 - 1 fit the sample index");
+  Pipeline pipeline(config);
+  pipeline.addFrame(frameOf(points));
+  const Hierarchy &hierarchy = pipeline.hierarchy();
+  const std::vector<SampleId> ids = pipeline.outputSamples();
+
+  Samples out;
+  out.index.resize(ids.size());
+  out.level.resize(ids.size());
+  for (std::size_t i = 0; i < ids.size(); ++i) {
+    std::memcpy(&out.index[i], hierarchy.record(ids[i]) + kIndexOffset, sizeof(std::uint32_t));
+    out.level[i] = static_cast<std::uint8_t>(hierarchy.level(ids[i]));
+  }
+  if (config.normals.enabled) {
+    const std::vector<SampleNormal> normals =
+        estimateNormals(hierarchy, ids, normalParamsFor(config, pipeline.outputLevel()));
+    out.normal.resize(ids.size());
+    out.curvature.resize(ids.size());
+    for (std::size_t i = 0; i < ids.size(); ++i) {
+      // Invalid results are NaN already (the estimator's contract).
+      out.normal[i] = Eigen::Vector3f(normals[i].normal[0], normals[i].normal[1], normals[i].normal[2]);
+      out.curvature[i] = normals[i].curvature;
+    }
+  }
+  return out;
+}
+
+HpdsConfig loadConfig(const std::string &path) { return loadConfigFile(path); }
+
+}  // namespace hpds

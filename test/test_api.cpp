@@ -1,0 +1,189 @@
+// The one-call API (hpds/hpds.hpp): the streaming pipeline's samples, Poisson-disk and covering by brute force,
+// skipped points, normals, determinism, config errors. Core only: runs in a build without PCL.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <fstream>
+#include <limits>
+#include <set>
+#include <stdexcept>
+
+#include "TestData.hpp"
+#include "hpds/config/ConfigYaml.hpp"
+#include "hpds/eval/SyntheticLidar.hpp"
+#include "hpds/hpds.hpp"
+#include "hpds/pipeline/Pipeline.hpp"
+
+namespace hpds {
+namespace {
+
+SyntheticFrame syntheticFrame() {
+  SyntheticLidarConfig c;
+  c.beams = 16;
+  c.azimuth_steps = 720;
+  c.frames = 1;
+  return SyntheticLidar(c).frame(0);
+}
+
+std::vector<Eigen::Vector3f> xyzOf(const PointBuffer &cloud) {
+  const PointLayout &l = cloud.layout();
+  std::vector<Eigen::Vector3f> out(cloud.size());
+  for (std::size_t i = 0; i < cloud.size(); ++i)
+    for (int a = 0; a < 3; ++a)
+      out[i][a] = static_cast<float>(readAsDouble(cloud.record(i), *l.find(a == 0 ? "x" : a == 1 ? "y" : "z")));
+  return out;
+}
+
+HpdsConfig withNormals() {
+  HpdsConfig c;
+  c.output.level = -1;
+  c.output.spacing = 0.15;
+  c.normals.enabled = true;
+  return c;
+}
+
+TEST(Downsample, GivesThePipelinesSamplesInItsOrderWithItsNormals) {
+  const SyntheticFrame f = syntheticFrame();
+  const std::vector<Eigen::Vector3f> points = xyzOf(f.frame.points);
+  const HpdsConfig config = withNormals();
+
+  Pipeline pipeline(config);
+  Frame frame = f.frame;
+  frame.sensor_to_fixed = Eigen::Isometry3d::Identity();
+  pipeline.addFrame(frame);
+  const std::vector<SampleId> ids = pipeline.outputSamples();
+  const PointBuffer cloud = pipeline.makeCloud(ids, false);
+  const PointLayout &l = cloud.layout();
+
+  const Samples s = downsample(points, config);
+  ASSERT_EQ(s.size(), ids.size());
+  ASSERT_GT(s.size(), 100u);
+  ASSERT_EQ(s.level.size(), s.size());
+  ASSERT_EQ(s.normal.size(), s.size());
+  ASSERT_EQ(s.curvature.size(), s.size());
+  for (std::size_t i = 0; i < s.size(); ++i) {
+    ASSERT_LT(s.index[i], points.size());
+    const double *p = pipeline.hierarchy().position(ids[i]);
+    for (int a = 0; a < 3; ++a) ASSERT_EQ(static_cast<double>(points[s.index[i]][a]), p[a]) << i;
+    ASSERT_EQ(s.level[i], pipeline.hierarchy().level(ids[i]));
+    const char *nf[3] = {"normal_x", "normal_y", "normal_z"};
+    for (int a = 0; a < 3; ++a) {
+      const double expected = readAsDouble(cloud.record(i), *l.find(nf[a]));
+      if (std::isnan(expected)) {
+        EXPECT_TRUE(std::isnan(s.normal[i][a]));
+      } else {
+        EXPECT_EQ(s.normal[i][a], static_cast<float>(expected));
+      }
+    }
+  }
+}
+
+TEST(Downsample, SamplesAreRealPointsSpacedAndCoveringByBruteForce) {
+  std::vector<Eigen::Vector3f> points;
+  std::uint64_t state = 7;
+  auto uniform = [&] {
+    state = state * 6364136223846793005ull + 1442695040888963407ull;
+    return static_cast<float>((state >> 40) * 0x1.0p-24);
+  };
+  for (int i = 0; i < 3000; ++i) points.emplace_back(4.0f * uniform(), 4.0f * uniform(), 0.5f * uniform());
+  HpdsConfig config;
+  config.hierarchy.cell_size = 2.0;
+  config.hierarchy.max_depth = 4;
+  config.output.level = 3;
+  config.output.spacing = 0.0;
+  config.normals.enabled = false;
+  const Samples s = downsample(points, config);
+  ASSERT_GT(s.size(), 10u);
+  EXPECT_TRUE(s.normal.empty());
+  EXPECT_TRUE(s.curvature.empty());
+  const double r = poissonRadius(config.hierarchy.cell_size, 3);
+  std::set<std::uint32_t> unique(s.index.begin(), s.index.end());
+  EXPECT_EQ(unique.size(), s.size());
+  for (std::size_t i = 0; i < s.size(); ++i) {
+    ASSERT_LE(s.level[i], 3);
+    for (std::size_t j = i + 1; j < s.size(); ++j)
+      ASSERT_GE((points[s.index[i]].cast<double>() - points[s.index[j]].cast<double>()).norm(), r) << i << " " << j;
+  }
+  for (const Eigen::Vector3f &p : points) {
+    double best = std::numeric_limits<double>::infinity();
+    for (std::uint32_t k : s.index) best = std::min(best, (p.cast<double>() - points[k].cast<double>()).norm());
+    ASSERT_LE(best, 2.0 * r);
+  }
+}
+
+TEST(Downsample, NanInfAndNoReturnPointsNeverComeOut) {
+  const float nan = std::numeric_limits<float>::quiet_NaN(), inf = std::numeric_limits<float>::infinity();
+  std::vector<Eigen::Vector3f> points = {{nan, 0, 0}, {0, 0, 0}, {1, inf, 0}, {1, 1, 1}, {5, 5, 5}};
+  const Samples s = downsample(points, HpdsConfig{});
+  std::set<std::uint32_t> got(s.index.begin(), s.index.end());
+  EXPECT_EQ(got, (std::set<std::uint32_t>{3, 4}));
+  EXPECT_TRUE(downsample({}, HpdsConfig{}).index.empty());
+}
+
+TEST(Downsample, NormalsFaceTheOriginAndAreNanWhereNotEstimable) {
+  // A flat patch 10 m in front of the sensor, plus one isolated point.
+  std::vector<Eigen::Vector3f> points;
+  for (int i = 0; i < 60; ++i)
+    for (int j = 0; j < 60; ++j) points.emplace_back(10.0f, -1.5f + 0.05f * float(i), -1.5f + 0.05f * float(j));
+  points.emplace_back(-40.0f, 30.0f, 2.0f);
+  HpdsConfig config = withNormals();
+  const Samples s = downsample(points, config);
+  ASSERT_EQ(s.normal.size(), s.size());
+  std::size_t valid = 0;
+  for (std::size_t i = 0; i < s.size(); ++i) {
+    if (s.index[i] == points.size() - 1) {
+      EXPECT_TRUE(std::isnan(s.normal[i].x()) && std::isnan(s.curvature[i]));
+      continue;
+    }
+    if (std::isnan(s.normal[i].x())) continue;
+    ++valid;
+    EXPECT_LT(s.normal[i].x(), -0.99f) << i;  // faces the sensor at the origin: -x
+    EXPECT_NEAR(s.normal[i].norm(), 1.0f, 1e-5f);
+  }
+  EXPECT_GT(valid, s.size() / 2);
+}
+
+TEST(Downsample, SameInputAndSeedSameSamplesWhateverTheThreads) {
+  const std::vector<Eigen::Vector3f> points = xyzOf(syntheticFrame().frame.points);
+  HpdsConfig one = withNormals(), many = withNormals(), other = withNormals();
+  many.threads = 4;
+  other.order.seed = 99;
+  const Samples a = downsample(points, one), b = downsample(points, many), c = downsample(points, other);
+  EXPECT_EQ(a.index, b.index);
+  EXPECT_EQ(a.level, b.level);
+  for (std::size_t i = 0; i < a.size(); ++i)
+    for (int k = 0; k < 3; ++k)
+      EXPECT_TRUE(a.normal[i][k] == b.normal[i][k] || (std::isnan(a.normal[i][k]) && std::isnan(b.normal[i][k])));
+  EXPECT_NE(a.index, c.index);
+}
+
+TEST(Downsample, BadConfigIsAnErrorNamingTheKey) {
+  HpdsConfig c;
+  c.hierarchy.max_depth = 40;
+  try {
+    (void)downsample({{1, 2, 3}}, c);
+    FAIL() << "no error";
+  } catch (const std::invalid_argument &e) {
+    EXPECT_EQ(std::string(e.what()).rfind("hierarchy.max_depth", 0), 0u) << e.what();
+  }
+}
+
+TEST(LoadConfig, TheShippedFileIsTheDefaultsAndErrorsNameTheKey) {
+  const HpdsConfig shipped = loadConfig(std::string(HPDS_SOURCE_DIR) + "/config/hpds.yaml");
+  EXPECT_EQ(dumpConfigYaml(shipped), dumpConfigYaml(HpdsConfig{}));
+  const auto dir = test::scratchDir("load_config");
+  const std::string bad = (dir / "bad.yaml").string();
+  std::ofstream(bad) << "normals:\n  k: -3\n";
+  try {
+    (void)loadConfig(bad);
+    FAIL() << "no error";
+  } catch (const std::invalid_argument &e) {
+    const std::string what = e.what();
+    EXPECT_EQ(what.rfind("normals.k", 0), 0u) << what;
+    EXPECT_NE(what.find(bad), std::string::npos) << what;
+  }
+  EXPECT_THROW((void)loadConfig((dir / "missing.yaml").string()), std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace hpds
