@@ -44,8 +44,9 @@ TEST(Cli, EveryRealSensorFrameSamplesVerifiesAndKeepsItsFields) {
     const PointBuffer s = readPointCloud(out.string());
     ASSERT_GT(s.size(), 100u);
     ASSERT_LT(s.size(), in.size());
-    // Layout contract: x y z float, level uchar, normals, then every other input field with its type.
-    const std::vector<std::string> head = {"x", "y", "z", "level", "normal_x", "normal_y", "normal_z", "curvature"};
+    // Layout contract: x y z float, normals, then the other fields by element size (level uchar, every other input
+    // field with its type).
+    const std::vector<std::string> head = {"x", "y", "z", "normal_x", "normal_y", "normal_z", "curvature"};
     for (std::size_t i = 0; i < head.size(); ++i) EXPECT_EQ(s.layout().fields[i].name, head[i]);
     EXPECT_EQ(s.layout().find("level")->type, FieldType::UInt8);
     EXPECT_EQ(s.layout().find("x")->type, FieldType::Float32);

@@ -144,18 +144,43 @@ std::size_t DiagnosticsReader::updates() const {
   return updates_;
 }
 
-void expectOutputLayout(const sensor_msgs::PointCloud2 &out, const sensor_msgs::PointCloud2 &input, bool normals) {
-  std::vector<std::pair<std::string, int>> expected = {{"x", 7}, {"y", 7}, {"z", 7}, {"level", 2}};
-  if (normals)
-    for (const char *n : {"normal_x", "normal_y", "normal_z", "curvature"}) expected.emplace_back(n, 7);
-  for (const auto &f : input.fields)
-    if (f.name != "x" && f.name != "y" && f.name != "z") expected.emplace_back(f.name, f.datatype);
-  ASSERT_EQ(out.fields.size(), expected.size());
-  for (std::size_t i = 0; i < expected.size(); ++i) {
-    EXPECT_EQ(out.fields[i].name, expected[i].first) << "field " << i;
-    EXPECT_EQ(int(out.fields[i].datatype), expected[i].second) << "field " << out.fields[i].name;
-    EXPECT_EQ(out.fields[i].count, 1u) << "field " << out.fields[i].name;
+void expectAlignedFields(const sensor_msgs::PointCloud2 &cloud) {
+  ASSERT_GE(cloud.fields.size(), 3u);
+  const char *axes[] = {"x", "y", "z"};
+  for (std::size_t a = 0; a < 3; ++a) {
+    EXPECT_EQ(cloud.fields[a].name, axes[a]);
+    EXPECT_EQ(cloud.fields[a].offset, 4 * a) << cloud.fields[a].name;
+    EXPECT_EQ(int(cloud.fields[a].datatype), int(sensor_msgs::PointField::FLOAT32)) << cloud.fields[a].name;
   }
+  EXPECT_EQ(cloud.point_step % 4, 0u) << "point_step " << cloud.point_step;
+  std::vector<bool> used(cloud.point_step, false);
+  for (const auto &f : cloud.fields) {
+    ASSERT_TRUE(hpds::isValidFieldType(f.datatype)) << f.name;
+    const std::size_t size = hpds::fieldTypeSize(static_cast<hpds::FieldType>(f.datatype));
+    EXPECT_EQ(f.offset % size, 0u) << "field " << f.name << " at offset " << f.offset << ", element size " << size;
+    EXPECT_EQ(cloud.point_step % size, 0u) << "point_step " << cloud.point_step << ", field " << f.name;
+    ASSERT_LE(f.offset + f.count * size, cloud.point_step) << f.name;
+    for (std::size_t b = f.offset; b < f.offset + f.count * size; ++b) {
+      EXPECT_FALSE(used[b]) << "field " << f.name << " overlaps another at byte " << b;
+      used[b] = true;
+    }
+  }
+}
+
+void expectOutputLayout(const sensor_msgs::PointCloud2 &out, const sensor_msgs::PointCloud2 &input, bool normals) {
+  // Fields are found by name: their order after x y z follows the element sizes (OutputCloud.hpp).
+  std::map<std::string, std::pair<int, std::uint32_t>> expected = {{"x", {7, 1}}, {"y", {7, 1}}, {"z", {7, 1}},
+                                                                    {"level", {2, 1}}};
+  if (normals)
+    for (const char *n : {"normal_x", "normal_y", "normal_z", "curvature"}) expected.emplace(n, std::make_pair(7, 1u));
+  for (const auto &f : input.fields)
+    if (f.name != "x" && f.name != "y" && f.name != "z" && f.name != "_")
+      expected.emplace(f.name, std::make_pair(int(f.datatype), f.count));
+  std::map<std::string, std::pair<int, std::uint32_t>> got;
+  for (const auto &f : out.fields)
+    EXPECT_TRUE(got.emplace(f.name, std::make_pair(int(f.datatype), f.count)).second) << "field " << f.name << " twice";
+  EXPECT_EQ(got, expected);
+  expectAlignedFields(out);
   EXPECT_FALSE(out.is_bigendian);
 }
 

@@ -98,8 +98,12 @@ class DiagnosticsReader {
   std::size_t updates_ = 0;
 };
 
-/// Checks the layout of an hpds output cloud: x y z float32, level uint8, normals when `normals`, then every field
-/// of `input` except x/y/z with the same name, datatype and count.
+/// Checks that x y z are float32 at offsets 0, 4, 8, every field sits at a multiple of its element size without
+/// overlapping another, and point_step is a multiple of 4 and of every element size.
+void expectAlignedFields(const sensor_msgs::PointCloud2 &cloud);
+
+/// Checks the layout of an hpds output cloud: x y z float32, level uint8, normals when `normals`, every field of
+/// `input` except x/y/z (and PCL padding "_") with the same name, datatype and count, nothing else, all aligned (expectAlignedFields).
 void expectOutputLayout(const sensor_msgs::PointCloud2 &out, const sensor_msgs::PointCloud2 &input, bool normals);
 
 /// The whole file (empty when it cannot be read) / replaces the file with `bytes`.

@@ -4,6 +4,7 @@
 
 #include <unistd.h>
 
+#include <cmath>
 #include <cstring>
 #include <filesystem>
 #include <functional>
@@ -128,9 +129,60 @@ TEST(FrameProcessor, Float64AndOrganizedNanInput) {
   ASSERT_TRUE(r.processed);
   EXPECT_EQ(r.counters.skipped_invalid, (cloud.size() + 6) / 7);
   EXPECT_EQ(r.output.fields[0].datatype, sensor_msgs::PointField::FLOAT32);
-  EXPECT_EQ(r.output.fields.back().name, "tag");
+  hpds_test::expectAlignedFields(r.output);
+  const hpds::PointBuffer out = hpds_test::toBuffer(r.output);
+  const hpds::PointField *tag = out.layout().find("tag");
+  ASSERT_NE(tag, nullptr);
+  EXPECT_EQ(tag->type, hpds::FieldType::UInt16);
   EXPECT_GT(r.output.width, 0u);
   EXPECT_TRUE(r.output.is_dense);
+}
+
+TEST(FrameProcessor, OutputIsAlignedForPackedInputFields) {
+  // 1-byte fields first, so x y z (float32) sit at odd offsets, then an int16, a count-3 uint16 and a float64, all
+  // packed: the output must still be aligned, and every input field must keep its bytes.
+  hpds::PointLayout layout;
+  layout.append("ring", hpds::FieldType::UInt8);
+  layout.append("return_type", hpds::FieldType::Int8);
+  layout.append("flags", hpds::FieldType::UInt8);
+  for (const char *axis : {"x", "y", "z"}) layout.append(axis, hpds::FieldType::Float32);
+  layout.append("code", hpds::FieldType::Int16);
+  layout.append("triple", hpds::FieldType::UInt16, 3);
+  layout.append("time", hpds::FieldType::Float64);
+  ASSERT_EQ(layout.point_step, 31u);
+  hpds::PointBuffer cloud(layout, 30 * 30);
+  for (std::size_t i = 0; i < cloud.size(); ++i) {
+    std::uint8_t *rec = cloud.record(i);
+    for (std::uint32_t b = 0; b < layout.point_step; ++b) rec[b] = std::uint8_t(i * 31 + b * 7);
+    const float p[3] = {float(i % 30) * 0.3f, float(i / 30) * 0.3f, 1.0f};
+    for (int a = 0; a < 3; ++a) std::memcpy(rec + 3 + 4 * a, &p[a], 4);
+  }
+  for (const bool normals : {false, true}) {
+    SCOPED_TRACE(normals ? "normals" : "no normals");
+    NodeConfig config;
+    config.hpds.hierarchy.cell_size = 4.0;
+    config.hpds.output.level = 4;
+    config.hpds.normals.enabled = normals;
+    FrameProcessor processor(config);
+    const PointCloud2 msg = toMsg(cloud, 1.0);
+    const auto r = processor.process(msg, Eigen::Isometry3d::Identity(), OutputRequest::all());
+    ASSERT_TRUE(r.processed);
+    hpds_test::expectOutputLayout(r.output, msg, normals);
+    const hpds::PointBuffer out = hpds_test::toBuffer(r.output);
+    ASSERT_GT(out.size(), 10u);
+    const hpds::PointField *ox = out.layout().find("x"), *oy = out.layout().find("y");
+    for (std::size_t s = 0; s < out.size(); ++s) {
+      // The sample's input point from its grid position.
+      const long col = std::lround(hpds::readAsDouble(out.record(s), *ox) / 0.3);
+      const long row = std::lround(hpds::readAsDouble(out.record(s), *oy) / 0.3);
+      const std::uint8_t *in = cloud.record(std::size_t(row) * 30 + std::size_t(col));
+      for (const char *name : {"ring", "return_type", "flags", "code", "triple", "time"}) {
+        const hpds::PointField *fi = layout.find(name), *fo = out.layout().find(name);
+        ASSERT_NE(fo, nullptr) << name;
+        ASSERT_EQ(std::memcmp(out.record(s) + fo->offset, in + fi->offset, fi->byteSize()), 0) << name << ", sample " << s;
+      }
+    }
+  }
 }
 
 TEST(FrameProcessor, MapOutputIsTheSampleSetHitByTheFrame) {

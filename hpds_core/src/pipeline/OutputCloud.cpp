@@ -1,5 +1,6 @@
 #include "hpds/pipeline/OutputCloud.hpp"
 
+#include <algorithm>
 #include <cstring>
 #include <stdexcept>
 
@@ -13,20 +14,35 @@ bool isOwnName(const std::string &n) {
 }  // namespace
 
 PointLayout outputLayout(const PointLayout &input, bool with_normals, bool with_frame) {
-  PointLayout out;
-  out.append("x", FieldType::Float32);
-  out.append("y", FieldType::Float32);
-  out.append("z", FieldType::Float32);
-  out.append("level", FieldType::UInt8);
+  // x y z first, then the other fields by decreasing element size (stable: listed order within a size), each at the
+  // next offset that is a multiple of its element size: readers may then load any field as an aligned value, and
+  // the size order leaves at most one gap (before the first 8-byte field).
+  std::vector<PointField> rest;
+  auto want = [&rest](const std::string &name, FieldType type, std::uint32_t count = 1) {
+    rest.push_back(PointField{name, 0, type, count});
+  };
   if (with_normals) {
-    out.append("normal_x", FieldType::Float32);
-    out.append("normal_y", FieldType::Float32);
-    out.append("normal_z", FieldType::Float32);
-    out.append("curvature", FieldType::Float32);
+    for (const char *name : {"normal_x", "normal_y", "normal_z", "curvature"}) want(name, FieldType::Float32);
   }
-  if (with_frame) out.append("frame", FieldType::UInt32);
+  if (with_frame) want("frame", FieldType::UInt32);
+  want("level", FieldType::UInt8);
   for (const auto &f : input.fields)
-    if (!isOwnName(f.name)) out.append(f.name, f.type, f.count);
+    if (!isOwnName(f.name)) want(f.name, f.type, f.count);
+  std::stable_sort(rest.begin(), rest.end(), [](const PointField &a, const PointField &b) {
+    return fieldTypeSize(a.type) > fieldTypeSize(b.type);
+  });
+
+  PointLayout out;
+  std::uint32_t alignment = 4;  // point_step a multiple of 4 at least, as PCL's point types are
+  auto place = [&](const PointField &f) {
+    const auto size = static_cast<std::uint32_t>(fieldTypeSize(f.type));
+    alignment = std::max(alignment, size);
+    out.point_step = (out.point_step + size - 1) / size * size;
+    out.append(f.name, f.type, f.count);
+  };
+  for (const char *axis : {"x", "y", "z"}) place(PointField{axis, 0, FieldType::Float32, 1});
+  for (const PointField &f : rest) place(f);
+  out.point_step = (out.point_step + alignment - 1) / alignment * alignment;
   return out;
 }
 

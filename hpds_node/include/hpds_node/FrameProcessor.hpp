@@ -17,7 +17,8 @@
 //                 those hit by the frame with radius 2 r_D).
 //     local_map   map: samples of levels 0..L within ros.local_map_radius of the sensor, when the frame's stamp is
 //                 at least 1 / ros.local_map_rate after the last local map (or went backwards: a looped bag).
-//   Clouds use the OutputCloud layout (x y z float32, level uint8, [normal_x/y/z curvature], input fields).
+//   Clouds use the OutputCloud layout: x y z float32 first, [normal_x/y/z curvature], level uint8 and the input
+//   fields, every field aligned to its element size and point_step a multiple of 4 (OutputCloud.hpp).
 // - Drops: a message whose fields differ from the map's (map mode) is dropped and counted (LayoutChanged).
 // - Persistence (map mode): saveMap writes the map and the frame counter (hpds::saveMap, atomic); loadMap replaces
 //   them with a file's (hpds::loadMap: on any error nothing changes) and restarts the local-map clock, so the next

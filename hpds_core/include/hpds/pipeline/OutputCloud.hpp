@@ -1,7 +1,10 @@
 // OutputCloud: hierarchy samples as a point cloud with the layout every consumer (PLY, PointCloud2) shares.
 //
-// Layout: float32 x y z (fixed frame), uint8 level, [float32 normal_x normal_y normal_z curvature],
-// [uint32 frame], then every input field except x/y/z and names taken above, same name, type and bytes.
+// Layout (outputLayout): float32 x y z at offsets 0, 4, 8; then [float32 normal_x normal_y normal_z curvature],
+// [uint32 frame], uint8 level and every input field except x/y/z and the names taken above (same name, type, count
+// and bytes), ordered by decreasing element size. Every field sits at an offset that is a multiple of its element
+// size and point_step is a multiple of 4 and of the largest element size, so records can be read as aligned structs
+// (as PCL's padded point types are); the padding bytes are zero. Consumers find fields by name, not position.
 #pragma once
 
 #include <vector>
