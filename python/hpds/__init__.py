@@ -1,0 +1,64 @@
+"""hpds: hierarchical additive Poisson-disk sampling of lidar point clouds, with PCA normals.
+
+    import hpds
+    samples = hpds.downsample(points)                    # points: (N, 3) float32 or float64 NumPy array
+    samples = hpds.downsample(points, {"output": {"spacing": 0.2}, "normals": {"enabled": True}})
+    samples = hpds.downsample(points, "config/hpds.yaml")
+    points[samples["index"]], samples["level"]           # and samples["normal"], samples["curvature"]
+
+The samples are those of the C++ one-call API (hpds/hpds.hpp): the samples `hpds sample` writes for the same points
+and config, in the same order. A tiled map build of a whole drive runs with `python3 -m hpds.map_build`.
+"""
+import os
+
+from . import _hpds
+from .config import to_yaml
+
+__all__ = ["downsample", "load_config", "read_points", "read_poses"]
+
+
+def _config_source(config):
+    """(yaml_text, path) for the C++ side: a dict becomes YAML text, a path is read by the core."""
+    if config is None:
+        return "", ""
+    if isinstance(config, (str, os.PathLike)):
+        path = os.fspath(config)
+        if not path:
+            raise ValueError("config: empty path")
+        if not os.path.exists(path):
+            raise FileNotFoundError("config file '%s' does not exist" % path)
+        return "", path
+    return to_yaml(config), ""
+
+
+def downsample(points, config=None):
+    """Downsamples one point cloud to an additive Poisson-disk hierarchy.
+
+    points: (N, 3) NumPy array of float32 or float64 (float64 is rounded to float32, as the C++ API stores points),
+        in the sensor frame (metres; normals face the origin). NaN/Inf points, exact (0,0,0) no-returns and points
+        outside input.min_range/max_range are skipped.
+    config: None (the defaults), a dict in config/hpds.yaml's layout (missing keys keep their defaults), or the path
+        of a YAML file in that layout.
+    Returns a dict of NumPy arrays, one entry per sample: "index" (uint32, position in `points`), "level" (uint8,
+        0..D of the output level D) and, with normals.enabled, "normal" ((n, 3) float32, facing the sensor; NaN where
+        no normal could be estimated) and "curvature" (float32).
+    Raises ValueError naming the key for an invalid config, TypeError for a points array of another type.
+    """
+    text, path = _config_source(config)
+    return _hpds.downsample(points, text, path)
+
+
+def load_config(config=None):
+    """Every key of a config (None, dict or YAML path, as for downsample), validated, as a dict of sections."""
+    text, path = _config_source(config)
+    return _hpds.config_dict(text, path)
+
+
+def read_points(path):
+    """x, y, z of a .pcd, .ply (built with PCL) or KITTI .bin file as an (N, 3) float64 array."""
+    return _hpds.read_points(os.fspath(path))
+
+
+def read_poses(path):
+    """A KITTI pose file (one 3x4 sensor-to-world matrix per line) as an (N, 4, 4) float64 array."""
+    return _hpds.read_poses(os.fspath(path))

@@ -1,0 +1,68 @@
+// The config as Python sees it: named by a YAML file or by YAML text (python/hpds/config.py turns a dict into it),
+// loaded by the core's own loader so that validation and messages are those of the CLI and the node.
+#include <yaml-cpp/yaml.h>
+
+#include <cctype>
+#include <stdexcept>
+
+#include "Bindings.hpp"
+#include "hpds/config/ConfigYaml.hpp"
+#include "hpds/config/YamlScalar.hpp"
+
+namespace py = pybind11;
+
+namespace hpds::python {
+
+HpdsConfig configFrom(const std::string &yaml_text, const std::string &path) {
+  return path.empty() ? loadConfigString(yaml_text) : loadConfigFile(path);
+}
+
+namespace {
+
+// A scalar of dumpConfigYaml's output as the Python value it stands for: the dump writes booleans as true/false,
+// integers as bare digits, every double with a '.' or an exponent (or .inf/.nan), and enums by name.
+py::object scalarValue(const std::string &text, const std::string &key) {
+  if (text == "true") return py::bool_(true);
+  if (text == "false") return py::bool_(false);
+  const bool integer = !text.empty() && text.find_first_not_of("+-0123456789") == std::string::npos &&
+                       std::isdigit(static_cast<unsigned char>(text.back()));
+  if (integer) return py::reinterpret_steal<py::object>(PyLong_FromString(text.c_str(), nullptr, 10));
+  try {
+    return py::float_(yaml::parseNumber(text, false, key));
+  } catch (const std::invalid_argument &) {
+    return py::str(text);
+  }
+}
+
+py::object toPython(const YAML::Node &node, const std::string &key) {
+  if (node.IsMap()) {
+    py::dict d;
+    for (const auto &kv : node) {
+      const std::string name = kv.first.as<std::string>();
+      d[py::str(name)] = toPython(kv.second, key.empty() ? name : key + "." + name);
+    }
+    return std::move(d);
+  }
+  if (node.IsScalar()) return scalarValue(node.Scalar(), key);
+  throw std::logic_error("config dump: unexpected YAML node at " + key);
+}
+
+}  // namespace
+
+void bindConfig(py::module_ &m) {
+  m.def(
+      "config_yaml",
+      [](const std::string &yaml_text, const std::string &path) { return dumpConfigYaml(configFrom(yaml_text, path)); },
+      py::arg("config_yaml"), py::arg("config_path"),
+      "Every key of the config (YAML file `config_path` if not empty, else `config_yaml` over the defaults), validated, "
+      "as complete YAML text.");
+  m.def(
+      "config_dict",
+      [](const std::string &yaml_text, const std::string &path) {
+        const std::string dump = dumpConfigYaml(configFrom(yaml_text, path));
+        return toPython(YAML::Load(dump), "");
+      },
+      py::arg("config_yaml"), py::arg("config_path"), "The same config as a dict of sections.");
+}
+
+}  // namespace hpds::python

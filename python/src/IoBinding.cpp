@@ -1,0 +1,64 @@
+// Files in: point clouds (as `hpds sample` reads them) and KITTI pose files, as NumPy arrays.
+#include <pybind11/numpy.h>
+
+#include <algorithm>
+#include <cctype>
+#include <stdexcept>
+
+#include "Bindings.hpp"
+#include "hpds/io/KittiBin.hpp"
+#include "hpds/io/PoseFile.hpp"
+#ifdef HPDS_PYTHON_WITH_PCL
+#include "hpds/pcl/PointCloudFile.hpp"
+#endif
+
+namespace py = pybind11;
+
+namespace hpds::python {
+
+PointBuffer readCloudFile(const std::string &path) {
+#ifdef HPDS_PYTHON_WITH_PCL
+  return readPointCloud(path);
+#else
+  std::string ext = path.size() >= 4 ? path.substr(path.size() - 4) : "";
+  std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return std::tolower(c); });
+  if (ext != ".bin")
+    throw std::runtime_error(path + ": this build of hpds has no PCL: only KITTI .bin files can be read");
+  return readKittiBin(path);
+#endif
+}
+
+void bindIo(py::module_ &m) {
+  m.def(
+      "read_points",
+      [](const std::string &path) {
+        PointBuffer cloud;
+        {
+          py::gil_scoped_release unlocked;
+          cloud = readCloudFile(path);
+        }
+        const PointLayout &l = cloud.layout();
+        const PointField *f[3] = {l.find("x"), l.find("y"), l.find("z")};
+        if (!f[0] || !f[1] || !f[2]) throw std::runtime_error(path + ": no x/y/z fields");
+        py::array_t<double> xyz({static_cast<py::ssize_t>(cloud.size()), py::ssize_t(3)});
+        double *out = xyz.mutable_data();
+        for (std::size_t i = 0; i < cloud.size(); ++i)
+          for (int a = 0; a < 3; ++a) out[3 * i + a] = readAsDouble(cloud.record(i), *f[a]);
+        return xyz;
+      },
+      py::arg("path"), "x, y, z of every point of a .pcd/.ply/.bin file as an (N, 3) float64 array (exact).");
+  m.def(
+      "read_poses",
+      [](const std::string &path) {
+        const std::vector<Eigen::Isometry3d> poses = readKittiPoses(path);
+        py::array_t<double> out({static_cast<py::ssize_t>(poses.size()), py::ssize_t(4), py::ssize_t(4)});
+        double *o = out.mutable_data();
+        for (std::size_t k = 0; k < poses.size(); ++k)
+          for (int r = 0; r < 4; ++r)
+            for (int c = 0; c < 4; ++c) o[16 * k + 4 * r + c] = poses[k].matrix()(r, c);
+        return out;
+      },
+      py::arg("path"), "Poses of a KITTI pose file as an (N, 4, 4) float64 array of sensor-to-world matrices.");
+}
+
+}  // namespace hpds::python

@@ -1,0 +1,176 @@
+"""hpds.downsample against the C++ one-call API (hpds::downsample, run by downsample_dump) on real and synthetic
+frames, bit for bit; configs as dicts and YAML files; errors as Python exceptions naming the key."""
+import os
+import unittest
+
+import numpy as np
+
+import hpds
+import support
+
+NORMALS = {"output": {"spacing": 0.2}, "normals": {"enabled": True}}
+
+
+def dump_yaml(case, config, name):
+    path = case.path(name)
+    with open(path, "w") as f:
+        f.write(hpds.config.to_yaml(config))
+    return path
+
+
+class MatchesTheCppApi(support.ScratchCase):
+    def setUp(self):
+        super().setUp()
+        support.require_tools(self)
+
+    def assert_same_samples(self, ours, cpp):
+        self.assertEqual(sorted(ours), sorted(cpp))
+        self.assertEqual(ours["index"].dtype, np.uint32)
+        self.assertEqual(ours["level"].dtype, np.uint8)
+        np.testing.assert_array_equal(ours["index"], cpp["index"])
+        np.testing.assert_array_equal(ours["level"], cpp["level"])
+        if "normal" in cpp:
+            self.assertEqual(ours["normal"].shape, (len(ours["index"]), 3))
+            # Bit for bit, NaN (no normal) where the C++ API has NaN.
+            np.testing.assert_array_equal(ours["normal"].view(np.uint32), cpp["normal"].view(np.uint32))
+            np.testing.assert_array_equal(ours["curvature"].view(np.uint32), cpp["curvature"].view(np.uint32))
+
+    def check_file(self, cloud_path, config):
+        points = hpds.read_points(cloud_path)
+        config_path = dump_yaml(self, config, "config.yaml") if config is not None else "-"
+        support.run([support.DOWNSAMPLE_DUMP, cloud_path, config_path, self.path("cpp.bin")])
+        cpp = support.read_dump(self.path("cpp.bin"))
+        self.assertGreater(len(cpp["index"]), 100)
+        ours = hpds.downsample(points, config)
+        self.assert_same_samples(ours, cpp)
+        # float32 input, a YAML path instead of the dict: the same samples.
+        again = hpds.downsample(points.astype(np.float32), config_path if config is not None else None)
+        self.assert_same_samples(again, cpp)
+        return points, ours
+
+    def test_real_frames(self):
+        frames = [f for f in support.shared_frames() if os.path.basename(f) in ("hdl32_a.pcd", "velodyne_vlp16.pcd")]
+        if not frames:
+            self.skipTest("../shared/data/lidar is absent: real-frame test skipped (CI has it; clones do not)")
+        for frame in frames:
+            with self.subTest(frame=os.path.basename(frame)):
+                self.check_file(frame, {"output": {"spacing": 0.3}})
+                points, ours = self.check_file(frame, NORMALS)
+                self.assertTrue(np.isfinite(ours["normal"]).any())
+
+    def test_synthetic_lidar_frame(self):
+        support.run([support.CLI, "synth", "-o", self.path("synth"), "--frames", "1", "--beams", "16",
+                     "--azimuth-steps", "720", "--format", "pcd"])
+        frame = self.path("synth/frame_000000.pcd")
+        self.check_file(frame, None)
+        self.check_file(frame, NORMALS)
+        self.check_file(frame, {"order": {"type": "sphericity"}, "output": {"level": 3}})
+
+    def test_synthetic_planes_from_numpy(self):
+        rng = np.random.default_rng(7)
+        n = 20000
+        u, v = rng.uniform(-5, 5, n), rng.uniform(-5, 5, n)
+        xyz = np.stack([u, v, 0.02 * rng.standard_normal(n) - 1.5], axis=1)
+        xyz[: n // 2, 2] = u[: n // 2] * 0.3 + 4.0  # a second, tilted plane
+        xyz[::97] = 0.0  # no-returns, skipped by both
+        support.write_kitti_bin(self.path("planes.bin"), xyz)
+        self.check_file(self.path("planes.bin"), NORMALS)
+
+
+class Arguments(support.ScratchCase):
+    def setUp(self):
+        super().setUp()
+        rng = np.random.default_rng(3)
+        self.points = rng.uniform(-8, 8, (5000, 3)).astype(np.float32)
+
+    def test_defaults_and_empty_dict_agree(self):
+        a = hpds.downsample(self.points)
+        b = hpds.downsample(self.points, {})
+        np.testing.assert_array_equal(a["index"], b["index"])
+        self.assertEqual(sorted(a), ["index", "level"])
+        # Every input point is in range and finite here, so at max_depth 8 with 4 m cells most are kept.
+        self.assertGreater(len(a["index"]), 1000)
+        self.assertTrue((a["index"] < len(self.points)).all())
+
+    def test_strided_and_float64_views_give_the_same_samples(self):
+        wide = np.zeros((len(self.points), 6), np.float64)
+        wide[:, ::2] = self.points
+        strided = wide[:, ::2]
+        self.assertFalse(strided.flags["C_CONTIGUOUS"])
+        a = hpds.downsample(self.points, {"output": {"level": 4}})
+        b = hpds.downsample(strided, {"output": {"level": 4}})
+        np.testing.assert_array_equal(a["index"], b["index"])
+        np.testing.assert_array_equal(a["level"], b["level"])
+
+    def test_skipped_points_never_appear(self):
+        pts = self.points.copy()
+        pts[::5] = np.nan
+        pts[1::5] = 0.0
+        s = hpds.downsample(pts)
+        self.assertTrue((s["index"] % 5 >= 2).all())
+
+    def test_empty_input(self):
+        s = hpds.downsample(np.zeros((0, 3), np.float32), NORMALS)
+        self.assertEqual(len(s["index"]), 0)
+        self.assertEqual(s["normal"].shape, (0, 3))
+
+    def test_numpy_scalars_in_the_dict(self):
+        a = hpds.downsample(self.points, {"hierarchy": {"cell_size": np.float64(2.0), "max_depth": np.int64(5)}})
+        b = hpds.downsample(self.points, {"hierarchy": {"cell_size": 2.0, "max_depth": 5}})
+        np.testing.assert_array_equal(a["index"], b["index"])
+
+    def test_config_errors_name_the_key(self):
+        cases = [
+            ({"hierarchy": {"cell_size": -1.0}}, "hierarchy.cell_size"),
+            ({"hierarchy": {"max_depth": 40}}, "hierarchy.max_depth"),
+            ({"hierarchy": {"cell_sise": 1.0}}, "hierarchy.cell_sise"),
+            ({"order": {"seed": "5"}}, "order.seed"),
+            ({"order": {"type": "best"}}, "order.type"),
+            ({"normals": {"enabled": 1}}, "normals.enabled"),
+            ({"output": {"spacing": float("nan")}}, "output.spacing"),
+            ({"mode": "tiles"}, "mode"),
+            ({"hierarchy": 4.0}, "hierarchy"),
+        ]
+        for config, key in cases:
+            with self.subTest(key=key):
+                with self.assertRaises(ValueError) as e:
+                    hpds.downsample(self.points, config)
+                self.assertIn(key, str(e.exception))
+
+    def test_config_file_errors(self):
+        with self.assertRaises(FileNotFoundError):
+            hpds.downsample(self.points, self.path("missing.yaml"))
+        bad = self.path("bad.yaml")
+        with open(bad, "w") as f:
+            f.write("hierarchy:\n  max_depth: deep\n")
+        with self.assertRaises(ValueError) as e:
+            hpds.downsample(self.points, bad)
+        self.assertIn("hierarchy.max_depth", str(e.exception))
+        with self.assertRaises(TypeError):
+            hpds.downsample(self.points, 42)
+        with self.assertRaises(TypeError):
+            hpds.downsample(self.points, {"hierarchy": {"cell_size": object()}})
+
+    def test_points_errors(self):
+        with self.assertRaises(TypeError):
+            hpds.downsample(self.points.astype(np.int32))
+        with self.assertRaises(TypeError):
+            hpds.downsample(self.points.tolist())
+        with self.assertRaises(ValueError) as e:
+            hpds.downsample(self.points[:, :2])
+        self.assertIn("(5000, 2)", str(e.exception))
+        with self.assertRaises(ValueError):
+            hpds.downsample(self.points.reshape(-1))
+
+    def test_load_config_is_the_core_defaults_plus_the_overrides(self):
+        c = hpds.load_config({"normals": {"enabled": True}, "order": {"seed": 9}})
+        self.assertIs(c["normals"]["enabled"], True)
+        self.assertEqual(c["order"]["seed"], 9)
+        self.assertIsInstance(c["hierarchy"]["cell_size"], float)
+        self.assertIsInstance(c["hierarchy"]["max_depth"], int)
+        # The dict reads back as the same config.
+        self.assertEqual(hpds.load_config(c), c)
+
+
+if __name__ == "__main__":
+    unittest.main()
