@@ -5,9 +5,10 @@
 #include <array>
 #include <cstdio>
 #include <cstdlib>
-#include <filesystem>
-#include <fstream>
 #include <stdexcept>
+#include <string_view>
+
+#include "hpds/io/AtomicFile.hpp"
 
 namespace hpds {
 
@@ -220,14 +221,7 @@ std::vector<std::uint8_t> encodePng(const RgbImage &image) {
 
 void writePng(const std::string &path, const RgbImage &image) {
   const std::vector<std::uint8_t> bytes = encodePng(image);
-  {
-    std::ofstream f(path, std::ios::binary | std::ios::trunc);
-    if (f) f.write(reinterpret_cast<const char *>(bytes.data()), static_cast<std::streamsize>(bytes.size()));
-    if (f && f.flush()) return;
-  }
-  std::error_code ec;
-  std::filesystem::remove(path, ec);
-  throw std::runtime_error(path + ": cannot write PNG file");
+  writeFileAtomically(path, std::string_view(reinterpret_cast<const char *>(bytes.data()), bytes.size()));
 }
 
 }  // namespace hpds

@@ -18,6 +18,7 @@
 #include <stdexcept>
 
 #include "Commands.hpp"
+#include "OutputPaths.hpp"
 #include "QualityIo.hpp"
 #include "hpds/eval/BlueNoiseAnalysis.hpp"
 #include "hpds/config/Config.hpp"
@@ -207,6 +208,9 @@ std::string shellQuote(const std::string &s) {
 }
 
 void runAnalyze(const AnalyzeArgs &a) {
+  std::vector<InputPath> inputs = {{"input", a.sampling}, {"--poses", a.poses}};
+  for (const std::string &in : a.inputs) inputs.push_back({"--input", in});
+  checkPaths(inputs, {}, {{"-o", a.out_dir, {"analysis.json", "levels.csv", "rdf.csv", "spectrum.csv"}}});
   if (!(a.cell_size > 0.0)) throw std::invalid_argument("--cell-size: must be > 0");
   if (!a.patch.empty() && a.patch.size() != 3) throw std::invalid_argument("--patch: expected cx,cy,size");
   SamplingCloud cloud = loadSampling(a.sampling);
@@ -359,7 +363,7 @@ void runAnalyze(const AnalyzeArgs &a) {
 
   {
     TextFile json((out / "analysis.json").string());
-    json << "{\n  \"sampling\": \"" << a.sampling << "\",\n  \"cell_size\": " << num(a.cell_size)
+    json << "{\n  \"sampling\": " << jsonQuoted(a.sampling) << ",\n  \"cell_size\": " << num(a.cell_size)
          << ",\n  \"frame\": " << (frame ? std::to_string(*frame) : "null") << ",\n  \"patch\": {\"center\": ["
          << num(patch.center_xy.x()) << ", " << num(patch.center_xy.y()) << "], \"size\": " << num(patch.size)
          << ", \"window\": " << num(patch.window.size) << ", \"normal\": [" << num(patch.plane.normal.x()) << ", "
@@ -377,6 +381,7 @@ void runAnalyze(const AnalyzeArgs &a) {
       json << "\n  ]}";
     }
     json << "\n}\n";
+    json.close();
   }
   // The plot script reads these files: they must be complete first.
   levels_csv.close();

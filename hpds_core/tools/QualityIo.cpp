@@ -4,8 +4,10 @@
 #include <algorithm>
 #include <charconv>
 #include <cmath>
+#include <cstdio>
 #include <stdexcept>
 
+#include "hpds/io/AtomicFile.hpp"
 #include "hpds/pcl/PointCloudFile.hpp"
 #include "hpds/io/PoseFile.hpp"
 
@@ -78,21 +80,23 @@ std::vector<Eigen::Vector3d> loadInputs(const std::vector<std::string> &inputs, 
   return out;
 }
 
-TextFile::TextFile(const std::string &path) : path_(path), out_(path, std::ios::trunc) {
-  if (!out_) throw std::runtime_error(path + ": cannot open for writing");
-}
+void TextFile::close() { writeFileAtomically(path_, out_.str()); }
 
-void TextFile::close() {
-  if (!out_.is_open()) return;
-  out_.close();
-  if (!out_) throw std::runtime_error(path_ + ": write failed");
-}
-
-TextFile::~TextFile() noexcept(false) {
-  if (!out_.is_open()) return;
-  out_.close();
-  // Throwing from a destructor during unwinding would terminate; report only on the normal path.
-  if (!out_ && std::uncaught_exceptions() == 0) throw std::runtime_error(path_ + ": write failed");
+std::string jsonQuoted(const std::string &text) {
+  std::string out = "\"";
+  for (const char c : text) {
+    if (c == '"' || c == '\\') {
+      out += '\\';
+      out += c;
+    } else if (static_cast<unsigned char>(c) < 0x20) {
+      char buf[8];
+      std::snprintf(buf, sizeof buf, "\\u%04x", static_cast<unsigned>(static_cast<unsigned char>(c)));
+      out += buf;
+    } else {
+      out += c;
+    }
+  }
+  return out + "\"";
 }
 
 std::string num(double v) {

@@ -12,8 +12,9 @@
 
 #include <Eigen/Core>
 #include <cstdint>
-#include <fstream>
+#include <sstream>
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace hpds::cli {
@@ -36,14 +37,14 @@ struct SamplingCloud {
 [[nodiscard]] std::vector<Eigen::Vector3d> loadInputs(const std::vector<std::string> &inputs,
                                                       const std::string &poses_file);
 
-/// A text file that throws std::runtime_error naming the path when it cannot be opened or written.
+/// A text file written atomically (AtomicFile): the text is kept in memory and put in place by close(); a TextFile
+/// destroyed without close() (an exception on the way) writes nothing. Errors name the path.
 class TextFile {
  public:
-  explicit TextFile(const std::string &path);
-  ~TextFile() noexcept(false);
+  explicit TextFile(std::string path) : path_(std::move(path)) {}
   TextFile(const TextFile &) = delete;
   TextFile &operator=(const TextFile &) = delete;
-  /// Flushes and closes (throws on a failed write); the destructor does the same if not done yet.
+  /// Writes the file (throws std::runtime_error naming the path on failure); no << after it.
   void close();
   template <typename T>
   TextFile &operator<<(const T &v) {
@@ -53,8 +54,11 @@ class TextFile {
 
  private:
   std::string path_;
-  std::ofstream out_;
+  std::ostringstream out_;
 };
+
+/// `text` as a JSON string literal: quoted, with quotes, backslashes and control characters escaped.
+[[nodiscard]] std::string jsonQuoted(const std::string &text);
 
 /// Shortest round-trip decimal text of a double; "null" for NaN/Inf (valid JSON, empty-safe in CSV readers).
 [[nodiscard]] std::string num(double v);

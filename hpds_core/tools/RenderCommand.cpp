@@ -8,6 +8,7 @@
 #include <stdexcept>
 
 #include "Commands.hpp"
+#include "OutputPaths.hpp"
 #include "QualityIo.hpp"
 #include "hpds/eval/BlueNoiseAnalysis.hpp"
 #include "hpds/sampling/InsertionOrderer.hpp"
@@ -82,6 +83,10 @@ std::vector<double> featureValues(const SamplingCloud &c, const RenderArgs &a, d
 }
 
 void runRender(const RenderArgs &a) {
+  std::vector<std::string> pictures;
+  for (const std::string &colour : a.colors)
+    for (const std::string &view : a.views) pictures.push_back(a.prefix + "_" + colour + "_" + view + ".png");
+  checkPaths({{"input", a.cloud}}, {}, {{"-o", a.out_dir, pictures}});
   if (!a.crop.empty() && a.crop.size() != 6) throw std::invalid_argument("--crop: expected x0,y0,z0,x1,y1,z1");
   SamplingCloud c = loadSampling(a.cloud);
   if (!c.frame.empty() && a.frame >= 0) c = keepFrame(c, static_cast<std::uint32_t>(a.frame));

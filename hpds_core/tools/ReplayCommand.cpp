@@ -14,8 +14,10 @@
 #include <stdexcept>
 
 #include "CliOptions.hpp"
+#include "OutputPaths.hpp"
 #include "RunReport.hpp"
 #include "hpds/config/ConfigYaml.hpp"
+#include "hpds/io/AtomicFile.hpp"
 #include "hpds/io/PlyWriter.hpp"
 #include "hpds_node/FrameProcessor.hpp"
 
@@ -89,11 +91,22 @@ std::string messagesJson(const hpds_node::ProcessorStats &s, std::uint64_t wrong
   return j.str();
 }
 
+std::string messageSummary(std::size_t messages, const std::string &topic, const hpds_node::ProcessorStats &s,
+                           std::uint64_t wrong_type, const std::string &target) {
+  std::ostringstream m;
+  m << messages << " on " << topic << ", " << s.processed << " processed, " << s.malformedTotal() << " malformed, "
+    << s.dropped[int(hpds_node::DropReason::NoTransform)] << " without transform to '" << target << "', "
+    << s.dropped[int(hpds_node::DropReason::LayoutChanged)] << " with other fields than the map, " << wrong_type
+    << " not PointCloud2";
+  return m.str();
+}
+
 int runReplay(const ReplayArgs &a) {
+  // Before anything is read or opened: the bag is never its own output, and a run never ends on an unwritable path.
+  checkPaths({{"input", a.bag}, {"--config", a.sampling.config_file}},
+             {{"-o", a.output, {".bag", ".ply"}, "a bag or a PLY", ""}, {"--stats", a.stats, {".json"}, "JSON", ""}});
   const hpds_node::NodeConfig config = resolveNodeConfig(a);
   const bool to_bag = endsWith(a.output, ".bag");
-  if (!to_bag && !endsWith(a.output, ".ply"))
-    throw std::invalid_argument("-o: '" + a.output + "' must end in .bag or .ply");
   const bool scan = config.hpds.mode == Mode::Scan;
 
   rosbag::Bag in;
@@ -122,10 +135,13 @@ int runReplay(const ReplayArgs &a) {
   rosbag::View clouds(in, rosbag::TopicQuery(a.topic));
   if (clouds.size() == 0) throw std::invalid_argument("'" + a.bag + "' has no messages on --topic " + a.topic);
 
+  // Written under a temporary name and put in place only after a run that processed frames (AtomicFile).
+  std::optional<AtomicFile> bag_file;
   rosbag::Bag out;
   if (to_bag) {
+    bag_file.emplace(a.output);
     try {
-      out.open(a.output, rosbag::bagmode::Write);
+      out.open(bag_file->writingPath(), rosbag::bagmode::Write);
     } catch (const rosbag::BagException &e) {
       throw std::runtime_error("'" + a.output + "': " + e.what());
     }
@@ -178,6 +194,12 @@ int runReplay(const ReplayArgs &a) {
   progress.finish();
   report.seconds.insert = since(t_run) - report.seconds.write;
 
+  const hpds_node::ProcessorStats &s = processor.stats();
+  if (s.processed == 0) {
+    // Nothing to write: an existing output stays as it is (the temporary bag is removed).
+    throw std::runtime_error("no frame processed: " + messageSummary(clouds.size(), a.topic, s, wrong_type, target) +
+                             "; nothing written");
+  }
   const hpds::Pipeline &pipeline = processor.pipeline();
   if (!scan)
     for (std::size_t d = 0; d < report.samples_per_level.size(); ++d)
@@ -185,6 +207,7 @@ int runReplay(const ReplayArgs &a) {
   const auto t_write = std::chrono::steady_clock::now();
   if (to_bag) {
     out.close();
+    bag_file->commit();
   } else {
     if (!scan) ply = pipeline.makeCloud(pipeline.outputSamples(), false, &report.seconds.normals);
     report.output_points = ply.size();
@@ -195,19 +218,15 @@ int runReplay(const ReplayArgs &a) {
   report.totals = pipeline.totals();
   report.hierarchy_bytes = pipeline.hierarchy().memUsage();
 
-  const hpds_node::ProcessorStats &s = processor.stats();
   std::cout << levelSummary(report);
-  std::cout << "messages: " << clouds.size() << " on " << a.topic << ", " << s.processed << " processed, "
-            << s.malformedTotal() << " malformed, " << s.dropped[int(hpds_node::DropReason::NoTransform)]
-            << " without transform to '" << target << "', " << s.dropped[int(hpds_node::DropReason::LayoutChanged)]
-            << " with other fields than the map, " << wrong_type << " not PointCloud2\n";
+  std::cout << "messages: " << messageSummary(clouds.size(), a.topic, s, wrong_type, target) << "\n";
   std::cout << "wrote " << a.output << "\n";
   if (!a.stats.empty()) {
     // The report of `hpds sample`, plus the message counts only a replay has.
     report.extra.emplace_back("messages", messagesJson(s, wrong_type));
     writeJsonFile(a.stats, report);
   }
-  return s.processed > 0 ? 0 : 1;
+  return 0;
 }
 
 }  // namespace

@@ -5,11 +5,12 @@
 
 #include <cmath>
 #include <cstdio>
-#include <fstream>
 #include <iomanip>
 #include <iostream>
 #include <sstream>
 #include <stdexcept>
+
+#include "hpds/io/AtomicFile.hpp"
 
 namespace hpds::cli {
 
@@ -72,12 +73,7 @@ std::string toJson(const RunReport &r) {
   return j.str();
 }
 
-void writeJsonFile(const std::string &path, const RunReport &report) {
-  std::ofstream f(path, std::ios::binary | std::ios::trunc);
-  if (!f) throw std::runtime_error("cannot write stats file '" + path + "'");
-  f << toJson(report);
-  if (!f) throw std::runtime_error("failed writing stats file '" + path + "'");
-}
+void writeJsonFile(const std::string &path, const RunReport &report) { writeFileAtomically(path, toJson(report)); }
 
 std::string levelSummary(const RunReport &r) {
   std::ostringstream s;

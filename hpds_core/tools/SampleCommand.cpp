@@ -7,6 +7,7 @@
 
 #include "CliOptions.hpp"
 #include "Commands.hpp"
+#include "OutputPaths.hpp"
 #include "RunReport.hpp"
 #include "hpds/io/HierarchyFile.hpp"
 #include "hpds/util/ParallelFor.hpp"
@@ -53,7 +54,20 @@ void appendCloud(PointBuffer &all, const PointBuffer &part, const std::string &i
   all.setOrganization(static_cast<std::uint32_t>(all.size()), 1);
 }
 
+// Every path this run reads or writes, checked before any work (OutputPaths.hpp).
+void checkSamplePaths(const SampleArgs &a) {
+  std::vector<InputPath> inputs;
+  for (const std::string &in : a.inputs) inputs.push_back({"input", in});
+  inputs.push_back({"--poses", a.poses});
+  inputs.push_back({"--config", a.sampling.config_file});
+  inputs.push_back({"--load-map", a.load_map});
+  checkPaths(inputs, {{"-o", a.output, {".ply"}, "PLY", ""},
+                      {"--stats", a.stats, {".json"}, "JSON", ""},
+                      {"--save-map", a.save_map, {}, "an hpds map", "--load-map"}});
+}
+
 int runSample(const SampleArgs &a) {
+  checkSamplePaths(a);
   const HpdsConfig config = resolveConfig(a.sampling);
   std::vector<Eigen::Isometry3d> poses;
   if (!a.poses.empty()) {

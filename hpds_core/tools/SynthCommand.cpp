@@ -5,6 +5,7 @@
 #include <stdexcept>
 
 #include "Commands.hpp"
+#include "OutputPaths.hpp"
 #include "hpds/eval/SyntheticLidar.hpp"
 #include "hpds/pcl/PointCloudFile.hpp"
 #include "hpds/io/PoseFile.hpp"
@@ -31,6 +32,7 @@ void runSynth(SynthArgs a) {
   if (a.format != "pcd" && a.format != "bin" && a.format != "ply")
     throw std::invalid_argument("--format: expected pcd, ply or bin, got '" + a.format + "'");
   a.lidar.scene = parseScene(a.scene);
+  checkPaths({}, {}, {{"-o", a.out_dir, {}}});
   const SyntheticLidar lidar(a.lidar);
   std::filesystem::create_directories(a.out_dir);
   std::vector<Eigen::Isometry3d> poses;

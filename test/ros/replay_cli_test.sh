@@ -13,10 +13,25 @@ grep -q '"data_size": 1' "$work/stats.json" || { echo "expected the truncated cl
 "$hpds" replay "$work/input.bag" "${common[@]}" -o "$work/map1.ply" > /dev/null
 "$hpds" replay "$work/input.bag" "${common[@]}" -o "$work/map2.ply" --threads 2 > /dev/null
 cmp "$work/map1.ply" "$work/map2.ply" || { echo "replay is not deterministic"; exit 1; }
-# Scan mode into one PLY, and a fixed frame that the bag does not have: every frame dropped, exit status 1.
+# Scan mode into one PLY, and a fixed frame that the bag does not have: every frame dropped, exit status 1 with an
+# error line, and the existing outputs of an earlier run (bag and PLY) left as they were.
 "$hpds" replay "$work/input.bag" "${common[@]}" --mode scan -o "$work/scan.ply" > /dev/null
-if "$hpds" replay "$work/input.bag" "${common[@]}" --fixed-frame nowhere -o "$work/none.ply" > "$work/none.log"; then
-  echo "a replay without transforms must fail"; exit 1
+cp "$work/cli.bag" "$work/prev.bag"
+for out in prev.bag scan.ply; do
+  before=$(md5sum < "$work/$out")
+  if "$hpds" replay "$work/input.bag" "${common[@]}" --fixed-frame nowhere -o "$work/$out" > "$work/none.log" 2>&1; then
+    echo "a replay without transforms must fail"; exit 1
+  fi
+  grep -q "hpds: error: no frame processed: .*6 without transform to 'nowhere'.*nothing written" "$work/none.log" ||
+    { cat "$work/none.log"; exit 1; }
+  [ "$(md5sum < "$work/$out")" = "$before" ] || { echo "a failed replay changed the existing $out"; exit 1; }
+done
+ls "$work" | grep -q hpds-tmp && { echo "a failed replay left a temporary file"; ls "$work"; exit 1; }
+# The input bag is never an output: refused before it is opened, and left intact.
+before=$(md5sum < "$work/input.bag")
+if "$hpds" replay "$work/input.bag" "${common[@]}" -o "$work/./input.bag" > "$work/self.log" 2>&1; then
+  echo "replaying a bag onto itself must be refused"; exit 1
 fi
-grep -q "6 without transform to 'nowhere'" "$work/none.log" || { cat "$work/none.log"; exit 1; }
+grep -q "is the input '$work/input.bag'" "$work/self.log" || { cat "$work/self.log"; exit 1; }
+[ "$(md5sum < "$work/input.bag")" = "$before" ] || { echo "the input bag changed"; exit 1; }
 echo "replay_cli_test: ok"

@@ -1,5 +1,5 @@
 // Internal to the I/O files: one error convention ("<path>: <what>", std::runtime_error), an owning FILE*, the
-// checks every reader makes before opening a path, and the limits readers enforce (writers refuse to produce files
+// checks every reader makes before opening a path, the writers' output file, and the limits readers enforce (writers refuse to produce files
 // beyond them, so that whatever is written reads back).
 #pragma once
 
@@ -9,6 +9,8 @@
 #include <memory>
 #include <stdexcept>
 #include <string>
+
+#include "hpds/io/AtomicFile.hpp"
 
 namespace hpds::io_detail {
 
@@ -35,26 +37,13 @@ using FilePtr = std::unique_ptr<std::FILE, FileCloser>;
 /// "not a regular file".
 void requireRegularFile(const std::string &path);
 
-/// A file being written by one of the writers. Failures throw via fail(): "cannot open for writing: <errno text>",
-/// "write failed: <errno text>". A file that is not completed by close() (a failed write, or an exception on the way)
-/// is removed, but only where the path itself is a regular file: a device (/dev/full) or a link is never deleted.
-class OutputFile {
+/// A file being written by one of the writers: an AtomicFile (temporary beside the target, renamed into place by
+/// close()), so a failed or interrupted write leaves whatever was at the path untouched.
+class OutputFile : public AtomicFile {
  public:
-  explicit OutputFile(std::string path);
-  ~OutputFile();
-  OutputFile(const OutputFile &) = delete;
-  OutputFile &operator=(const OutputFile &) = delete;
-
-  void write(const void *data, std::size_t bytes);
-  /// Flushes and closes; no write() after it.
-  void close();
-
- private:
-  [[noreturn]] void abandon(int err);
-  void removePartial() const;
-
-  std::string path_;
-  FilePtr file_;
+  using AtomicFile::AtomicFile;
+  /// Flushes and puts the file in place; no write() after it.
+  void close() { commit(); }
 };
 
 }  // namespace hpds::io_detail

@@ -7,16 +7,15 @@
 
 #include <algorithm>
 #include <array>
-#include <atomic>
 #include <cerrno>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
-#include <filesystem>
 #include <limits>
 #include <stdexcept>
 #include <vector>
 
+#include "hpds/io/AtomicFile.hpp"
 #include "hpds/pipeline/Pipeline.hpp"
 
 // Byte layout of version 1 (little-endian, no padding):
@@ -290,29 +289,6 @@ LoadedHierarchy parse(Source &src, std::uint64_t total_size, const std::string &
   return out;
 }
 
-bool writeAll(int fd, const std::uint8_t *data, std::size_t n) {
-  while (n > 0) {
-    const ::ssize_t put = ::write(fd, data, n);
-    if (put < 0 && errno == EINTR) continue;
-    if (put <= 0) return false;
-    data += put;
-    n -= static_cast<std::size_t>(put);
-  }
-  return true;
-}
-
-// Opens a fresh temporary beside `path` (same file system, so the final rename is atomic); returns its name.
-std::string openTemporary(const std::string &path, int &fd) {
-  static std::atomic<unsigned> counter{0};
-  for (int attempt = 0; attempt < 100; ++attempt) {
-    std::string tmp = path + ".tmp." + std::to_string(::getpid()) + "." + std::to_string(counter++);
-    fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0666);
-    if (fd >= 0) return tmp;
-    if (errno != EEXIST) fail(path, std::string("cannot create a temporary file beside it: ") + std::strerror(errno));
-  }
-  fail(path, "cannot create a temporary file beside it: too many stale temporaries");
-}
-
 }  // namespace
 
 void saveHierarchy(const std::string &path, const Hierarchy &hierarchy, std::uint32_t next_frame) {
@@ -343,61 +319,38 @@ void saveHierarchy(const std::string &path, const Hierarchy &hierarchy, std::uin
   std::memcpy(h.bytes.data() + 12, &header_size, 4);
   h.put(crc32(h.bytes.data(), h.bytes.size()));
 
-  int raw_fd = -1;
-  const std::string tmp = openTemporary(path, raw_fd);
-  Fd fd(raw_fd);
-  auto abandon = [&](const char *what) { fail(path, std::string(what) + ": " + std::strerror(errno)); };
-  try {
-    if (!writeAll(fd.get(), h.bytes.data(), h.bytes.size())) abandon("write failed");
-    const std::size_t step = layout.point_step;
-    const std::size_t entry_bytes = kEntryFixedBytes + step;
-    std::vector<std::uint8_t> chunk;
-    const std::size_t chunk_entries = entriesPerChunk(entry_bytes);
-    chunk.reserve(chunk_entries * entry_bytes);
-    std::uint32_t crc = 0;
-    auto flush = [&] {
-      crc = crc32(chunk.data(), chunk.size(), crc);
-      if (!writeAll(fd.get(), chunk.data(), chunk.size())) abandon("write failed");
-      chunk.clear();
-    };
-    for (SampleId id = 0; id < hierarchy.idBound(); ++id) {
-      if (!hierarchy.isLive(id)) continue;
-      const std::size_t at = chunk.size();
-      chunk.resize(at + entry_bytes);
-      std::uint8_t *e = chunk.data() + at;
-      std::memcpy(e, hierarchy.position(id), 24);
-      e[24] = static_cast<std::uint8_t>(hierarchy.level(id));
-      const std::uint32_t frame = hierarchy.frameIndex(id);
-      std::memcpy(e + 25, &frame, 4);
-      std::memcpy(e + 29, hierarchy.toViewpoint(id).data(), 12);
-      if (step) std::memcpy(e + kEntryFixedBytes, hierarchy.record(id), step);
-      if (chunk.size() >= chunk_entries * entry_bytes) flush();
-    }
-    flush();
-    std::uint8_t c[4];
-    std::memcpy(c, &crc, 4);
-    if (!writeAll(fd.get(), c, 4)) abandon("write failed");
-    // Data must be on disk before the rename publishes it, or a crash could leave a complete-looking empty file.
-    if (::fsync(fd.get()) != 0) abandon("fsync failed");
-    if (!fd.close()) abandon("close failed");
-  } catch (...) {
-    fd.close();
-    ::unlink(tmp.c_str());
-    throw;
+  // Temporary file, fsync and rename (AtomicFile): a failure or a kill leaves any previous map at `path` untouched.
+  AtomicFile file(path);
+  file.write(h.bytes.data(), h.bytes.size());
+  const std::size_t step = layout.point_step;
+  const std::size_t entry_bytes = kEntryFixedBytes + step;
+  std::vector<std::uint8_t> chunk;
+  const std::size_t chunk_entries = entriesPerChunk(entry_bytes);
+  chunk.reserve(chunk_entries * entry_bytes);
+  std::uint32_t crc = 0;
+  auto flush = [&] {
+    crc = crc32(chunk.data(), chunk.size(), crc);
+    file.write(chunk.data(), chunk.size());
+    chunk.clear();
+  };
+  for (SampleId id = 0; id < hierarchy.idBound(); ++id) {
+    if (!hierarchy.isLive(id)) continue;
+    const std::size_t at = chunk.size();
+    chunk.resize(at + entry_bytes);
+    std::uint8_t *e = chunk.data() + at;
+    std::memcpy(e, hierarchy.position(id), 24);
+    e[24] = static_cast<std::uint8_t>(hierarchy.level(id));
+    const std::uint32_t frame = hierarchy.frameIndex(id);
+    std::memcpy(e + 25, &frame, 4);
+    std::memcpy(e + 29, hierarchy.toViewpoint(id).data(), 12);
+    if (step) std::memcpy(e + kEntryFixedBytes, hierarchy.record(id), step);
+    if (chunk.size() >= chunk_entries * entry_bytes) flush();
   }
-  if (std::rename(tmp.c_str(), path.c_str()) != 0) {
-    const int err = errno;
-    ::unlink(tmp.c_str());
-    fail(path, std::string("cannot rename the temporary file into place: ") + std::strerror(err));
-  }
-  // Makes the rename itself durable; failing here only weakens durability, the file is complete.
-  std::string dir = std::filesystem::path(path).parent_path().string();
-  if (dir.empty()) dir = ".";
-  const int dfd = ::open(dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
-  if (dfd >= 0) {
-    ::fsync(dfd);
-    ::close(dfd);
-  }
+  flush();
+  std::uint8_t c[4];
+  std::memcpy(c, &crc, 4);
+  file.write(c, 4);
+  file.commit();
 }
 
 LoadedHierarchy loadHierarchy(const std::string &path, const HierarchyConfig *expected) {

@@ -6,7 +6,7 @@
 //   matcher over a 32 KiB window and closed by the Adler-32 of the filtered scanlines; each scanline uses the PNG
 //   filter (None, Sub, Up, Paeth) with the smallest sum of absolute residuals. Plots and renderings are mostly flat
 //   colour, which this compresses well; photographs would compress less than with zlib, but stay valid.
-// - writePng writes that file; std::runtime_error starting with the path on I/O failure (a partial file is removed).
+// - writePng writes that file atomically (AtomicFile); std::runtime_error starting with the path on I/O failure.
 // - Throws std::invalid_argument for an image whose width/height is not positive or whose buffer size is not
 //   width * height * 3.
 #pragma once

@@ -8,8 +8,9 @@
 //             to_viewpoint (3 x float32), the record (point_step bytes); then CRC-32 of the body.
 //   The file size is fully determined by the header, so truncation and trailing bytes are detected before any
 //   sample is read, and nothing is allocated beyond what the file holds.
-// - saveHierarchy writes atomically: a temporary file in the same directory, flushed and fsync'ed, then renamed over
-//   `path`. A failure (or an exception) leaves any previous file at `path` untouched and removes the temporary.
+// - saveHierarchy writes atomically (AtomicFile.hpp): a temporary file in the same directory, fsync'ed, then renamed
+//   over `path`. A failure, an exception or a killed process leaves any previous file at `path` untouched; the
+//   temporary is removed (a killed process's by the next write into that folder).
 // - Samples are written in increasing id order and get ids 0..n-1 in that order when loaded: ids are not kept
 //   (evicted slots are compacted), everything else (positions bit for bit, levels, frame indices, viewpoint vectors,
 //   record bytes) is.

@@ -1,0 +1,147 @@
+#include "OutputPaths.hpp"
+
+#include "hpds/io/AtomicFile.hpp"
+
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cctype>
+#include <filesystem>
+#include <optional>
+#include <stdexcept>
+
+namespace hpds::cli {
+
+namespace {
+
+namespace fs = std::filesystem;
+
+// Extensions of the files hpds reads or writes: none of them may name a file of another format.
+const std::vector<std::string> &knownExtensions() {
+  static const std::vector<std::string> known = {".pcd", ".ply", ".bin", ".bag", ".json", ".yaml",
+                                                 ".yml", ".png", ".csv", ".txt", ".py"};
+  return known;
+}
+
+std::string lowerExtension(const std::string &path) {
+  std::string ext = fs::path(path).extension().string();
+  for (char &c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  return ext;
+}
+
+std::string inQuotes(const std::string &path) { return "'" + path + "'"; }
+
+[[noreturn]] void refuse(const std::string &flag, const std::string &path, const std::string &why) {
+  throw std::invalid_argument(flag + ": " + inQuotes(path) + " " + why);
+}
+
+std::string folderOf(const std::string &path) {
+  const fs::path parent = fs::path(path).parent_path();
+  return parent.empty() ? std::string(".") : parent.string();
+}
+
+// A file's identity: (device, inode) of the file when it exists, else of its folder plus its name.
+struct Identity {
+  dev_t dev = 0;
+  ino_t ino = 0;
+  std::string name;
+  bool operator==(const Identity &o) const { return dev == o.dev && ino == o.ino && name == o.name; }
+};
+
+std::optional<Identity> identify(const std::string &given) {
+  // As AtomicFile writes it: through symbolic links, even a dangling one.
+  const std::string path = followLinks(given);
+  struct stat st {};
+  if (::stat(path.c_str(), &st) == 0) return Identity{st.st_dev, st.st_ino, ""};
+  if (::stat(folderOf(path).c_str(), &st) == 0) return Identity{st.st_dev, st.st_ino, fs::path(path).filename()};
+  return std::nullopt;
+}
+
+void requireWritableFolder(const std::string &flag, const std::string &path, const std::string &folder) {
+  struct stat st {};
+  if (::stat(folder.c_str(), &st) != 0) refuse(flag, path, "is in folder " + inQuotes(folder) + ", which does not exist");
+  if (!S_ISDIR(st.st_mode)) refuse(flag, path, "is in " + inQuotes(folder) + ", which is not a folder");
+  if (::access(folder.c_str(), W_OK | X_OK) != 0)
+    refuse(flag, path, "is in folder " + inQuotes(folder) + ", which is not writable");
+}
+
+void checkExtension(const OutputPath &o) {
+  const std::string ext = lowerExtension(o.path);
+  if (!o.extensions.empty()) {
+    if (std::find(o.extensions.begin(), o.extensions.end(), ext) != o.extensions.end()) return;
+    std::string list;
+    for (std::size_t i = 0; i < o.extensions.size(); ++i)
+      list += (i == 0 ? "" : i + 1 == o.extensions.size() ? " or " : ", ") + o.extensions[i];
+    refuse(o.flag, o.path, "must end in " + list + " (" + o.format + " is written there)");
+  }
+  const auto &known = knownExtensions();
+  if (std::find(known.begin(), known.end(), ext) != known.end())
+    refuse(o.flag, o.path, "has the extension of another format (" + ext + "); " + o.format +
+                               " needs another name, e.g. map.hpdsmap");
+}
+
+struct Planned {
+  std::string flag, path, updates;
+  std::optional<Identity> id;
+};
+
+}  // namespace
+
+void checkPaths(const std::vector<InputPath> &inputs, const std::vector<OutputPath> &outputs,
+                const std::vector<OutputFolder> &folders) {
+  std::vector<Planned> planned;
+  for (const OutputPath &o : outputs) {
+    if (o.path.empty()) continue;
+    struct stat st {};
+    const bool exists = ::stat(o.path.c_str(), &st) == 0;
+    if (exists && S_ISDIR(st.st_mode)) refuse(o.flag, o.path, "is a directory");
+    // Devices and FIFOs are written in place and hold nothing to lose: any name, no folder to write into.
+    if (!exists || S_ISREG(st.st_mode)) {
+      checkExtension(o);
+      requireWritableFolder(o.flag, o.path, folderOf(o.path));
+      if (exists && ::access(o.path.c_str(), W_OK) != 0)
+        refuse(o.flag, o.path, "exists and is read-only; hpds does not replace files it may not write");
+    }
+    planned.push_back({o.flag, o.path, o.updates, identify(o.path)});
+  }
+  for (const OutputFolder &f : folders) {
+    if (f.path.empty()) continue;
+    struct stat st {};
+    if (::stat(f.path.c_str(), &st) == 0) {
+      if (!S_ISDIR(st.st_mode)) refuse(f.flag, f.path, "exists and is not a folder");
+      if (::access(f.path.c_str(), W_OK | X_OK) != 0) refuse(f.flag, f.path, "is a folder that is not writable");
+    } else {
+      // Created with its missing parents: the nearest existing ancestor must take them.
+      fs::path ancestor = fs::absolute(f.path).parent_path();
+      while (!ancestor.empty() && ::stat(ancestor.c_str(), &st) != 0 && ancestor != ancestor.root_path())
+        ancestor = ancestor.parent_path();
+      if (!S_ISDIR(st.st_mode)) refuse(f.flag, f.path, "cannot be created: " + inQuotes(ancestor.string()) + " is not a folder");
+      if (::access(ancestor.c_str(), W_OK | X_OK) != 0)
+        refuse(f.flag, f.path, "cannot be created in " + inQuotes(ancestor.string()) + ", which is not writable");
+    }
+    for (const std::string &name : f.files) {
+      const std::string path = (fs::path(f.path) / name).string();
+      planned.push_back({f.flag, path, "", identify(path)});
+    }
+  }
+
+  for (std::size_t i = 0; i < planned.size(); ++i) {
+    const Planned &o = planned[i];
+    if (!o.id) continue;
+    for (const InputPath &in : inputs) {
+      if (in.path.empty()) continue;
+      struct stat st {};
+      if (::stat(in.path.c_str(), &st) != 0) continue;  // a missing input is the reader's error
+      if (!(Identity{st.st_dev, st.st_ino, ""} == *o.id) || (!o.updates.empty() && o.updates == in.flag)) continue;
+      refuse(o.flag, o.path,
+             "is the " + (in.flag == "input" ? std::string("input ") : in.flag + " file ") + inQuotes(in.path) +
+                 "; hpds never writes over what it reads");
+    }
+    for (std::size_t j = 0; j < i; ++j)
+      if (planned[j].id && *planned[j].id == *o.id)
+        refuse(o.flag, o.path, "is also the output of " + planned[j].flag + " (" + inQuotes(planned[j].path) + ")");
+  }
+}
+
+}  // namespace hpds::cli

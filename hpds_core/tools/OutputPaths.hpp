@@ -1,0 +1,48 @@
+// The files a command will read and write, checked before any work so that a run never ends, after minutes, on an
+// output it cannot write, and never writes over its own input.
+//
+// Contract
+// - checkPaths throws std::invalid_argument naming the flag and the path when an output
+//   - has an extension of another format than the one it is written in (`-o out.pcd` for a PLY), or, for a map
+//     (no fixed extension), the extension of a format hpds reads or writes (`--save-map in.pcd`);
+//   - is a directory, or lies in a folder that does not exist or is not writable;
+//   - is the same file as an input or as another output. "Same" is the file system's identity (device and inode),
+//     not the spelling: `./a.ply`, `dir/../a.ply`, a hard link and a symbolic link to the input are all the input;
+//     an output that does not exist yet is identified by its folder's identity and its name.
+// - An output may be declared as an update of one input (`--save-map` of the `--load-map` file): that input is read
+//   completely before the output is written, and the write is atomic (AtomicFile), so nothing is lost.
+// - Existing devices and FIFOs (/dev/null) are accepted as outputs of any extension: they hold nothing to destroy.
+// - Outputs that are folders (render, analyze, synth -o DIR) are checked as the folder they will create or fill,
+//   plus every file name the command writes into it.
+#pragma once
+
+#include <string>
+#include <vector>
+
+namespace hpds::cli {
+
+struct InputPath {
+  std::string flag;  ///< how the user gave it: "input", "--config", "--poses", "--load-map", ...
+  std::string path;
+};
+
+struct OutputPath {
+  std::string flag;                     ///< "-o", "--stats", "--save-map"
+  std::string path;
+  std::vector<std::string> extensions;  ///< accepted, lower case with the dot; empty: any but another format's
+  std::string format;                   ///< what is written, for the message ("PLY", "JSON", "an hpds map")
+  std::string updates;                  ///< flag of the one input this output may replace (see contract), or ""
+};
+
+/// Outputs that are folders: the folder (created when missing, so its parent must exist and be writable) and the
+/// names of the files the command writes into it.
+struct OutputFolder {
+  std::string flag;
+  std::string path;
+  std::vector<std::string> files;
+};
+
+void checkPaths(const std::vector<InputPath> &inputs, const std::vector<OutputPath> &outputs,
+                const std::vector<OutputFolder> &folders = {});
+
+}  // namespace hpds::cli
