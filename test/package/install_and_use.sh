@@ -1,0 +1,56 @@
+#!/usr/bin/env bash
+# The installed package as its users get it: `cmake --install` the build into a fresh prefix, check what lands there,
+# then build examples/ against it as a separate project (find_package(hpds)) and run it on a real frame (a
+# synthetic one when ../shared is absent).
+# Usage: install_and_use.sh BUILD_DIR SOURCE_DIR WORK_DIR NODE_BUILT(ON|OFF)
+set -euo pipefail
+build=$1 src=$(realpath "$2") work=$(realpath -m "$3") node=$4
+rm -rf "$work"
+mkdir -p "$work"
+prefix=$work/prefix
+fail() { echo "install_and_use: $*" >&2; exit 1; }
+
+cmake --install "$build" --prefix "$prefix" > "$work/install.log" || { cat "$work/install.log"; fail "cmake --install failed"; }
+
+# What a user of the library, the tool and the ROS package finds in the prefix.
+config=$(cd "$prefix" && find . -path '*/cmake/hpds/hpdsConfig.cmake' | head -n 1)
+[ -n "$config" ] || fail "no hpdsConfig.cmake in the prefix"
+libdir=${config#./}
+libdir=${libdir%/cmake/hpds/hpdsConfig.cmake}
+for f in include/hpds/hpds.hpp include/hpds/pcl.hpp include/hpds/config/Config.hpp include/hpds/pipeline/Pipeline.hpp \
+         "$libdir/cmake/hpds/hpdsConfig.cmake" "$libdir/cmake/hpds/hpdsConfigVersion.cmake" \
+         "$libdir/cmake/hpds/hpdsTargets.cmake" bin/hpds share/doc/hpds/LICENSE; do
+  [ -e "$prefix/$f" ] || fail "$f is not installed"
+done
+ls "$prefix/$libdir"/libhpds_core.* > /dev/null 2>&1 || fail "libhpds_core is not installed"
+ls "$prefix/$libdir"/libhpds_pcl.* > /dev/null 2>&1 || fail "libhpds_pcl is not installed"
+[ ! -e "$prefix/include/hpds/eval" ] || fail "the evaluation headers are installed (they belong to no installed library)"
+if find "$prefix" -name 'test_*' -type f | grep -q .; then fail "test binaries are installed"; fi
+if [ "$node" = ON ]; then
+  for f in lib/hpds/hpds_node lib/hpds/hpds "$libdir/libhpds_nodelet.so" share/hpds/package.xml \
+           share/hpds/hpds_node/nodelet_plugins.xml share/hpds/launch/hpds.launch share/hpds/launch/replay.launch \
+           share/hpds/config/hpds.yaml share/hpds/LICENSE; do
+    [ -e "$prefix/$f" ] || fail "$f is not installed (ROS package)"
+  done
+fi
+# The installed tool runs from the prefix (its libraries found through the install RPATH).
+"$prefix/bin/hpds" --help > /dev/null || fail "the installed hpds tool does not run"
+
+# A separate project against the prefix.
+cmake -S "$src/examples" -B "$work/example" -DCMAKE_PREFIX_PATH="$prefix" -DCMAKE_BUILD_TYPE=Release \
+  > "$work/example-configure.log" 2>&1 || { cat "$work/example-configure.log"; fail "examples/ does not configure"; }
+cmake --build "$work/example" -j2 > "$work/example-build.log" 2>&1 || { cat "$work/example-build.log"; fail "examples/ does not build"; }
+
+frame=$src/../shared/data/lidar/hdl32_a.pcd
+if [ ! -f "$frame" ]; then
+  echo "install_and_use: ../shared/data/lidar is absent: using a synthetic frame instead of hdl32_a.pcd"
+  "$prefix/bin/hpds" synth -o "$work/synth" --frames 1 > /dev/null
+  frame=$work/synth/frame_000000.pcd
+fi
+"$work/example/downsample_pcd" "$frame" "$work/out.pcd" | tee "$work/run.log"
+read -r points _ _ samples _ < "$work/run.log"
+[ -s "$work/out.pcd" ] || fail "no output PCD"
+[ "$samples" -gt 0 ] && [ "$samples" -lt "$points" ] || fail "expected 0 < samples < points, got $samples of $points"
+# The output must not be the input: the example refuses it.
+if "$work/example/downsample_pcd" "$work/out.pcd" "$work/out.pcd" 2> /dev/null; then fail "the example overwrote its input"; fi
+echo "install_and_use: OK ($samples samples of $points points)"
