@@ -2,13 +2,14 @@
 # The installed package as its users get it: `cmake --install` the build into a fresh prefix, check what lands there,
 # then build examples/ against it as a separate project (find_package(hpds)) and run it on a real frame (a
 # synthetic one when ../shared is absent).
-# Usage: install_and_use.sh BUILD_DIR SOURCE_DIR WORK_DIR NODE_BUILT(ON|OFF)
+# Usage: install_and_use.sh BUILD_DIR SOURCE_DIR NODE_BUILT(ON|OFF)
+# The prefix is made under the system's temporary folder, outside the source tree: roslaunch looks for launch files
+# anywhere below the package's source folder and would find the installed copies too. Removed when the test passes.
 set -euo pipefail
-build=$1 src=$(realpath "$2") work=$(realpath -m "$3") node=$4
-rm -rf "$work"
-mkdir -p "$work"
+build=$1 src=$(realpath "$2") node=$3
+work=$(mktemp -d "${TMPDIR:-/tmp}/hpds-install-test.XXXXXX")
 prefix=$work/prefix
-fail() { echo "install_and_use: $*" >&2; exit 1; }
+fail() { echo "install_and_use: $* (files kept in $work)" >&2; exit 1; }
 
 cmake --install "$build" --prefix "$prefix" > "$work/install.log" || { cat "$work/install.log"; fail "cmake --install failed"; }
 
@@ -54,3 +55,4 @@ read -r points _ _ samples _ < "$work/run.log"
 # The output must not be the input: the example refuses it.
 if "$work/example/downsample_pcd" "$work/out.pcd" "$work/out.pcd" 2> /dev/null; then fail "the example overwrote its input"; fi
 echo "install_and_use: OK ($samples samples of $points points)"
+rm -rf "$work"
