@@ -14,11 +14,12 @@ if grep -rnE '#include *[<"](pcl/|ros/|sensor_msgs/|tf2|rosbag/|nodelet/)' "$src
 fi
 
 rm -rf "$work"
+mkdir -p "$work"
 cmake -S "$src" -B "$work" -DCMAKE_BUILD_TYPE=Release -DCMAKE_DISABLE_FIND_PACKAGE_PCL=ON -DHPDS_BUILD_NODE=OFF \
-  > "$work.configure.log" 2>&1 || { cat "$work.configure.log"; fail "does not configure without PCL"; }
+  > "$work/hpds-configure.log" 2>&1 || { cat "$work/hpds-configure.log"; fail "does not configure without PCL"; }
 targets=$(cmake --build "$work" --target help)
 if grep -qE '(^|\.\.\. )hpds_pcl$' <<< "$targets"; then fail "hpds_pcl is configured although PCL is hidden"; fi
-cmake --build "$work" -j2 --target hpds_core test_api > "$work.build.log" 2>&1 || { tail -n 50 "$work.build.log"; fail "the core does not build without PCL"; }
+cmake --build "$work" -j2 --target hpds_core test_api > "$work/hpds-build.log" 2>&1 || { tail -n 50 "$work/hpds-build.log"; fail "the core does not build without PCL"; }
 test_api=$(find "$work" -name test_api -type f -perm -u+x | head -n 1)
 [ -n "$test_api" ] || fail "test_api was not built"
 "$test_api" --gtest_brief=1 || fail "test_api fails in the build without PCL"
