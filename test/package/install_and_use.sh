@@ -37,6 +37,24 @@ fi
 # The installed tool runs from the prefix (its libraries found through the install RPATH).
 "$prefix/bin/hpds" --help > /dev/null || fail "the installed hpds tool does not run"
 
+# The ROS package as a ROS user gets it from an install space: the package, its launch files, the nodelet plugin and
+# `rosrun hpds hpds` resolve from the prefix alone (no source tree, no devel space on the paths). catkin_make install
+# puts the same files into the workspace's install space.
+if [ "$node" = ON ]; then
+  (
+    # What a catkin install space's setup.bash sets up (a standalone build installs no setup files).
+    export ROS_PACKAGE_PATH=$prefix/share:/usr/share CMAKE_PREFIX_PATH=$prefix
+    cd "$work"
+    [ "$(rospack find hpds)" = "$prefix/share/hpds" ] || fail "rospack finds hpds at $(rospack find hpds)"
+    rospack plugins --attrib=plugin nodelet | grep -q "^hpds $prefix/share/hpds/hpds_node/nodelet_plugins.xml" ||
+      fail "the nodelet plugin is not registered from the install space"
+    [ "$(roslaunch --nodes hpds hpds.launch | tr -d '\n')" = "/hpds" ] || fail "roslaunch hpds hpds.launch does not resolve"
+    roslaunch --args /hpds hpds hpds.launch | grep -q " $prefix/lib/hpds/hpds_node " ||
+      fail "hpds.launch does not start the installed node: $(roslaunch --args /hpds hpds hpds.launch)"
+    rosrun hpds hpds --help > /dev/null || fail "rosrun hpds hpds does not run"
+  ) || exit 1
+fi
+
 # A separate project against the prefix.
 cmake -S "$src/examples" -B "$work/example" -DCMAKE_PREFIX_PATH="$prefix" -DCMAKE_BUILD_TYPE=Release \
   > "$work/example-configure.log" 2>&1 || { cat "$work/example-configure.log"; fail "examples/ does not configure"; }
