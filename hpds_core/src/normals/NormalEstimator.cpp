@@ -25,6 +25,23 @@ NormalParams normalParamsFor(const HpdsConfig &config, int level) {
   return p;
 }
 
+double neighborhoodReach(const NormalParams &p, double cell_size, double level_radius) {
+  const double cap = 2.0 * cell_size;  // max_radius of both estimators
+  const bool refined = p.neighborhood_level_offset > 0 || p.max_growth > 1.0;
+  if (!refined) {
+    // A fixed radius is searched as is; the adaptive k-NN radius doubles from 2 r_level until it reaches the cap, so
+    // its last search is below twice the cap (or 2 r_level itself, when that is already beyond it).
+    if (p.radius > 0.0) return p.radius;
+    return std::max(2.0 * level_radius, 2.0 * cap);
+  }
+  // Refined, k > 0: the k-th nearest is searched with radii doubling from `base` until one reaches the cap (below
+  // twice the cap, or `base` itself beyond it); footprints are at most max(radius, cap) and grow to at most the cap.
+  if (p.k > 0) return std::max(p.radius > 0.0 ? p.radius : 2.5 * level_radius, 2.0 * cap);
+  // k = 0: the footprint is the radius (the cap without one) and grows by doubling up to min(cap, footprint * growth).
+  const double footprint = p.radius > 0.0 ? p.radius : cap;
+  return std::max(footprint, std::min(cap, footprint * std::max(1.0, p.max_growth)));
+}
+
 SampleNormal invalidNormal() {
   const float nan = std::numeric_limits<float>::quiet_NaN();
   return SampleNormal{{nan, nan, nan}, nan, false};

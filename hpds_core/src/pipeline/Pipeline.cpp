@@ -7,6 +7,7 @@
 #include <stdexcept>
 #include <string>
 
+#include "hpds/pipeline/FramePoints.hpp"
 #include "hpds/sampling/FrameGridIndex.hpp"
 #include "hpds/sampling/InsertionOrderer.hpp"
 #include "hpds/pipeline/OutputCloud.hpp"
@@ -81,52 +82,14 @@ FrameResult Pipeline::addFrame(const Frame &frame) {
 
   // 2. Sensor-frame filtering, then into the fixed frame.
   const auto t_order = std::chrono::steady_clock::now();
+  c.input = pts.size();
+  SkippedPoints skipped;
+  poseFramePoints(frame, config_.input, xyz_, candidates_, skipped);
+  c.skipped_invalid = skipped.invalid;
+  c.skipped_zero = skipped.zero;
+  c.skipped_range = skipped.range;
   const std::size_t n = pts.size();
-  c.input = n;
-  xyz_.resize(3 * n);
-  candidates_.clear();
-  candidates_.reserve(n);
-  const Eigen::Matrix3d R = frame.sensor_to_fixed.linear();
   const Eigen::Vector3d t = frame.sensor_to_fixed.translation();
-  const double min_r2 = config_.input.min_range * config_.input.min_range;
-  const double max_r2 = config_.input.max_range > 0.0 ? config_.input.max_range * config_.input.max_range : INFINITY;
-  // Drivers almost always send float32 x/y/z: read those directly instead of through the per-type switch.
-  const bool f32 = fx->type == FieldType::Float32 && fy->type == FieldType::Float32 && fz->type == FieldType::Float32;
-  const auto loadF32 = [](const std::uint8_t *p) {
-    float v;
-    std::memcpy(&v, p, sizeof v);
-    return static_cast<double>(v);
-  };
-  for (std::size_t i = 0; i < n; ++i) {
-    const std::uint8_t *rec = pts.record(i);
-    const double x = f32 ? loadF32(rec + fx->offset) : readAsDouble(rec, *fx);
-    const double y = f32 ? loadF32(rec + fy->offset) : readAsDouble(rec, *fy);
-    const double z = f32 ? loadF32(rec + fz->offset) : readAsDouble(rec, *fz);
-    if (!std::isfinite(x) || !std::isfinite(y) || !std::isfinite(z)) {
-      ++c.skipped_invalid;
-      continue;
-    }
-    if (config_.input.skip_zero_points && x == 0.0 && y == 0.0 && z == 0.0) {
-      ++c.skipped_zero;
-      continue;
-    }
-    const double r2 = x * x + y * y + z * z;
-    if (r2 < min_r2 || r2 > max_r2) {
-      ++c.skipped_range;
-      continue;
-    }
-    const double wx = R(0, 0) * x + R(0, 1) * y + R(0, 2) * z + t.x();
-    const double wy = R(1, 0) * x + R(1, 1) * y + R(1, 2) * z + t.y();
-    const double wz = R(2, 0) * x + R(2, 1) * y + R(2, 2) * z + t.z();
-    if (!std::isfinite(wx) || !std::isfinite(wy) || !std::isfinite(wz)) {  // a finite point can overflow through a huge pose
-      ++c.skipped_invalid;
-      continue;
-    }
-    xyz_[3 * i] = wx;
-    xyz_[3 * i + 1] = wy;
-    xyz_[3 * i + 2] = wz;
-    candidates_.push_back(static_cast<std::uint32_t>(i));
-  }
 
   // 3. Map mode: keep memory bounded around the sensor before adding more.
   const double viewpoint[3] = {t.x(), t.y(), t.z()};

@@ -52,6 +52,13 @@ struct SampleNormal {
 /// Resolves the config's defaults (radius 0 and k 0 -> 2.5 r_level) for output level `level`.
 [[nodiscard]] NormalParams normalParamsFor(const HpdsConfig &config, int level);
 
+/// An upper bound [m] on the distance from a sample to any sample its normal reads, for a hierarchy of level-0
+/// cell edge `cell_size` and radius `level_radius` of params.level: samples farther than this from every queried id
+/// cannot change estimateNormals' results (the tiled map build reads its neighbours' samples this far). Kept beside
+/// estimateNormals because it mirrors its search limits: fixed radius (plain), growth capped at twice the level-0
+/// edge (refined), k-NN searches doubling up to that cap.
+[[nodiscard]] double neighborhoodReach(const NormalParams &params, double cell_size, double level_radius);
+
 /// One result per id in `ids` (same order).
 [[nodiscard]] std::vector<SampleNormal> estimateNormals(const Hierarchy &hierarchy, const std::vector<SampleId> &ids,
                                                         const NormalParams &params);

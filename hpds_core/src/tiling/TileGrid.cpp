@@ -1,0 +1,90 @@
+#include "hpds/tiling/TileGrid.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+#include <string>
+
+#include "hpds/normals/NormalEstimator.hpp"
+#include "hpds/sampling/CellKey.hpp"
+#include "hpds/sampling/Hierarchy.hpp"
+
+namespace hpds {
+
+namespace {
+std::int64_t floorDiv(std::int64_t a, std::int64_t b) { return a >= 0 ? a / b : -((-a + b - 1) / b); }
+}  // namespace
+
+TileGrid::TileGrid(const HierarchyConfig &hierarchy, double tile_size) : cell_size_(hierarchy.cell_size) {
+  if (!(cell_size_ > 0.0) || !std::isfinite(cell_size_))
+    throw std::invalid_argument("hierarchy.cell_size: must be a finite number > 0");
+  if (hierarchy.max_depth < 0 || hierarchy.max_depth > kMaxDepthLimit)
+    throw std::invalid_argument("hierarchy.max_depth: must be in 0..21");
+  const double ratio = tile_size / cell_size_;
+  const double k = std::round(ratio);
+  if (!std::isfinite(tile_size) || !(k >= 1.0) || k > double(1 << 20) || std::fabs(ratio - k) > 1e-9 * k)
+    throw std::invalid_argument("tile size: must be a whole multiple (>= 1, <= 2^20) of hierarchy.cell_size (" +
+                                std::to_string(cell_size_) + " m), so that tiles hold whole cells; got " +
+                                std::to_string(tile_size) + " m");
+  k_ = static_cast<int>(k);
+  inv_cell_ = 1.0 / cell_size_;
+  finest_inv_edge_ = 1.0 / std::ldexp(cell_size_, -hierarchy.max_depth);
+}
+
+bool TileGrid::cellColumn(const double xyz[3], std::int64_t &cx, std::int64_t &cy) const {
+  // The hierarchy's own range test (its finest level), so that exactly the points it would insert have a tile.
+  for (int a = 0; a < 3; ++a)
+    if (!inCellRange(xyz[a], finest_inv_edge_)) return false;
+  cx = exactCellCoord(xyz[0], cell_size_, inv_cell_);
+  cy = exactCellCoord(xyz[1], cell_size_, inv_cell_);
+  return true;
+}
+
+bool TileGrid::tileOf(const double xyz[3], TileKey &key) const {
+  std::int64_t cx, cy;
+  if (!cellColumn(xyz, cx, cy)) return false;
+  key = TileKey{static_cast<std::int32_t>(floorDiv(cx, k_)), static_cast<std::int32_t>(floorDiv(cy, k_))};
+  return true;
+}
+
+std::int64_t TileGrid::ringOf(const TileKey &key, std::int64_t cx, std::int64_t cy) const {
+  auto axis = [&](std::int64_t c, std::int64_t t) {
+    const std::int64_t lo = t * k_, hi = lo + k_ - 1;
+    return c < lo ? lo - c : c > hi ? c - hi : 0;
+  };
+  return std::max(axis(cx, key.i), axis(cy, key.j));
+}
+
+std::int64_t TileGrid::borderDepth(std::int64_t cx, std::int64_t cy) const {
+  auto axis = [&](std::int64_t c) {
+    const std::int64_t local = c - floorDiv(c, k_) * k_;  // 0..k-1
+    return std::min(local, k_ - 1 - local) + 1;
+  };
+  return std::min(axis(cx), axis(cy));
+}
+
+std::vector<TileKey> TileGrid::neighbours(const TileKey &key, int ring) const {
+  const std::int32_t reach = static_cast<std::int32_t>((std::max(ring, 1) + k_ - 1) / k_);
+  std::vector<TileKey> out;
+  for (std::int32_t dj = -reach; dj <= reach; ++dj)
+    for (std::int32_t di = -reach; di <= reach; ++di)
+      if (di != 0 || dj != 0) out.push_back(TileKey{key.i + di, key.j + dj});
+  return out;
+}
+
+std::array<double, 4> TileGrid::bounds(const TileKey &key) const {
+  const double t = tileSize();
+  return {key.i * t, key.j * t, (key.i + 1.0) * t, (key.j + 1.0) * t};
+}
+
+int normalRing(const HpdsConfig &config) {
+  if (!config.normals.enabled) return 0;
+  const int level = resolveOutputLevel(config);
+  const double reach = neighborhoodReach(normalParamsFor(config, level), config.hierarchy.cell_size,
+                                         poissonRadius(config.hierarchy.cell_size, level));
+  return static_cast<int>(std::ceil(reach / config.hierarchy.cell_size));
+}
+
+int borderRing(const HpdsConfig &config) { return std::max(kInsertionRing, normalRing(config)); }
+
+}  // namespace hpds

@@ -1,0 +1,126 @@
+// The tiled map build's output files: each tile's PLY holds its samples of the output levels in the `hpds sample`
+// layout, and its normals are those one hierarchy holding the whole map gives (the neighbours' border samples are
+// read for them); without the neighbours they are not (the negative control).
+#include <gtest/gtest.h>
+
+#include "TestData.hpp"
+#include "TiledRun.hpp"
+#include "hpds/normals/NormalEstimator.hpp"
+#include "hpds/pcl/PointCloudFile.hpp"
+#include "hpds/pipeline/OutputCloud.hpp"
+
+namespace hpds {
+namespace {
+
+namespace fs = std::filesystem;
+
+HpdsConfig normalsConfig() {
+  HpdsConfig c;
+  c.mode = Mode::Map;
+  c.hierarchy.cell_size = 1.0;
+  c.hierarchy.max_depth = 4;
+  c.output.level = 3;
+  c.normals.enabled = true;
+  return c;
+}
+
+struct OutputSample {
+  float xyz[3];
+  int level;
+  float normal[3];
+  float curvature;
+};
+
+std::vector<OutputSample> readTile(const fs::path &ply, const PointLayout &expected_layout) {
+  const PointBuffer cloud = readPointCloud(ply.string());
+  const PointLayout &l = cloud.layout();
+  // The PLY holds the fields' values, not the record padding: names, types and order are what must match.
+  EXPECT_EQ(l.fields.size(), expected_layout.fields.size()) << ply;
+  for (std::size_t f = 0; f < std::min(l.fields.size(), expected_layout.fields.size()); ++f) {
+    EXPECT_EQ(l.fields[f].name, expected_layout.fields[f].name) << ply;
+    EXPECT_EQ(l.fields[f].type, expected_layout.fields[f].type) << ply;
+  }
+  std::vector<OutputSample> out(cloud.size());
+  const char *names[8] = {"x", "y", "z", "level", "normal_x", "normal_y", "normal_z", "curvature"};
+  for (std::size_t i = 0; i < cloud.size(); ++i) {
+    double v[8];
+    for (int k = 0; k < 8; ++k) v[k] = readAsDouble(cloud.record(i), *l.find(names[k]));
+    out[i] = OutputSample{{float(v[0]), float(v[1]), float(v[2])}, int(v[3]), {float(v[4]), float(v[5]), float(v[6])}, float(v[7])};
+  }
+  return out;
+}
+
+TEST(TiledOutput, TilePlysHoldTheOutputLevelsWithTheNormalsOfTheWholeMap) {
+  const HpdsConfig config = normalsConfig();
+  const TileGrid grid(config.hierarchy, 1.0);
+  ASSERT_GE(normalRing(config), 1);
+  const std::vector<Frame> input = test::denseFrames(3, 6000, 31);
+  const test::TiledRun run = test::runTiled(config, grid, input, test::scratchDir("tiled_out"));
+
+  // One hierarchy holding every tile's samples: the reference for the normals.
+  Hierarchy merged(config.hierarchy.cell_size, config.hierarchy.max_depth);
+  std::map<std::array<float, 3>, SampleId> by_position;
+  for (const TileKey &key : run.tiles) {
+    const Hierarchy h = loadHierarchy(run.maps.at(key).string()).hierarchy;
+    merged.setRecordLayout(h.recordLayout());
+    for (SampleId id = 0; id < h.idBound(); ++id) {
+      const auto v = h.toViewpoint(id);
+      const SampleId m = merged.restoreSample(h.position(id), h.level(id), h.frameIndex(id), v.data(), h.record(id));
+      const double *p = h.position(id);
+      by_position[{float(p[0]), float(p[1]), float(p[2])}] = m;
+    }
+  }
+  std::vector<SampleId> queries = merged.samplesUpTo(config.output.level);
+  const std::vector<SampleNormal> reference =
+      estimateNormals(merged, queries, normalParamsFor(config, config.output.level));
+  std::map<SampleId, SampleNormal> expected;
+  for (std::size_t i = 0; i < queries.size(); ++i) expected[queries[i]] = reference[i];
+
+  const PointLayout layout = outputLayout(input[0].points.layout(), true, false);
+  std::size_t written = 0, valid = 0, near_border = 0;
+  for (const TileKey &key : run.tiles) {
+    const std::vector<OutputSample> tile = readTile(run.plys.at(key), layout);
+    EXPECT_EQ(tile.size(), run.finished.at(key).samples);
+    for (const OutputSample &s : tile) {
+      ASSERT_LE(s.level, config.output.level);
+      const auto it = by_position.find({s.xyz[0], s.xyz[1], s.xyz[2]});
+      ASSERT_NE(it, by_position.end());
+      ASSERT_EQ(merged.level(it->second), s.level);
+      const SampleNormal &e = expected.at(it->second);
+      ASSERT_EQ(e.valid, !std::isnan(s.normal[0]));
+      ++written;
+      std::int64_t cx, cy;
+      grid.cellColumn(merged.position(it->second), cx, cy);
+      near_border += grid.borderDepth(cx, cy) <= 1 ? 1 : 0;  // with k = 1: every sample
+      if (!e.valid) continue;
+      ++valid;
+      for (int a = 0; a < 3; ++a) EXPECT_NEAR(s.normal[a], e.normal[a], 1e-5);
+      EXPECT_NEAR(s.curvature, e.curvature, 1e-6);
+    }
+  }
+  EXPECT_EQ(written, queries.size());
+  EXPECT_GT(valid, written / 2);
+  EXPECT_EQ(near_border, written);
+}
+
+TEST(TiledOutput, NormalsWithoutTheNeighboursSamplesDiffer) {
+  const HpdsConfig config = normalsConfig();
+  const TileGrid grid(config.hierarchy, 1.0);
+  const test::TiledRun run = test::runTiled(config, grid, test::denseFrames(3, 6000, 31), test::scratchDir("tiled_out_b"));
+  const PointLayout layout = outputLayout(test::denseFrames(1, 1, 1)[0].points.layout(), true, false);
+  std::size_t differ = 0;
+  for (const TileKey &key : run.tiles) {
+    const fs::path alone = run.plys.at(key).string() + ".alone.ply";
+    finishTile(config, grid, key, run.maps.at(key).string(), {}, alone.string());
+    const std::vector<OutputSample> a = readTile(run.plys.at(key), layout), b = readTile(alone, layout);
+    ASSERT_EQ(a.size(), b.size());
+    for (std::size_t i = 0; i < a.size(); ++i) {
+      const bool va = !std::isnan(a[i].normal[0]), vb = !std::isnan(b[i].normal[0]);
+      differ += va != vb || (va && std::fabs(a[i].normal[0] - b[i].normal[0]) > 1e-3) ? 1 : 0;
+    }
+  }
+  EXPECT_GT(differ, 50u);
+}
+
+}  // namespace
+}  // namespace hpds
