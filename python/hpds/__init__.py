@@ -12,9 +12,10 @@ and config, in the same order. A tiled map build of a whole drive runs with `pyt
 import os
 
 from . import _hpds
+from . import ply
 from .config import to_yaml
 
-__all__ = ["downsample", "load_config", "read_points", "read_poses"]
+__all__ = ["downsample", "load_config", "ply", "read_points", "read_poses"]
 
 
 def _config_source(config):

@@ -15,12 +15,14 @@
 
 namespace hpds::python {
 
-/// config_dict(config_yaml, config_path), config_yaml(config_yaml, config_path).
+/// config_dict(config_yaml, config_path), config_yaml(config_yaml, config_path, overlay).
 void bindConfig(pybind11::module_ &m);
 /// downsample(points, config_yaml, config_path).
 void bindDownsample(pybind11::module_ &m);
 /// read_points(path), read_poses(path).
 void bindIo(pybind11::module_ &m);
+/// The tiled map build's tasks: tiled_plan, tile_neighbours, tile_bounds, bucket_frames, build_tile, finish_tile.
+void bindTiling(pybind11::module_ &m);
 
 /// A point cloud file read as `hpds sample` reads it (.pcd/.ply through PCL when built with it, KITTI .bin).
 [[nodiscard]] PointBuffer readCloudFile(const std::string &path);

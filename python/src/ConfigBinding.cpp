@@ -52,10 +52,14 @@ py::object toPython(const YAML::Node &node, const std::string &key) {
 void bindConfig(py::module_ &m) {
   m.def(
       "config_yaml",
-      [](const std::string &yaml_text, const std::string &path) { return dumpConfigYaml(configFrom(yaml_text, path)); },
-      py::arg("config_yaml"), py::arg("config_path"),
-      "Every key of the config (YAML file `config_path` if not empty, else `config_yaml` over the defaults), validated, "
-      "as complete YAML text.");
+      [](const std::string &yaml_text, const std::string &path, const std::string &overlay) {
+        HpdsConfig config = configFrom(yaml_text, path);
+        if (!overlay.empty()) applyConfigYaml(overlay, config);
+        return dumpConfigYaml(config);
+      },
+      py::arg("config_yaml"), py::arg("config_path"), py::arg("overlay") = std::string(),
+      "Every key of the config (YAML file `config_path` if not empty, else `config_yaml` over the defaults, then the "
+      "keys of `overlay` over it), validated, as complete YAML text.");
   m.def(
       "config_dict",
       [](const std::string &yaml_text, const std::string &path) {

@@ -6,4 +6,5 @@ PYBIND11_MODULE(_hpds, m) {
   hpds::python::bindConfig(m);
   hpds::python::bindDownsample(m);
   hpds::python::bindIo(m);
+  hpds::python::bindTiling(m);
 }

@@ -1,0 +1,121 @@
+"""python3 -m hpds.map_build: a map-mode sampling of a whole drive, cut into tiles that run as Dask tasks.
+
+    python3 -m hpds.map_build INPUT... --poses POSES.txt -o OUTDIR --tile-size T
+        [--workers N | --scheduler ADDR] [--config FILE] [sampling options as in `hpds sample`]
+
+Writes OUTDIR/tile_<i>_<j>.ply (the `hpds sample` PLY layout) and OUTDIR/manifest.json (written last). The union of
+the tiles has the guarantees of one `hpds sample --mode map` run over the same frames (the samples may differ, as
+the insertion order does). --workers N starts a local Dask cluster of N processes, --scheduler joins a running one
+(every worker must see INPUT and OUTDIR at the same paths, and have hpds installed), --workers 0 runs in this
+process without Dask.
+"""
+import argparse
+import logging
+import os
+import sys
+
+from . import _hpds
+from .config import to_yaml
+from .runners import BuildError, DaskRunner, SerialRunner
+from .tiled_build import build
+
+
+def parse_args(argv):
+    p = argparse.ArgumentParser(prog="python3 -m hpds.map_build", description=__doc__.split("\n\n")[0],
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("inputs", nargs="+", metavar="INPUT", help="frames: .pcd, .ply, KITTI .bin, in stream order")
+    p.add_argument("--poses", required=True, help="KITTI pose file: one 3x4 sensor-to-world matrix per input")
+    p.add_argument("-o", "--output", required=True, metavar="OUTDIR", help="output folder (tiles and manifest.json)")
+    p.add_argument("--tile-size", required=True, type=float, metavar="T",
+                   help="[m] tile edge, a whole multiple of hierarchy.cell_size")
+    where = p.add_mutually_exclusive_group()
+    where.add_argument("--workers", type=int, default=None,
+                       help="local Dask worker processes (default: one per core); 0 = no Dask, this process")
+    where.add_argument("--scheduler", metavar="ADDR", help="address of a running Dask scheduler (tcp://host:8786)")
+    p.add_argument("--chunk-frames", type=int, default=None, help="frames per bucketing task (default: automatic)")
+    s = p.add_argument_group("sampling options (as in hpds sample)")
+    s.add_argument("--config", help="YAML config (see config/hpds.yaml); flags override it")
+    s.add_argument("--cell-size", type=float, help="[m] level-0 cell edge (hierarchy.cell_size)")
+    s.add_argument("--max-depth", type=int, help="finest level 0..21 (hierarchy.max_depth)")
+    lvl = s.add_mutually_exclusive_group()
+    lvl.add_argument("--level", type=int, help="write levels 0..D (output.level)")
+    lvl.add_argument("--spacing", type=float, help="[m] coarsest level with r_D <= S (output.spacing)")
+    s.add_argument("--normals", action="store_true", help="estimate PCA normals and curvature (normals.enabled)")
+    s.add_argument("--order", help="random | input | sphericity | surface_variation (order.type)")
+    s.add_argument("--seed", type=int, help="seed of the random order (order.seed)")
+    s.add_argument("--mode", help="map (a tiled build is a map build; scan is refused)")
+    s.add_argument("--threads", type=int, help="threads per task (threads)")
+    a = p.parse_args(argv)
+    if a.workers is not None and a.workers < 0:
+        p.error("--workers: must be >= 0")
+    if a.chunk_frames is not None and a.chunk_frames < 1:
+        p.error("--chunk-frames: must be >= 1")
+    return a
+
+
+def resolve_config(a):
+    """Defaults, then --config FILE, then the flags, validated by the core: the complete config as YAML text."""
+    if a.mode is not None and a.mode != "map":
+        raise ValueError("--mode: a tiled build is a map build (only 'map' is accepted), got '%s'" % a.mode)
+    overlay = {"mode": "map"}
+
+    def put(section, key, value):
+        if value is not None:
+            overlay.setdefault(section, {})[key] = value
+
+    put("hierarchy", "cell_size", a.cell_size)
+    put("hierarchy", "max_depth", a.max_depth)
+    put("output", "level", a.level)
+    if a.spacing is not None:
+        put("output", "level", -1)
+        put("output", "spacing", a.spacing)
+    if a.normals:
+        put("normals", "enabled", True)
+    put("order", "type", a.order)
+    put("order", "seed", a.seed)
+    if a.threads is not None:
+        overlay["threads"] = a.threads
+    return _hpds.config_yaml("", a.config or "", to_yaml(overlay))
+
+
+def _dask_runner(a):
+    from distributed import Client, LocalCluster
+
+    if a.scheduler:
+        client = Client(a.scheduler)
+        return DaskRunner(client), [client]
+    workers = a.workers if a.workers is not None else (os.cpu_count() or 1)
+    cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
+                           silence_logs=logging.ERROR)
+    client = Client(cluster)
+    return DaskRunner(client), [client, cluster]
+
+
+def main(argv=None):
+    a = parse_args(sys.argv[1:] if argv is None else argv)
+    closers = []
+    try:
+        config_yaml = resolve_config(a)
+        if a.workers == 0:
+            runner = SerialRunner()
+        else:
+            runner, closers = _dask_runner(a)
+        m = build(a.inputs, a.poses, a.output, a.tile_size, config_yaml, runner, chunk_frames=a.chunk_frames,
+                  other_inputs=[a.config] if a.config else [])
+    except (BuildError, ValueError, RuntimeError, OSError) as e:
+        print("hpds.map_build: error: %s" % e, file=sys.stderr)
+        return 1
+    finally:
+        for c in closers:
+            c.close()
+    c = m["counts"]
+    print("wrote %d samples (levels 0..%d) in %d tiles to %s (manifest.json); %d of %d points skipped, %d out of "
+          "range, %d dropped below the build depth" %
+          (c["samples_written"], m["output_level"], len(m["tiles"]), a.output,
+           c["skipped_invalid"] + c["skipped_zero"] + c["skipped_range"], c["input_points"], c["out_of_range"],
+           c["dropped_depth"]))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

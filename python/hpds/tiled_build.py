@@ -1,0 +1,215 @@
+"""The tiled map build, planned and run: bucketing tasks, then one task per tile in four colour phases, then one
+output task per tile, then the manifest. The work of each task is C++ (hpds/tiling/); this module decides what runs
+after what and where the files go.
+
+    OUTDIR/tile_<i>_<j>.ply     each tile's samples of the output levels (the `hpds sample` PLY layout)
+    OUTDIR/manifest.json        tiles, bounds, counts, config; written last: the build is complete when it exists
+    OUTDIR/.hpds_work/          buckets, tile maps and border files while the build runs (removed at the end)
+"""
+import glob
+import json
+import os
+import re
+import shutil
+import sys
+import time
+
+from . import _hpds
+from .runners import BuildError, Task
+
+WORK_DIR = ".hpds_work"
+MANIFEST = "manifest.json"
+_TILE_PLY = re.compile(r"tile_-?\d+_-?\d+\.ply$")
+
+
+# Task bodies: module-level functions, so that Dask ships them to workers by reference.
+def bucket_task(config_yaml, tile_size, inputs, poses, first_frame, out_dir):
+    return _hpds.bucket_frames(config_yaml, tile_size, inputs, poses, first_frame, out_dir)
+
+
+def build_task(config_yaml, tile_size, i, j, buckets, borders, map_path, border_path):
+    return _hpds.build_tile(config_yaml, tile_size, i, j, buckets, borders, map_path, border_path)
+
+
+def finish_task(config_yaml, tile_size, i, j, map_path, borders, ply_path):
+    return _hpds.finish_tile(config_yaml, tile_size, i, j, map_path, borders, ply_path)
+
+
+def phase(key):
+    """Colour phase of tile (i, j): tiles of one phase never touch."""
+    return (key[0] & 1) | ((key[1] & 1) << 1)
+
+
+def tile_ply_name(key):
+    return "tile_%d_%d.ply" % key
+
+
+def check_paths(inputs, outdir):
+    """Refuses a build that would overwrite an input or an earlier build's output (hpds never destroys data)."""
+    out = os.path.realpath(outdir)
+    work = os.path.join(out, WORK_DIR)
+    for p in inputs:
+        real = os.path.realpath(p)
+        if os.path.dirname(real) == out and (_TILE_PLY.match(os.path.basename(real)) or
+                                             os.path.basename(real) == MANIFEST):
+            raise BuildError("input '%s' has the name of an output of the build in %s" % (p, outdir))
+        if real == work or real.startswith(work + os.sep):
+            raise BuildError("input '%s' lies in the build's work folder %s" % (p, work))
+    earlier = sorted(os.path.basename(p) for p in glob.glob(os.path.join(glob.escape(outdir), "tile_*_*.ply"))
+                     if _TILE_PLY.match(os.path.basename(p)))
+    if os.path.exists(os.path.join(outdir, MANIFEST)):
+        earlier.insert(0, MANIFEST)
+    if earlier:
+        shown = ", ".join(earlier[:3]) + (", ..." if len(earlier) > 3 else "")
+        raise BuildError("%s already holds a tiled build (%s): choose another output folder or move those files "
+                         "away; hpds never overwrites them" % (outdir, shown))
+
+
+def _chunks(n, workers, chunk_frames):
+    if chunk_frames is None:
+        # A few bucketing tasks per worker (balance) with a bounded number of frames in memory per task.
+        chunk_frames = max(1, min(16, -(-n // max(1, 2 * max(workers, 1)))))
+    return [(a, min(n, a + chunk_frames)) for a in range(0, n, chunk_frames)]
+
+
+def _add_counters(total, part):
+    for k, v in part.items():
+        total[k] = total.get(k, 0) + v
+
+
+def _write_json(path, data):
+    tmp = "%s.tmp.%d" % (path, os.getpid())
+    with open(tmp, "w") as f:
+        json.dump(data, f, indent=1, sort_keys=False)
+        f.write("\n")
+        f.flush()
+        os.fsync(f.fileno())
+    os.replace(tmp, path)
+
+
+def build(inputs, poses_path, outdir, tile_size, config_yaml, runner, chunk_frames=None, log=None, other_inputs=()):
+    """Runs a tiled map build (see the module docstring) and returns the manifest as a dict.
+
+    inputs: point-cloud files, one frame each, in stream order; poses_path: KITTI poses, one per input;
+    config_yaml: the complete config (hpds._hpds.config_yaml), map mode; runner: SerialRunner or DaskRunner;
+    other_inputs: further files the build read (the config file), which it must not overwrite either.
+    Raises BuildError (a task failed, or the paths are unsafe) or ValueError (config, tile size).
+    """
+    log = log or (lambda msg: print("hpds.map_build: " + msg, file=sys.stderr, flush=True))
+    t_start = time.monotonic()
+    plan = _hpds.tiled_plan(config_yaml, tile_size)
+    inputs = [os.path.abspath(p) for p in inputs]  # workers elsewhere see the same shared paths
+    poses = _hpds.read_poses(os.fspath(poses_path))
+    if len(poses) != len(inputs):
+        raise BuildError("--poses: '%s' has %d poses for %d inputs (one pose per input is required)"
+                         % (poses_path, len(poses), len(inputs)))
+    check_paths(inputs + [os.fspath(poses_path)] + [os.fspath(p) for p in other_inputs], outdir)
+    os.makedirs(outdir, exist_ok=True)
+    outdir = os.path.abspath(outdir)
+    work = os.path.join(outdir, WORK_DIR)
+    shutil.rmtree(work, ignore_errors=True)  # our own scratch from an interrupted build
+    os.makedirs(os.path.join(work, "tiles"))
+
+    # 1. Bucketing: frames in chunks, each point filed under its tile.
+    chunks = _chunks(len(inputs), runner.workers, chunk_frames)
+    log("bucketing %d frames in %d tasks (tiles of %g m)" % (len(inputs), len(chunks), plan["tile_size"]))
+    tasks = [Task("bucket-%d" % c, "bucketing frames %d..%d" % (a, b - 1), bucket_task,
+                  (config_yaml, tile_size, inputs[a:b], poses[a:b], a, os.path.join(work, "buckets", "c%05d" % c)), [])
+             for c, (a, b) in enumerate(chunks)]
+    t0 = time.monotonic()
+    try:
+        bucketed = runner.run(tasks)
+    except BuildError:
+        shutil.rmtree(work, ignore_errors=True)
+        raise
+    seconds = {"bucketing": time.monotonic() - t0}
+    counters, buckets, points = {}, {}, {}
+    for c in range(len(chunks)):
+        result = bucketed["bucket-%d" % c]
+        _add_counters(counters, result["counters"])
+        for i, j, n, path in result["tiles"]:
+            buckets.setdefault((i, j), []).append(path)
+            points[(i, j)] = points.get((i, j), 0) + n
+    tiles = sorted(buckets, key=lambda k: (k[1], k[0]))
+
+    # 2. Tiles: phase by phase, each after its neighbours of earlier phases; 3. outputs, after all neighbours.
+    def map_path(k):
+        return os.path.join(work, "tiles", "tile_%d_%d.hpdsmap" % k)
+
+    def border_path(k):
+        return os.path.join(work, "tiles", "tile_%d_%d.border" % k)
+
+    def near(k, ring):
+        return [tuple(n) for n in _hpds.tile_neighbours(config_yaml, tile_size, k[0], k[1], ring) if tuple(n) in buckets]
+
+    tasks = []
+    for p in range(4):
+        for k in tiles:
+            if phase(k) != p:
+                continue
+            earlier = [n for n in near(k, plan["insertion_ring"]) if phase(n) < p]
+            tasks.append(Task("build-%d_%d" % k, "tile (%d, %d), phase %d" % (k + (p,)), build_task,
+                              (config_yaml, tile_size, k[0], k[1], buckets[k], [border_path(n) for n in earlier],
+                               map_path(k), border_path(k)), ["build-%d_%d" % n for n in earlier]))
+    for k in tiles:
+        around = near(k, plan["normal_ring"]) if plan["normal_ring"] > 0 else []
+        borders = [border_path(n) for n in around]
+        tasks.append(Task("finish-%d_%d" % k, "output of tile (%d, %d)" % k, finish_task,
+                          (config_yaml, tile_size, k[0], k[1], map_path(k), borders,
+                           os.path.join(outdir, tile_ply_name(k))),
+                          ["build-%d_%d" % k] + ["build-%d_%d" % n for n in around]))
+    log("building %d tiles in 4 phases on %s" % (len(tiles), "%d workers" % runner.workers if runner.workers
+                                                 else "this process"))
+    t0 = time.monotonic()
+    try:
+        done = runner.run(tasks)
+    except BuildError:
+        # The buckets are a copy of the input: not left behind. Complete tiles stay; without a manifest the build
+        # is marked incomplete.
+        shutil.rmtree(work, ignore_errors=True)
+        raise
+    seconds["tiles"] = time.monotonic() - t0
+
+    # 4. The manifest, last: its presence marks a complete build.
+    depth = plan["output_level"]
+    per_level = [0] * (depth + 1)
+    lo, hi = [float("inf")] * 3, [float("-inf")] * 3
+    entries = []
+    peak = 0
+    counts = {"input_points": counters.get("input", 0), "skipped_invalid": counters.get("skipped_invalid", 0),
+              "skipped_zero": counters.get("skipped_zero", 0), "skipped_range": counters.get("skipped_range", 0),
+              "out_of_range": counters.get("out_of_range", 0), "dropped_depth": 0, "samples_built": 0}
+    for k in tiles:
+        b, f = done["build-%d_%d" % k], done["finish-%d_%d" % k]
+        counts["dropped_depth"] += b["counters"]["dropped_depth"]
+        counts["samples_built"] += b["samples"]
+        peak = max(peak, b["memory_bytes"])
+        for d, n in enumerate(f["samples_per_level"]):
+            per_level[d] += n
+        if f["samples"]:
+            lo = [min(a, v) for a, v in zip(lo, f["bounds"][:3])]
+            hi = [max(a, v) for a, v in zip(hi, f["bounds"][3:])]
+        entries.append({"i": k[0], "j": k[1], "phase": phase(k), "file": tile_ply_name(k),
+                        "bounds_xy": _hpds.tile_bounds(config_yaml, tile_size, k[0], k[1]),
+                        "points": points[k], "samples_built": b["samples"], "samples": f["samples"],
+                        "samples_per_level": f["samples_per_level"], "invalid_normals": f["invalid_normals"]})
+    counts["samples_written"] = sum(per_level)
+    counts["samples_per_level"] = per_level
+    seconds["total"] = time.monotonic() - t_start
+    manifest = {
+        "format": "hpds tiled map 1",
+        "tile_size": plan["tile_size"], "cell_size": plan["cell_size"], "output_level": depth,
+        "build_depth": plan["build_depth"], "frames": len(inputs),
+        "bounds": {"min": lo, "max": hi} if counts["samples_written"] else None,
+        "counts": counts, "tiles": entries,
+        "config": _hpds.config_dict(config_yaml, ""),
+        "run": {"workers": runner.workers, "bucketing_tasks": len(chunks), "seconds": seconds,
+                "peak_tile_memory_bytes": peak},
+    }
+    _write_json(os.path.join(outdir, MANIFEST), manifest)
+    shutil.rmtree(work, ignore_errors=True)
+    # Temporaries of output tasks whose worker died before the rename (AtomicFile's "<target>.hpds-tmp.<pid>.<n>"):
+    # every task is done, so none is being written.
+    for stale in glob.glob(os.path.join(glob.escape(outdir), "tile_*_*.ply.hpds-tmp.*")):
+        os.remove(stale)
+    return manifest

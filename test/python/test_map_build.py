@@ -1,0 +1,246 @@
+"""python3 -m hpds.map_build on a synthetic drive (`hpds synth`): the merged tiles pass `hpds verify` (no
+violation, coverage of every input point), seams lie in dense geometry, a 2-worker LocalCluster writes the same
+bytes as one process, a worker killed in the middle of a tile is retried (or, killed every time, stops the build
+with the tile named and nothing half-written published), and the build never overwrites an input or an earlier
+build."""
+import contextlib
+import filecmp
+import functools
+import glob
+import io
+import json
+import logging
+import os
+import shutil
+import signal
+import tempfile
+import threading
+import time
+import unittest
+
+import numpy as np
+
+import hpds
+import hpds.ply
+from hpds import map_build
+from hpds.runners import BuildError, DaskRunner, SerialRunner
+from hpds.tiled_build import build
+import support
+
+TILE = 8.0
+CELL = 2.0
+SAMPLING = ["--cell-size", str(CELL), "--max-depth", "5", "--level", "4", "--normals"]
+
+
+def _killing_call(fn, marks, times, watch, *args):
+    """Runs fn(*args), but the first `times` runs (counted by files in `marks`) kill their own worker process in the
+    middle: as soon as a temporary of the task's output appears (or, at the latest, when the work is done and
+    before its result is reported)."""
+    n = len(os.listdir(marks))
+    if n >= times:
+        return fn(*args)
+    worker = threading.Thread(target=fn, args=args, daemon=True)
+    worker.start()
+    seen = False
+    while worker.is_alive() and not seen:
+        seen = bool(glob.glob(glob.escape(watch) + "*tmp*"))
+        time.sleep(0.0005)
+    with open(os.path.join(marks, "%d-%d-%s" % (n, os.getpid(), "mid-write" if seen else "after")), "w"):
+        pass
+    os.kill(os.getpid(), signal.SIGKILL)
+
+
+class KillWorker:
+    """A runner `wrap`: the task with key `key` kills its worker the first `times` times it runs."""
+
+    def __init__(self, key, marks, times, watch):
+        self.key, self.marks, self.times, self.watch = key, marks, times, watch
+
+    def __call__(self, task):
+        if task.key != self.key:
+            return task.fn
+        return functools.partial(_killing_call, task.fn, self.marks, self.times, self.watch)
+
+
+def tile_files(outdir):
+    return sorted(os.path.basename(p) for p in glob.glob(os.path.join(outdir, "tile_*.ply")))
+
+
+class MapBuild(unittest.TestCase):
+    @classmethod
+    def setUpClass(cls):
+        if not support.CLI:
+            raise unittest.SkipTest("HPDS_CLI not set: run through ctest")
+        cls.root = tempfile.mkdtemp(prefix="hpds_map_build_")
+        drive = os.path.join(cls.root, "drive")
+        support.run([support.CLI, "synth", "-o", drive, "--frames", "6", "--beams", "16", "--azimuth-steps", "900",
+                     "--speed", "2.5"])
+        cls.frames = sorted(glob.glob(os.path.join(drive, "frame_*.pcd")))
+        cls.poses = os.path.join(drive, "poses.txt")
+        cls.reference = os.path.join(cls.root, "serial")
+        rc = map_build.main(cls.frames + ["--poses", cls.poses, "-o", cls.reference, "--tile-size", str(TILE),
+                                          "--workers", "0"] + SAMPLING)
+        assert rc == 0, "the serial reference build failed"
+        with open(os.path.join(cls.reference, "manifest.json")) as f:
+            cls.manifest = json.load(f)
+        a = map_build.parse_args(cls.frames + ["--poses", cls.poses, "-o", "x", "--tile-size", str(TILE)] + SAMPLING)
+        cls.config_yaml = map_build.resolve_config(a)
+        cls.cluster = cls.client = None
+
+    @classmethod
+    def tearDownClass(cls):
+        if cls.client is not None:
+            cls.client.close()
+            cls.cluster.close()
+        shutil.rmtree(cls.root, ignore_errors=True)
+
+    @classmethod
+    def dask(cls):
+        """A 2-worker LocalCluster, shared by the tests; a task whose workers die twice fails (KilledWorker)."""
+        if cls.client is None:
+            import dask
+            from distributed import Client, LocalCluster
+
+            dask.config.set({"distributed.scheduler.allowed-failures": 1})
+            logging.getLogger("distributed").setLevel(logging.CRITICAL)
+            cls.cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None,
+                                       silence_logs=logging.CRITICAL)
+            cls.client = Client(cls.cluster)
+        return cls.client
+
+    def out(self, name):
+        return os.path.join(self.root, name)
+
+    def assert_same_tiles(self, outdir):
+        names = tile_files(self.reference)
+        self.assertEqual(tile_files(outdir), names)
+        for n in names:
+            self.assertTrue(filecmp.cmp(os.path.join(outdir, n), os.path.join(self.reference, n), shallow=False), n)
+
+    def assert_no_temporaries(self, outdir):
+        left = [p for p in glob.glob(os.path.join(outdir, "**", "*"), recursive=True) if "tmp" in os.path.basename(p)]
+        self.assertEqual(left, [])
+
+    def test_merged_tiles_pass_verify_with_coverage_of_every_input_point(self):
+        m = self.manifest
+        self.assertGreaterEqual(len(m["tiles"]), 12)
+        self.assertEqual(m["config"]["mode"], "map")
+        self.assertEqual(m["config"]["hierarchy"]["cell_size"], CELL)
+        self.assertEqual(m["output_level"], 4)
+        self.assertEqual(tile_files(self.reference), sorted(t["file"] for t in m["tiles"]))
+        self.assertFalse(os.path.exists(os.path.join(self.reference, ".hpds_work")))
+        self.assert_no_temporaries(self.reference)
+        merged = self.out("merged.ply")
+        hpds.ply.merge([os.path.join(self.reference, t["file"]) for t in m["tiles"]], merged)
+        cloud = hpds.ply.read(merged)
+        self.assertEqual(len(cloud), m["counts"]["samples_written"])
+        self.assertIn("normal_x", cloud.dtype.names)
+        # The input, posed as the pipeline does (no-returns at the sensor origin are skipped, as it skips them).
+        poses = hpds.read_poses(self.poses)
+        posed = []
+        for frame, pose in zip(self.frames, poses):
+            p = hpds.read_points(frame)
+            p = p[np.isfinite(p).all(axis=1) & (p != 0).any(axis=1)]
+            posed.append(p @ pose[:3, :3].T + pose[:3, 3])
+        posed = np.concatenate(posed)
+        self.assertEqual(len(posed), m["counts"]["input_points"] - m["counts"]["skipped_invalid"] -
+                         m["counts"]["skipped_zero"])
+        xyz = np.zeros(len(posed), [("x", "<f4"), ("y", "<f4"), ("z", "<f4")])
+        xyz["x"], xyz["y"], xyz["z"] = posed[:, 0], posed[:, 1], posed[:, 2]
+        hpds.ply.write(self.out("input.ply"), xyz)
+        rc, text = support.run([support.CLI, "verify", merged, "--cell-size", str(CELL), "--input",
+                                self.out("input.ply")], check=False)
+        self.assertEqual(rc, 0, text)
+        self.assertIn("OK: no violations", text)
+        # The seams cut dense geometry: many samples within r_0 of a tile border, on both of its sides.
+        r0 = 0.5 * np.sqrt(3.0) * CELL
+        for axis in ("x", "y"):
+            off = np.mod(cloud[axis].astype(np.float64), TILE)
+            near_low, near_high = (off < r0).sum(), (off > TILE - r0).sum()
+            self.assertGreater(min(near_low, near_high), 500, axis)
+
+    def test_two_dask_workers_write_the_same_bytes_as_one_process(self):
+        # --workers 2: the command starts (and stops) its own 2-worker LocalCluster; --scheduler joins a running one.
+        for name, where in (("dask2", ["--workers", "2"]), ("dask_scheduler", ["--scheduler",
+                                                                               self.dask().scheduler.address])):
+            with self.subTest(where=where[0]):
+                out = self.out(name)
+                rc = map_build.main(self.frames + ["--poses", self.poses, "-o", out, "--tile-size", str(TILE),
+                                                   "--chunk-frames", "1"] + where + SAMPLING)
+                self.assertEqual(rc, 0)
+                self.assert_same_tiles(out)
+                with open(os.path.join(out, "manifest.json")) as f:
+                    m = json.load(f)
+                self.assertEqual(m["run"]["workers"], 2)
+                self.assertEqual(m["run"]["bucketing_tasks"], len(self.frames))
+                for k in ("tiles", "counts", "config", "bounds"):
+                    self.assertEqual(m[k], self.manifest[k], k)
+
+    def test_a_worker_killed_in_the_middle_of_a_tile_is_retried(self):
+        biggest = max(self.manifest["tiles"], key=lambda t: t["points"])
+        out, marks = self.out("killed_once"), self.out("marks_once")
+        os.makedirs(marks)
+        wrap = KillWorker("finish-%d_%d" % (biggest["i"], biggest["j"]), marks, 1,
+                          os.path.join(out, biggest["file"]))
+        build(self.frames, self.poses, out, TILE, self.config_yaml, DaskRunner(self.dask(), wrap=wrap),
+              log=lambda m: None)
+        self.assertEqual(len(os.listdir(marks)), 1)  # it did die once
+        self.assert_same_tiles(out)
+        self.assertTrue(os.path.exists(os.path.join(out, "manifest.json")))
+        self.assert_no_temporaries(out)
+
+    def test_a_tile_whose_workers_keep_dying_stops_the_build_with_its_name(self):
+        tile = [t for t in self.manifest["tiles"] if t["phase"] == 1][0]
+        out, marks = self.out("killed_always"), self.out("marks_always")
+        os.makedirs(marks)
+        wrap = KillWorker("build-%d_%d" % (tile["i"], tile["j"]), marks, 100,
+                          os.path.join(out, ".hpds_work", "tiles", "tile_%d_%d.hpdsmap" % (tile["i"], tile["j"])))
+        with self.assertRaises(BuildError) as e:
+            build(self.frames, self.poses, out, TILE, self.config_yaml, DaskRunner(self.dask(), wrap=wrap),
+                  log=lambda m: None)
+        self.assertIn("tile (%d, %d)" % (tile["i"], tile["j"]), str(e.exception))
+        self.assertIn("died", str(e.exception))
+        self.assertFalse(os.path.exists(os.path.join(out, "manifest.json")))
+        self.assertNotIn(tile["file"], tile_files(out))
+        # What was published is complete: every tile file present equals the reference's.
+        for n in tile_files(out):
+            self.assertTrue(filecmp.cmp(os.path.join(out, n), os.path.join(self.reference, n), shallow=False), n)
+        self.assertEqual([p for p in os.listdir(out) if "tmp" in p], [])
+        self.assertFalse(os.path.exists(os.path.join(out, ".hpds_work")))
+
+    def test_never_overwrites_an_input_or_an_earlier_build(self):
+        # An earlier build in OUTDIR: refused, nothing touched.
+        before = {n: os.path.getmtime(os.path.join(self.reference, n)) for n in os.listdir(self.reference)}
+        with self.assertRaises(BuildError) as e:
+            build(self.frames, self.poses, self.reference, TILE, self.config_yaml, SerialRunner(), log=lambda m: None)
+        self.assertIn("already holds a tiled build", str(e.exception))
+        self.assertEqual({n: os.path.getmtime(os.path.join(self.reference, n)) for n in os.listdir(self.reference)},
+                         before)
+        # An input that has an output's name.
+        out = self.out("clash")
+        os.makedirs(out)
+        shutil.copy(self.frames[0], os.path.join(out, "tile_0_0.ply"))
+        with self.assertRaises(BuildError):
+            build([os.path.join(out, "tile_0_0.ply")], self.poses, out, TILE, self.config_yaml, SerialRunner(),
+                  log=lambda m: None)
+
+    def test_command_line_errors_name_the_option_or_key(self):
+        base = self.frames[:2] + ["--poses", self.poses, "--workers", "0"]
+        cases = [
+            (["-o", self.out("e1"), "--tile-size", "3", "--cell-size", "2"], "tile size"),
+            (["-o", self.out("e2"), "--tile-size", "8", "--mode", "scan"], "--mode"),
+            (["-o", self.out("e3"), "--tile-size", "8", "--cell-size", "-1"], "hierarchy.cell_size"),
+            (["-o", self.out("e4"), "--tile-size", "8", "--order", "best"], "order.type"),
+        ]
+        for args, what in cases:
+            with self.subTest(what=what):
+                with contextlib.redirect_stderr(io.StringIO()) as err:
+                    self.assertEqual(map_build.main(base + args), 1)
+                self.assertIn(what, err.getvalue())
+        with contextlib.redirect_stderr(io.StringIO()) as err:  # 2 inputs, 6 poses
+            self.assertEqual(map_build.main(base + ["-o", self.out("e5"), "--tile-size", "8"]), 1)
+        self.assertIn("poses", err.getvalue())
+
+
+if __name__ == "__main__":
+    unittest.main()
