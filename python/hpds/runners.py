@@ -41,36 +41,68 @@ class SerialRunner:
 
 
 class DaskRunner:
-    """Runs the tasks on a dask.distributed cluster through `client`; stops at the first failed task."""
+    """Runs the tasks on a dask.distributed cluster through `client`; stops at the first failed task.
 
-    def __init__(self, client, wrap=None):
+    A worker that dies takes every task queued on it along, not only the one that killed it; Dask fails a task once
+    it was on `allowed-failures` + 1 dying workers. Such a task (KilledWorker) is submitted again, with the tasks
+    waiting for it, up to `retries` times: a task that only shared a worker with a crashing one completes, and the
+    task that crashes its workers every time stops the build with its own name.
+    """
+
+    def __init__(self, client, wrap=None, retries=2):
         self.client = client
         self.wrap = wrap
+        self.retries = retries
         self.workers = len(client.scheduler_info().get("workers", {}))
 
     def run(self, tasks):
         from distributed import as_completed
 
         token = uuid.uuid4().hex[:8]
-        futures, names = {}, {}
+        dependents = collections.defaultdict(list)
         for t in tasks:
+            for d in t.deps:
+                dependents[d].append(t.key)
+        current, task_of, attempts, results = {}, {}, collections.Counter(), {}
+        serial = iter(range(1 << 62))  # every submission its own key: Dask would hand back an erred future
+
+        def submit(t):
             fn = self.wrap(t) if self.wrap else t.fn
-            future = self.client.submit(_call, fn, t.args, [futures[d] for d in t.deps], key="hpds-%s-%s" % (t.key, token),
-                                        pure=False)
-            futures[t.key] = future
-            names[future.key] = t
-        results = {}
+            future = self.client.submit(_call, fn, t.args, [current[d] for d in t.deps],
+                                        key="hpds-%s-%d-%s" % (t.key, next(serial), token), pure=False)
+            current[t.key] = future
+            task_of[future.key] = t
+            return future
+
+        def resubmit(key):
+            # The task and every task waiting on it (their futures fail with the dependency's error), in task order.
+            todo, stack = set(), [key]
+            while stack:
+                k = stack.pop()
+                if k not in todo and k not in results:
+                    todo.add(k)
+                    stack.extend(dependents[k])
+            attempts[key] += 1
+            return [submit(t) for t in tasks if t.key in todo]
+
+        pending = as_completed([submit(t) for t in tasks])
         try:
-            for future in as_completed(list(futures.values())):
-                t = names[future.key]
+            for future in pending:
+                t = task_of[future.key]
+                if current.get(t.key) is not future:
+                    continue  # superseded by a resubmission
                 try:
                     results[t.key] = future.result()
                 except Exception as e:  # noqa: BLE001 -- any task failure stops the build with its name
-                    raise BuildError("%s: %s" % (t.name, _describe(e))) from e
+                    culprit = _killed_task(e, task_of) or t
+                    if _is_killed_worker(e) and attempts[culprit.key] < self.retries:
+                        pending.update(resubmit(culprit.key))
+                        continue
+                    raise BuildError("%s: %s" % (culprit.name, _describe(e))) from e
         finally:
-            pending = [f for f in futures.values() if not f.done()]
-            if pending:
-                self.client.cancel(pending)
+            unfinished = [f for f in current.values() if not f.done()]
+            if unfinished:
+                self.client.cancel(unfinished)
                 self._wait_until_idle(token)
         return results
 
@@ -89,12 +121,27 @@ def _running_keys(token, dask_worker=None):
     return [k for k in list(getattr(dask_worker, "active_threads", {}).values()) if str(k).endswith(token)]
 
 
-def _describe(error):
+def _killed_worker_type():
     try:
         from distributed import KilledWorker
     except ImportError:  # pragma: no cover
-        KilledWorker = ()
-    if isinstance(error, KilledWorker):
+        return ()
+    return KilledWorker
+
+
+def _is_killed_worker(error):
+    return isinstance(error, _killed_worker_type())
+
+
+def _killed_task(error, task_of):
+    # A task waiting on a killed one fails with the dependency's KilledWorker: attribute it to the dependency.
+    if not _is_killed_worker(error):
+        return None
+    return task_of.get(error.task)
+
+
+def _describe(error):
+    if _is_killed_worker(error):
         return ("the workers running it died every time it was tried (%s); it published nothing, and the build "
                 "stopped without a manifest" % error)
     return "%s: %s" % (type(error).__name__, error)
