@@ -1,6 +1,6 @@
 """The tiled map build, planned and run: bucketing tasks, then one task per tile in four colour phases, then one
 output task per tile, then the manifest. The work of each task is C++ (hpds/tiling/); this module decides what runs
-after what and where the files go.
+after what and where the files go. The tiling rule, why it is exact, memory and speed: docs/scaling.md.
 
     OUTDIR/tile_<i>_<j>.ply     each tile's samples of the output levels (the `hpds sample` PLY layout)
     OUTDIR/manifest.json        tiles, bounds, counts, config; written last: the build is complete when it exists
@@ -22,17 +22,33 @@ MANIFEST = "manifest.json"
 _TILE_PLY = re.compile(r"tile_-?\d+_-?\d+\.ply$")
 
 
-# Task bodies: module-level functions, so that Dask ships them to workers by reference.
+# Task bodies: module-level functions, so that Dask ships them to workers by reference. Each result carries the
+# task's thread CPU time (the C++ work runs in the calling thread with threads: 1), for the run statistics.
+def _timed(fn, *args):
+    c0 = time.thread_time()
+    result = fn(*args)
+    result["cpu_seconds"] = time.thread_time() - c0
+    return result
+
+
 def bucket_task(config_yaml, tile_size, inputs, poses, first_frame, out_dir):
-    return _hpds.bucket_frames(config_yaml, tile_size, inputs, poses, first_frame, out_dir)
+    return _timed(_hpds.bucket_frames, config_yaml, tile_size, inputs, poses, first_frame, out_dir)
 
 
 def build_task(config_yaml, tile_size, i, j, buckets, borders, map_path, border_path):
-    return _hpds.build_tile(config_yaml, tile_size, i, j, buckets, borders, map_path, border_path)
+    return _timed(_hpds.build_tile, config_yaml, tile_size, i, j, buckets, borders, map_path, border_path)
 
 
 def finish_task(config_yaml, tile_size, i, j, map_path, borders, ply_path):
-    return _hpds.finish_tile(config_yaml, tile_size, i, j, map_path, borders, ply_path)
+    return _timed(_hpds.finish_tile, config_yaml, tile_size, i, j, map_path, borders, ply_path)
+
+
+def _critical_path(tasks, results, start):
+    """CPU seconds of the longest dependency chain of `tasks` (listed after their dependencies), from `start`."""
+    end = {}
+    for t in tasks:
+        end[t.key] = max([start] + [end[d] for d in t.deps]) + results[t.key]["cpu_seconds"]
+    return max(end.values(), default=start)
 
 
 def phase(key):
@@ -169,6 +185,13 @@ def build(inputs, poses_path, outdir, tile_size, config_yaml, runner, chunk_fram
         shutil.rmtree(work, ignore_errors=True)
         raise
     seconds["tiles"] = time.monotonic() - t0
+    bucket_cpu = [r["cpu_seconds"] for r in bucketed.values()]
+    cpu = {"bucketing": sum(bucket_cpu),
+           "tiles": sum(done[t.key]["cpu_seconds"] for t in tasks if t.key.startswith("build-")),
+           "outputs": sum(done[t.key]["cpu_seconds"] for t in tasks if t.key.startswith("finish-")),
+           # What any number of workers still runs one after another: the longest bucketing task, then the longest
+           # chain of tiles and outputs. total / critical_path bounds the speed-up.
+           "critical_path": _critical_path(tasks, done, max(bucket_cpu, default=0.0))}
 
     # 4. The manifest, last: its presence marks a complete build.
     depth = plan["output_level"]
@@ -204,7 +227,7 @@ def build(inputs, poses_path, outdir, tile_size, config_yaml, runner, chunk_fram
         "counts": counts, "tiles": entries,
         "config": _hpds.config_dict(config_yaml, ""),
         "run": {"workers": runner.workers, "bucketing_tasks": len(chunks), "seconds": seconds,
-                "peak_tile_memory_bytes": peak},
+                "task_cpu_seconds": cpu, "peak_tile_memory_bytes": peak},
     }
     _write_json(os.path.join(outdir, MANIFEST), manifest)
     shutil.rmtree(work, ignore_errors=True)

@@ -129,6 +129,10 @@ class MapBuild(unittest.TestCase):
         self.assertEqual(m["output_level"], 4)
         self.assertEqual(tile_files(self.reference), sorted(t["file"] for t in m["tiles"]))
         self.assertFalse(os.path.exists(os.path.join(self.reference, ".hpds_work")))
+        cpu = m["run"]["task_cpu_seconds"]
+        self.assertGreater(cpu["tiles"], 0.0)
+        self.assertGreater(cpu["critical_path"], 0.0)
+        self.assertLessEqual(cpu["critical_path"], cpu["bucketing"] + cpu["tiles"] + cpu["outputs"] + 1e-9)
         self.assert_no_temporaries(self.reference)
         merged = self.out("merged.ply")
         hpds.ply.merge([os.path.join(self.reference, t["file"]) for t in m["tiles"]], merged)

@@ -10,7 +10,7 @@
 //   HierarchyFile.hpp) and, first, its border file: the own samples within borderRing(config) cells of the tile's
 //   edge, which later phases and finishTile read. Both are written atomically; the map file appears last, so its
 //   presence means the tile is complete.
-// - Exactness: when every tile's earlier-phase neighbours were built before it, the union of all
+// - Exactness (docs/scaling.md): when every tile's earlier-phase neighbours were built before it, the union of all
 //   tiles keeps one map-mode run's guarantees: at most one sample per cell and level, the union of levels 0..D is
 //   r_D-separated (samples of levels i, j at least r_max(i,j) apart), every inserted point lies within 2 r_D of it for
 //   D up to the build depth. Tiles of one phase are independent: any schedule gives the same bytes.
