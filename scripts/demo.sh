@@ -9,12 +9,12 @@ mkdir -p "$out"
 echo "== 1. synthetic lidar: 32 beams x 1800 azimuths, 10 frames driving down an urban street"
 "$hpds" synth -o "$out/stream" --frames 10 --scene urban --seed 1
 echo
-echo "== 2. map-mode sampling with normals (cell 4 m, max depth 8, output spacing 0.15 m)"
-"$hpds" sample "$out"/stream/frame_*.pcd --poses "$out/stream/poses.txt" --mode map --normals \
-  --cell-size 4 --max-depth 8 --spacing 0.15 -o "$out/map.ply" --stats "$out/stats.json"
+echo "== 2. map-mode sampling with the shipped defaults (config/hpds.yaml: samples >= 0.1 m apart, normals on)"
+"$hpds" sample "$out"/stream/frame_*.pcd --poses "$out/stream/poses.txt" --mode map \
+  -o "$out/map.ply" --stats "$out/stats.json"
 echo
-echo "== 3. independent check of the written sampling (k-d tree, not the sampler's grids)"
-"$hpds" verify "$out/map.ply" --cell-size 4
+echo "== 3. independent check of the written sampling (k-d tree, not the sampler's grids), r = the 0.1 m asked"
+"$hpds" verify "$out/map.ply" --spacing 0.1
 echo
 echo "== 4. pictures: top and side views coloured by level and by normal"
 "$hpds" render "$out/map.ply" -o "$out/pictures" --color level,normal --view top,side

@@ -38,7 +38,8 @@ TEST(Cli, EveryRealSensorFrameSamplesVerifiesAndKeepsItsFields) {
     const auto out = tmp / (std::string(name) + ".ply");
     std::string log;
     ASSERT_EQ(runHpds("sample " + shellQuote(dir / name) + " -o " + shellQuote(out) + " --normals --spacing 0.1", &log), 0) << log;
-    ASSERT_EQ(runHpds("verify " + shellQuote(out) + " --cell-size 4 --input " + shellQuote(dir / name), &log), 0) << log;
+    // The cell is derived from the spacing (hierarchy.cell_size 0): verify derives it the same way.
+    ASSERT_EQ(runHpds("verify " + shellQuote(out) + " --spacing 0.1 --input " + shellQuote(dir / name), &log), 0) << log;
     EXPECT_NE(log.find("OK: no violations"), std::string::npos) << log;
     const PointBuffer in = readPointCloud((dir / name).string());
     const PointBuffer s = readPointCloud(out.string());
@@ -56,7 +57,7 @@ TEST(Cli, EveryRealSensorFrameSamplesVerifiesAndKeepsItsFields) {
       ASSERT_NE(o, nullptr) << f.name << " lost";
       EXPECT_EQ(o->type, f.type) << f.name;
     }
-    EXPECT_LE(maxLevel(s), 6);  // coarsest level with r_D <= 0.1 at cell 4 m
+    EXPECT_EQ(maxLevel(s), 5);  // r_5 = 0.1 m exactly, with a level-0 cell of 2 * 0.1 / sqrt(3) * 2^5 = 3.695 m
   }
 }
 
@@ -95,7 +96,7 @@ TEST(Cli, Hdl32PairInMapModeWithPosesVerifies) {
                  &log),
             0)
       << log;
-  ASSERT_EQ(runHpds("verify " + shellQuote(tmp / "map.ply") + " --cell-size 4", &log), 0) << log;
+  ASSERT_EQ(runHpds("verify " + shellQuote(tmp / "map.ply") + " --spacing 0.2", &log), 0) << log;
   const PointBuffer map = readPointCloud((tmp / "map.ply").string());
   EXPECT_EQ(map.layout().find("frame"), nullptr);
   const std::string stats = readText(tmp / "stats.json");
@@ -153,18 +154,19 @@ TEST(Cli, SyntheticStreamScanModeTagsFramesAndSeedsAreDeterministic) {
                  &log),
             0)
       << log;
-  EXPECT_EQ(runHpds("verify " + shellQuote(tmp / "m.ply") + " --cell-size 4", &log), 0) << log;
+  EXPECT_EQ(runHpds("verify " + shellQuote(tmp / "m.ply") + " --spacing 0.1", &log), 0) << log;
 }
 
 TEST(Cli, ScanModeWithASpacingBuildsAndReportsOnlyTheLevelsItWrites) {
-  // --spacing 0.2 writes levels 0..5; scan mode then builds no deeper (7 with --normals, which average levels 6..7),
-  // and the summary and --stats say so instead of listing empty deeper levels. The written samples are the same as
-  // when every level is built (--level 8 writes them all; its levels 0..5 are the same points).
+  // With 4 m cells, --spacing 0.2 writes levels 0..5; scan mode then builds no deeper (7 with --normals, which
+  // average levels 6..7), and the summary and --stats say so instead of listing empty deeper levels. The written
+  // samples are the same as when every level is built (--level 8 writes them all; its levels 0..5 are the same points).
   const auto tmp = test::scratchDir("cli_depth");
   std::string log;
   ASSERT_EQ(runHpds("synth -o " + shellQuote(tmp / "s") + " --frames 1 --beams 8 --azimuth-steps 600", &log), 0) << log;
   const std::string input = shellQuote(tmp / "s" / "frame_000000.pcd");
-  ASSERT_EQ(runHpds("sample " + input + " --spacing 0.2 -o " + shellQuote(tmp / "a.ply") + " --stats " + shellQuote(tmp / "a.json"), &log), 0)
+  const std::string fixed = " --cell-size 4 --no-normals";
+  ASSERT_EQ(runHpds("sample " + input + fixed + " --spacing 0.2 -o " + shellQuote(tmp / "a.ply") + " --stats " + shellQuote(tmp / "a.json"), &log), 0)
       << log;
   EXPECT_NE(log.find("dropped past level 5,"), std::string::npos) << log;
   const std::string stats = readText(tmp / "a.json");
@@ -173,11 +175,11 @@ TEST(Cli, ScanModeWithASpacingBuildsAndReportsOnlyTheLevelsItWrites) {
   std::size_t listed = 0;
   for (std::size_t at = stats.find("{\"level\": "); at != std::string::npos; at = stats.find("{\"level\": ", at + 1)) ++listed;
   EXPECT_EQ(listed, 6u) << stats;
-  ASSERT_EQ(runHpds("sample " + input + " --spacing 0.2 --normals -o " + shellQuote(tmp / "n.ply") + " --stats " + shellQuote(tmp / "n.json"), &log), 0)
+  ASSERT_EQ(runHpds("sample " + input + " --cell-size 4 --spacing 0.2 --normals -o " + shellQuote(tmp / "n.ply") + " --stats " + shellQuote(tmp / "n.json"), &log), 0)
       << log;
   EXPECT_NE(readText(tmp / "n.json").find("\"built_depth\": 7,"), std::string::npos);
 
-  ASSERT_EQ(runHpds("sample " + input + " --level 8 -o " + shellQuote(tmp / "all.ply"), &log), 0) << log;
+  ASSERT_EQ(runHpds("sample " + input + fixed + " --level 8 -o " + shellQuote(tmp / "all.ply"), &log), 0) << log;
   const PointBuffer a = readPointCloud((tmp / "a.ply").string()), all = readPointCloud((tmp / "all.ply").string());
   const PointField *level = all.layout().find("level");
   ASSERT_NE(level, nullptr);

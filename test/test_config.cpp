@@ -31,7 +31,7 @@ std::size_t expectSameConfig(const HpdsConfig &a, const HpdsConfig &b) {
   [[maybe_unused]] const auto &[type, seed, feature_radius] = a.order;
   [[maybe_unused]] const auto &[level, spacing] = a.output;
   [[maybe_unused]] const auto &[enabled, radius, k, min_neighbors, neighborhood_level_offset, max_growth] = a.normals;
-  [[maybe_unused]] const auto &[evict_distance, max_samples] = a.map;
+  [[maybe_unused]] const auto &[evict_distance, max_samples, keep_depth] = a.map;
   [[maybe_unused]] const auto &[skip_zero_points, min_range, max_range] = a.input;
 
   std::size_t compared = 0;
@@ -55,6 +55,7 @@ std::size_t expectSameConfig(const HpdsConfig &a, const HpdsConfig &b) {
   same("normals.max_growth", a.normals.max_growth, b.normals.max_growth);
   same("map.evict_distance", a.map.evict_distance, b.map.evict_distance);
   same("map.max_samples", a.map.max_samples, b.map.max_samples);
+  same("map.keep_depth", a.map.keep_depth, b.map.keep_depth);
   same("input.skip_zero_points", a.input.skip_zero_points, b.input.skip_zero_points);
   same("input.min_range", a.input.min_range, b.input.min_range);
   same("input.max_range", a.input.max_range, b.input.max_range);
@@ -91,7 +92,7 @@ HpdsConfig nonDefaultConfig() {
   c.order.feature_radius = 0.1;  // not exactly representable: the dump must still round-trip it
   c.output.level = 5;
   c.output.spacing = 0.3;
-  c.normals.enabled = true;
+  c.normals.enabled = false;
   c.normals.radius = 1.0 / 3.0;
   c.normals.k = 20;
   c.normals.min_neighbors = 7;
@@ -99,6 +100,7 @@ HpdsConfig nonDefaultConfig() {
   c.normals.max_growth = 2.5;
   c.map.evict_distance = 123.456;
   c.map.max_samples = 1000000;
+  c.map.keep_depth = 9;
   c.input.skip_zero_points = false;
   c.input.min_range = 0.5;
   c.input.max_range = 1e3;
@@ -231,7 +233,9 @@ TEST(ConfigYaml, InvalidDocumentsNameTheKey) {
   const InvalidCase cases[] = {
       // values validateConfig rejects
       {"hierarchy: {cell_size: -1.0}", "hierarchy.cell_size", "> 0"},
-      {"hierarchy: {cell_size: 0}", "hierarchy.cell_size", "> 0"},
+      {"map: {keep_depth: -2}", "map.keep_depth", "-1 or in 0..hierarchy.max_depth"},
+      {"hierarchy: {max_depth: 6}\nmap: {keep_depth: 7}", "map.keep_depth", "0..hierarchy.max_depth (6)"},
+      {"output: {spacing: 1e7}", "output.spacing", "too large"},
       {"hierarchy: {cell_size: .nan}", "hierarchy.cell_size", "finite"},
       {"hierarchy: {cell_size: -.inf}", "hierarchy.cell_size", "finite"},
       {"hierarchy: {max_depth: 22}", "hierarchy.max_depth", "0..21"},

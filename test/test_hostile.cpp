@@ -265,9 +265,11 @@ TEST(HostileCli, TheSameFrameTwiceAddsNothingInMapMode) {
   }());
   writePcd((tmp / "f.pcd").string(), lidar.frame(0).frame.points);
   std::string log;
-  ASSERT_EQ(hpds("sample " + q(tmp / "f.pcd") + " -o " + q(tmp / "once.ply") + " --mode map --seed 1", &log), 0) << log;
+  // Every level down to 8 of 4 m cells is built and written, without normals.
+  const std::string levels = " --cell-size 4 --level 8 --no-normals";
+  ASSERT_EQ(hpds("sample " + q(tmp / "f.pcd") + " -o " + q(tmp / "once.ply") + " --mode map --seed 1" + levels, &log), 0) << log;
   ASSERT_EQ(hpds("sample " + q(tmp / "f.pcd") + " " + q(tmp / "f.pcd") + " -o " + q(tmp / "twice.ply") +
-                     " --mode map --seed 1 --stats " + q(tmp / "s.json"),
+                     " --mode map --seed 1 --stats " + q(tmp / "s.json") + levels,
                  &log),
             0)
       << log;
@@ -399,6 +401,7 @@ TEST(HostilePipeline, EveryNumericXyzTypeIsReadByValue) {
     HpdsConfig c;
     c.hierarchy.cell_size = 1.0;
     c.hierarchy.max_depth = 2;
+    c.output.level = 2;
     Pipeline p(c);
     const FrameResult r = p.addFrame(frameOf(typedCloud(t, pts)));
     EXPECT_EQ(r.counters.accepted, pts.size());  // unit grid at 1 m cells: every point its own level-0 sample
@@ -489,10 +492,14 @@ TEST(HostilePipeline, AllPointsAtOneSpotAndAtTheOrigin) {
 }
 
 TEST(HostilePipeline, CoordinatesAt1e7MetresAreExactOrCounted) {
-  // Default config (4 m, depth 8): 1e7 m is well inside the exact key range; with 2^-21 m cells it is not.
+  // 4 m cells, every level down to 8 built: 1e7 m is well inside the exact key range; with 2^-21 m cells it is not.
   const std::vector<std::array<double, 3>> far = {{1e7, 0, 0}, {-1e7, 1e7, 5}, {1e7 + 2.0, 0, 0}, {0, 0, -1e7}};
+  HpdsConfig depth8;
+  depth8.hierarchy.cell_size = 4.0;
+  depth8.hierarchy.max_depth = 8;
+  depth8.output.level = 8;
   for (FieldType t : {FieldType::Float32, FieldType::Float64}) {
-    Pipeline p(HpdsConfig{});
+    Pipeline p(depth8);
     const FrameResult r = p.addFrame(frameOf(typedCloud(t, far)));
     EXPECT_EQ(r.counters.accepted, 4u) << fieldTypeName(t);
     EXPECT_EQ(r.counters.out_of_range, 0u);
@@ -502,6 +509,7 @@ TEST(HostilePipeline, CoordinatesAt1e7MetresAreExactOrCounted) {
   HpdsConfig fine;
   fine.hierarchy.cell_size = 1.0;
   fine.hierarchy.max_depth = 21;
+  fine.output.level = 21;
   Pipeline p(fine);
   const FrameResult r = p.addFrame(frameOf(typedCloud(FieldType::Float64, far)));
   EXPECT_EQ(r.counters.out_of_range, 4u);
@@ -510,6 +518,7 @@ TEST(HostilePipeline, CoordinatesAt1e7MetresAreExactOrCounted) {
   HpdsConfig coarse;
   coarse.hierarchy.cell_size = 1e6;
   coarse.hierarchy.max_depth = 0;
+  coarse.output.level = 0;
   Pipeline pc(coarse);
   EXPECT_EQ(pc.addFrame(frameOf(typedCloud(FieldType::Float64, {{1e30, 0, 0}}))).counters.out_of_range, 1u);
 }
@@ -528,7 +537,10 @@ TEST(HostilePipeline, TenMillionPointFrameInBoundedTimeAndMemory) {
     std::memcpy(f.points.record(i), rec, 16);
   }
   HpdsConfig c;
+  c.hierarchy.cell_size = 4.0;
   c.hierarchy.max_depth = 2;
+  c.output.level = 2;
+  c.normals.enabled = false;
   const auto t0 = std::chrono::steady_clock::now();
   Pipeline p(c);
   const FrameResult r = p.addFrame(f);

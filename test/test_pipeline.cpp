@@ -212,16 +212,26 @@ TEST(Pipeline, LargeCoordinatesThroughThePoseAreExact) {
 
 TEST(Pipeline, ScanModeBuildsOnlyTheLevelsItsOutputsReadAndTheyComeOutTheSame) {
   HpdsConfig c;
+  c.hierarchy.cell_size = 4.0;
   c.hierarchy.max_depth = 8;
   c.output.level = 4;
+  c.normals.enabled = false;
   EXPECT_EQ(Pipeline(c).buildDepth(), 4);
   c.normals.enabled = true;  // neighborhood_level_offset 2: the normals read levels 5 and 6 too
   EXPECT_EQ(Pipeline(c).buildDepth(), 6);
   c.normals.neighborhood_level_offset = 7;
   EXPECT_EQ(Pipeline(c).buildDepth(), 8);  // clamped to max_depth, as the normals clamp it
   c.normals.neighborhood_level_offset = 2;
+  c.map.keep_depth = 8;
+  EXPECT_EQ(Pipeline(c).buildDepth(), 6) << "scan mode keeps nothing: map.keep_depth does not apply";
   c.mode = Mode::Map;
-  EXPECT_EQ(Pipeline(c).buildDepth(), 8) << "map mode keeps every level for later reads";
+  c.map.keep_depth = -1;
+  EXPECT_EQ(Pipeline(c).buildDepth(), 6) << "map mode too builds only the levels its outputs read";
+  c.map.keep_depth = 8;
+  EXPECT_EQ(Pipeline(c).buildDepth(), 8) << "map.keep_depth keeps finer levels for later reads";
+  c.map.keep_depth = 3;
+  EXPECT_EQ(Pipeline(c).buildDepth(), 6) << "never shallower than what the outputs read";
+  c.map.keep_depth = -1;
   c.mode = Mode::Scan;
   {
     Pipeline p(c);
@@ -341,6 +351,46 @@ TEST(Pipeline, SamplesHitByTheLastFrameMatchBruteForce) {
   }
 }
 
+TEST(Pipeline, MapModeStoresOnlyTheLevelsItReadsUnlessAskedToKeepMore) {
+  HpdsConfig c;
+  c.mode = Mode::Map;
+  // The shipped defaults in map mode: output level 5 (r = 0.1 m) and the normals' levels 6..7, nothing finer.
+  EXPECT_EQ(Pipeline(c).buildDepth(), 7);
+  // Spacing 0.4 m without normals: output level 3, built alone unless map.keep_depth asks for levels 4..5 too.
+  c.output.spacing = 0.4;
+  c.normals.enabled = false;
+  const SyntheticLidar lidar(smallLidar(SceneKind::Urban, 2));
+  Pipeline lean(c);
+  c.map.keep_depth = 5;
+  Pipeline kept(c);
+  ASSERT_EQ(lean.outputLevel(), 3);
+  ASSERT_EQ(lean.buildDepth(), 3);
+  ASSERT_EQ(kept.buildDepth(), 5);
+  for (int i = 0; i < 2; ++i) {
+    const Frame f = lidar.frame(i).frame;
+    const FrameResult a = lean.addFrame(f), b = kept.addFrame(f);
+    EXPECT_EQ(a.counters.accepted_per_level[4] + a.counters.accepted_per_level[5], 0u);
+    EXPECT_GT(b.counters.accepted_per_level[4], 0u);
+    EXPECT_GT(b.counters.accepted_per_level[5], 0u);
+    EXPECT_GT(a.counters.dropped_depth, b.counters.dropped_depth);
+  }
+  EXPECT_EQ(lean.hierarchy().countAtLevel(4) + lean.hierarchy().countAtLevel(5), 0u);
+  EXPECT_GT(kept.hierarchy().countAtLevel(5), 0u);
+  EXPECT_LT(lean.hierarchy().memUsage(), kept.hierarchy().memUsage());
+  // Both maps keep the Poisson property of their output (levels 0..3 at r_3 = 0.4 m), by brute force.
+  for (const Pipeline *p : {&lean, &kept}) {
+    const std::vector<SampleId> ids = p->outputSamples();
+    ASSERT_GT(ids.size(), 100u);
+    double min_d2 = INFINITY;
+    for (std::size_t i = 0; i < ids.size(); ++i)
+      for (std::size_t j = i + 1; j < ids.size(); ++j) {
+        const double *u = p->hierarchy().position(ids[i]), *v = p->hierarchy().position(ids[j]);
+        min_d2 = std::min(min_d2, (u[0] - v[0]) * (u[0] - v[0]) + (u[1] - v[1]) * (u[1] - v[1]) + (u[2] - v[2]) * (u[2] - v[2]));
+      }
+    EXPECT_GE(std::sqrt(min_d2), 0.4);
+  }
+}
+
 TEST(Pipeline, EvictionBoundsMemoryOnALongDrive) {
   SyntheticLidarConfig lc = smallLidar(SceneKind::Urban, 40);
   lc.speed = 4.0;
@@ -349,7 +399,11 @@ TEST(Pipeline, EvictionBoundsMemoryOnALongDrive) {
   HpdsConfig c;
   c.mode = Mode::Map;
   c.map.evict_distance = 30.0;
+  c.map.max_samples = 0;
+  c.hierarchy.cell_size = 4.0;
   c.hierarchy.max_depth = 6;
+  c.output.level = 6;
+  c.normals.enabled = false;
   Pipeline p(c);
   std::size_t peak_after_warmup = 0, peak_bytes_late = 0, bytes_at_20 = 0;
   for (int i = 0; i < 40; ++i) {

@@ -68,6 +68,9 @@ TEST(Soak, LongDriveInMapModeKeepsMemoryFlatAndTheLocalMapCorrect) {
   c.hierarchy.max_depth = 6;
   c.output.level = 5;
   c.map.evict_distance = kEvict;
+  c.map.max_samples = 0;      // eviction alone bounds the map here
+  c.map.keep_depth = 6;       // every level stored, as the memory figures below assume
+  c.normals.enabled = false;  // the map, not the normals, is under test
   c.order.seed = 3;
   Pipeline p(c);
 

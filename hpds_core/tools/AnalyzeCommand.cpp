@@ -17,6 +17,7 @@
 #include <sstream>
 #include <stdexcept>
 
+#include "CliOptions.hpp"
 #include "Commands.hpp"
 #include "OutputPaths.hpp"
 #include "QualityIo.hpp"
@@ -35,7 +36,7 @@ namespace fs = std::filesystem;
 struct AnalyzeArgs {
   std::string sampling;
   std::string out_dir;
-  double cell_size = 0.0;
+  CellSizeOptions cell;
   std::vector<std::string> inputs;
   std::string poses;
   std::vector<double> patch;  // cx, cy, size
@@ -211,7 +212,7 @@ void runAnalyze(const AnalyzeArgs &a) {
   std::vector<InputPath> inputs = {{"input", a.sampling}, {"--poses", a.poses}};
   for (const std::string &in : a.inputs) inputs.push_back({"--input", in});
   checkPaths(inputs, {}, {{"-o", a.out_dir, {"analysis.json", "levels.csv", "rdf.csv", "spectrum.csv"}}});
-  if (!(a.cell_size > 0.0)) throw std::invalid_argument("--cell-size: must be > 0");
+  const double cell_size = resolveCellSize(a.cell);
   if (!a.patch.empty() && a.patch.size() != 3) throw std::invalid_argument("--patch: expected cx,cy,size");
   SamplingCloud cloud = loadSampling(a.sampling);
   if (cloud.level.empty()) throw std::invalid_argument(a.sampling + ": no `level` field (not an hpds sampling?)");
@@ -250,7 +251,7 @@ void runAnalyze(const AnalyzeArgs &a) {
   std::cout << "level        r_D    count    union  min_nn/r  mean_nn/r  patch\n";
   for (int d = 0; d <= max_level; ++d) {
     const auto &u = unions[static_cast<std::size_t>(d)];
-    const double r = poissonRadius(a.cell_size, d);
+    const double r = poissonRadius(cell_size, d);
     double mn = NAN, mean = NAN;
     if (u.size() >= 2) {
       const std::vector<double> nn = nearestNeighborDistances(u);
@@ -363,7 +364,7 @@ void runAnalyze(const AnalyzeArgs &a) {
 
   {
     TextFile json((out / "analysis.json").string());
-    json << "{\n  \"sampling\": " << jsonQuoted(a.sampling) << ",\n  \"cell_size\": " << num(a.cell_size)
+    json << "{\n  \"sampling\": " << jsonQuoted(a.sampling) << ",\n  \"cell_size\": " << num(cell_size)
          << ",\n  \"frame\": " << (frame ? std::to_string(*frame) : "null") << ",\n  \"patch\": {\"center\": ["
          << num(patch.center_xy.x()) << ", " << num(patch.center_xy.y()) << "], \"size\": " << num(patch.size)
          << ", \"window\": " << num(patch.window.size) << ", \"normal\": [" << num(patch.plane.normal.x()) << ", "
@@ -409,7 +410,7 @@ void addAnalyzeCommand(CLI::App &app) {
   CLI::App *cmd = app.add_subcommand(
       "analyze", "blue-noise analysis of a sampling per level (RDF, power spectrum) and, with --input, versus grids");
   cmd->add_option("sampling", a->sampling, "sampling written by hpds sample (x y z level)")->required();
-  cmd->add_option("--cell-size", a->cell_size, "[m] level-0 cell edge the sampling was made with")->required();
+  addCellSizeOptions(*cmd, a->cell);
   cmd->add_option("-o,--output", a->out_dir, "output directory")->required();
   cmd->add_option("--input", a->inputs, "the input clouds of the sampling: adds the grid baselines at equal count");
   cmd->add_option("--poses", a->poses, "KITTI poses of the inputs (as given to hpds sample)");

@@ -6,12 +6,18 @@ namespace hpds::cli {
 
 void addSamplingOptions(CLI::App &app, SamplingOptions &o) {
   app.add_option("--config", o.config_file, "YAML config (see config/hpds.yaml); flags override it");
-  app.add_option("--cell-size", o.cell_size, "[m] level-0 cell edge (hierarchy.cell_size)");
+  app.add_option("--cell-size", o.cell_size, "[m] level-0 cell edge, fixed (hierarchy.cell_size; default: derived "
+                                             "from the spacing)");
   app.add_option("--max-depth", o.max_depth, "finest level 0..21 (hierarchy.max_depth)");
   auto *lvl = app.add_option("--level", o.level, "write levels 0..D (output.level)");
-  auto *sp = app.add_option("--spacing", o.spacing, "[m] coarsest level with r_D <= S (output.spacing)");
+  auto *sp = app.add_option("--spacing", o.spacing,
+                            "[m] output radius: samples at least S apart; exactly S unless --cell-size fixes the cell, "
+                            "then the coarsest level with r_D <= S (output.spacing)");
   lvl->excludes(sp);
-  app.add_flag("--normals", o.normals, "estimate PCA normals and curvature (normals.enabled)");
+  // A function flag, so that the config's value stays unless one of the two is given.
+  app.add_flag_function(
+      "--normals,!--no-normals", [&o](std::int64_t count) { o.normals = count > 0; },
+      "estimate PCA normals and curvature, or not (normals.enabled; default: the config's, on)");
   app.add_option("--order", o.order, "random | input | sphericity | surface_variation (order.type)");
   app.add_option("--seed", o.seed, "seed of the random order (order.seed)");
   app.add_option("--mode", o.mode, "scan | map (mode)");
@@ -28,13 +34,40 @@ HpdsConfig resolveConfig(const SamplingOptions &o) {
     c.output.level = -1;
     c.output.spacing = *o.spacing;
   }
-  if (o.normals) c.normals.enabled = true;
+  if (o.normals) c.normals.enabled = *o.normals;
   if (o.order) c.order.type = parseInsertionOrder(*o.order, "--order");
   if (o.seed) c.order.seed = *o.seed;
   if (o.mode) c.mode = parseMode(*o.mode, "--mode");
   if (o.threads) c.threads = *o.threads;
   validateConfig(c);
   return c;
+}
+
+void addCellSizeOptions(CLI::App &app, CellSizeOptions &o) {
+  auto *cell = app.add_option("--cell-size", o.cell_size, "[m] level-0 cell edge the sampling was made with");
+  auto *spacing = app.add_option("--spacing", o.spacing,
+                                 "[m] or: the --spacing (output.spacing) the sampling was made with, the cell derived "
+                                 "from it as hpds sample does when no cell size is fixed");
+  auto *depth = app.add_option("--max-depth", o.max_depth, "with --spacing: the hierarchy.max_depth of the sampling")
+                    ->capture_default_str();
+  cell->excludes(spacing);
+  depth->needs(spacing);
+}
+
+double resolveCellSize(const CellSizeOptions &o) {
+  if (o.cell_size) {
+    if (!(*o.cell_size > 0.0)) throw std::invalid_argument("--cell-size: must be > 0");
+    return *o.cell_size;
+  }
+  if (!o.spacing) throw std::invalid_argument("--cell-size or --spacing is required (the sampling's level-0 cell)");
+  HpdsConfig c;
+  c.hierarchy.cell_size = 0.0;
+  c.hierarchy.max_depth = o.max_depth;
+  c.output.level = -1;
+  c.output.spacing = *o.spacing;
+  if (!(*o.spacing > 0.0)) throw std::invalid_argument("--spacing: must be > 0");
+  validateConfig(c);
+  return resolveOutput(c).cell_size;
 }
 
 }  // namespace hpds::cli

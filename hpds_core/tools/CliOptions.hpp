@@ -16,17 +16,28 @@ struct SamplingOptions {
   std::optional<int> max_depth;
   std::optional<int> level;
   std::optional<double> spacing;
-  bool normals = false;
+  std::optional<bool> normals;
   std::optional<std::string> order;
   std::optional<std::uint64_t> seed;
   std::optional<std::string> mode;
   std::optional<int> threads;
 };
 
-/// Registers --config, --cell-size, --max-depth, --level, --spacing, --normals, --order, --seed, --mode, --threads.
+/// Registers --config, --cell-size, --max-depth, --level, --spacing, --normals/--no-normals, --order, --seed, --mode,
+/// --threads.
 void addSamplingOptions(CLI::App &app, SamplingOptions &options);
 
 /// Defaults, then --config FILE, then the flags; throws std::invalid_argument naming the key on a bad value.
 [[nodiscard]] HpdsConfig resolveConfig(const SamplingOptions &options);
+
+/// The level-0 cell of a sampling to check: --cell-size C, or --spacing S [--max-depth M] for one written with a
+/// derived cell (hierarchy.cell_size 0), derived as `hpds sample` derives it. Exactly one of the two is required.
+struct CellSizeOptions {
+  std::optional<double> cell_size;
+  std::optional<double> spacing;
+  int max_depth = HierarchyConfig{}.max_depth;
+};
+void addCellSizeOptions(CLI::App &app, CellSizeOptions &options);
+[[nodiscard]] double resolveCellSize(const CellSizeOptions &options);
 
 }  // namespace hpds::cli

@@ -10,6 +10,7 @@
 #include <sstream>
 #include <stdexcept>
 
+#include "QualityIo.hpp"
 #include "hpds/io/AtomicFile.hpp"
 
 namespace hpds::cli {
@@ -30,6 +31,9 @@ RunReport reportFor(const std::string &command, const Pipeline &pipeline) {
   r.cell_size = pipeline.config().hierarchy.cell_size;
   r.max_depth = pipeline.config().hierarchy.max_depth;
   r.output_level = pipeline.outputLevel();
+  r.output_radius = pipeline.outputResolution().radius;
+  r.spacing_asked = pipeline.outputResolution().spacing_asked;
+  r.output_reason = pipeline.outputResolution().reason;
   r.built_depth = pipeline.buildDepth();
   r.samples_per_level.assign(static_cast<std::size_t>(r.built_depth) + 1, 0);
   return r;
@@ -51,6 +55,9 @@ std::string toJson(const RunReport &r) {
   j << "  \"cell_size\": " << num(r.cell_size) << ",\n";
   j << "  \"max_depth\": " << r.max_depth << ",\n";
   j << "  \"output_level\": " << r.output_level << ",\n";
+  j << "  \"output\": {\"spacing_asked\": " << (r.spacing_asked > 0.0 ? num(r.spacing_asked) : "null")
+    << ", \"level\": " << r.output_level << ", \"radius\": " << num(r.output_radius)
+    << ", \"cell_size\": " << num(r.cell_size) << ", \"reason\": " << jsonQuoted(r.output_reason) << "},\n";
   j << "  \"built_depth\": " << r.built_depth << ",\n";
   j << "  \"levels\": [";
   for (std::size_t d = 0; d < r.samples_per_level.size(); ++d)
@@ -77,6 +84,7 @@ void writeJsonFile(const std::string &path, const RunReport &report) { writeFile
 
 std::string levelSummary(const RunReport &r) {
   std::ostringstream s;
+  if (!r.output_reason.empty()) s << r.output_reason << "\n";
   s << "level  r_D [m]      samples     levels 0..D\n";
   std::uint64_t cumulative = 0;
   for (std::size_t d = 0; d < r.samples_per_level.size(); ++d) {

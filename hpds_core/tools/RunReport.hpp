@@ -20,7 +20,10 @@ struct RunReport {
   double cell_size = 0.0;
   int max_depth = 0;
   int output_level = 0;
-  int built_depth = 0;  ///< deepest level built (Pipeline::buildDepth: max_depth in map mode)
+  double output_radius = 0.0;  ///< [m] r of the output level
+  double spacing_asked = 0.0;  ///< [m] output.spacing as given (0 = none)
+  std::string output_reason;   ///< how the output level and cell were chosen (OutputResolution::reason)
+  int built_depth = 0;  ///< deepest level built (Pipeline::buildDepth)
   std::vector<std::uint64_t> samples_per_level;  ///< levels 0..built_depth (map: in the map; scan: summed over frames)
   FrameCounters totals;
   std::uint64_t output_points = 0;
@@ -43,7 +46,8 @@ struct RunReport {
 [[nodiscard]] std::string toJson(const RunReport &report);
 void writeJsonFile(const std::string &path, const RunReport &report);
 
-/// The table printed after a run: level, r_D, samples, cumulative union count.
+/// The text printed after a run: how the output level was chosen, then a table of level, r_D, samples, cumulative
+/// union count.
 [[nodiscard]] std::string levelSummary(const RunReport &report);
 
 /// "\r[3/10] name" on stderr when stderr is a terminal; silent otherwise (logs and pipes stay clean).

@@ -190,6 +190,7 @@ TEST(FrameProcessor, MapOutputIsTheSampleSetHitByTheFrame) {
   NodeConfig config;
   config.hpds.mode = hpds::Mode::Map;
   config.hpds.output.level = 4;
+  config.hpds.hierarchy.cell_size = 4.0;
   config.hpds.hierarchy.max_depth = 6;
   config.ros.fixed_frame = "odom";
   config.ros.local_map_rate = 4.0;  // frames are 0.1 s apart: a local map every third frame

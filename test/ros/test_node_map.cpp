@@ -117,8 +117,7 @@ TEST_F(MapTest, TwoScansBuildAPoissonMapInTheFixedFrame) {
       },
       30.0));
 
-  const int L = hpds::resolveOutputLevel(config_.hpds);
-  const double rL = hpds::poissonRadius(config_.hpds.hierarchy.cell_size, L);
+  const double rL = hpds::resolveOutput(config_.hpds).radius;
   const Eigen::Isometry3d poses[2] = {Eigen::Isometry3d::Identity(),
                                       readRelativePose(data_ + "/hdl32_relative.txt")};
   const char *files[2] = {"hdl32_a.pcd", "hdl32_b.pcd"};

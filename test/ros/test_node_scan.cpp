@@ -32,7 +32,7 @@ void checkScanOutput(const PointCloud2 &out, const PointCloud2 &in, const hpds_n
 
   // Poisson property of levels 0..L (all of ~output) at r_L, up to float32 rounding of the coordinates.
   const int L = hpds::resolveOutputLevel(config.hpds);
-  const double r = hpds::poissonRadius(config.hpds.hierarchy.cell_size, L);
+  const double r = hpds::resolveOutput(config.hpds).radius;
   const auto xyz = hpds_test::positions(cloud);
   double extent = 0.0;
   for (const auto &p : xyz) extent = std::max(extent, p.cwiseAbs().maxCoeff());

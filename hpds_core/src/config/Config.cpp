@@ -1,6 +1,7 @@
 #include "hpds/config/Config.hpp"
 
 #include <cmath>
+#include <cstdio>
 #include <stdexcept>
 
 namespace hpds {
@@ -48,10 +49,37 @@ Mode parseMode(const std::string &text, const std::string &key) {
   fail(key, "unknown mode '" + text + "' (expected scan or map)");
 }
 
+namespace {
+constexpr double kMaxCellSize = 1e6;
+
+// The cell edge of level `level` whose radius is `spacing`, as a level-0 edge: the smallest double whose r_level is
+// not below the spacing (the product may round a bit low).
+double cellSizeForRadius(double spacing, int level) {
+  double cell = std::ldexp(2.0 * spacing / std::sqrt(3.0), level);
+  while (poissonRadius(cell, level) < spacing) cell = std::nextafter(cell, INFINITY);
+  return cell;
+}
+
+// Derived cell: the level whose 2^L multiple of the spacing's edge stays within kDefaultCellSize.
+int derivedOutputLevel(double spacing, int max_depth) {
+  const double edge = 2.0 * spacing / std::sqrt(3.0);
+  int level = 0;
+  while (level < max_depth && std::ldexp(edge, level + 1) <= kDefaultCellSize) ++level;
+  return level;
+}
+
+std::string metres(double v) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.6g m", v);
+  return buf;
+}
+}  // namespace
+
 void validateConfig(const HpdsConfig &c) {
   requireFinite("hierarchy.cell_size", c.hierarchy.cell_size);
-  if (c.hierarchy.cell_size <= 0.0) fail("hierarchy.cell_size", "must be > 0, got " + std::to_string(c.hierarchy.cell_size));
-  if (c.hierarchy.cell_size > 1e6) fail("hierarchy.cell_size", "must be <= 1e6 m");
+  if (c.hierarchy.cell_size < 0.0)
+    fail("hierarchy.cell_size", "must be > 0, or 0 = derived from output.spacing, got " + std::to_string(c.hierarchy.cell_size));
+  if (c.hierarchy.cell_size > kMaxCellSize) fail("hierarchy.cell_size", "must be <= 1e6 m");
   if (c.hierarchy.max_depth < 0 || c.hierarchy.max_depth > 21)
     fail("hierarchy.max_depth", "must be in 0..21, got " + std::to_string(c.hierarchy.max_depth));
   requireNonNegative("order.feature_radius", c.order.feature_radius);
@@ -59,11 +87,11 @@ void validateConfig(const HpdsConfig &c) {
     fail("output.level", "must be -1 or in 0..hierarchy.max_depth (" + std::to_string(c.hierarchy.max_depth) +
                              "), got " + std::to_string(c.output.level));
   requireNonNegative("output.spacing", c.output.spacing);
-  if (c.output.level < 0 && c.output.spacing > 0.0 &&
-      c.output.spacing < poissonRadius(c.hierarchy.cell_size, c.hierarchy.max_depth))
-    fail("output.spacing", "is finer than the finest level's radius " +
-                               std::to_string(poissonRadius(c.hierarchy.cell_size, c.hierarchy.max_depth)) +
-                               " m; raise hierarchy.max_depth or the spacing");
+  if (c.output.level < 0 && c.output.spacing > 0.0) {
+    if (c.hierarchy.cell_size == 0.0 &&
+        !(cellSizeForRadius(c.output.spacing, derivedOutputLevel(c.output.spacing, c.hierarchy.max_depth)) <= kMaxCellSize))
+      fail("output.spacing", "is too large: the derived hierarchy.cell_size would exceed 1e6 m");
+  }
   requireNonNegative("normals.radius", c.normals.radius);
   if (c.normals.k < 0) fail("normals.k", "must be >= 0, got " + std::to_string(c.normals.k));
   if (c.normals.min_neighbors < 3)
@@ -78,6 +106,9 @@ void validateConfig(const HpdsConfig &c) {
   if (c.normals.max_growth < 1.0 || c.normals.max_growth > 1024.0)
     fail("normals.max_growth", "must be in 1..1024 (1 = off), got " + std::to_string(c.normals.max_growth));
   requireNonNegative("map.evict_distance", c.map.evict_distance);
+  if (c.map.keep_depth < -1 || c.map.keep_depth > c.hierarchy.max_depth)
+    fail("map.keep_depth", "must be -1 or in 0..hierarchy.max_depth (" + std::to_string(c.hierarchy.max_depth) +
+                               "), got " + std::to_string(c.map.keep_depth));
   requireNonNegative("input.min_range", c.input.min_range);
   requireNonNegative("input.max_range", c.input.max_range);
   if (c.input.max_range > 0.0 && c.input.max_range <= c.input.min_range)
@@ -89,13 +120,60 @@ double cellEdge(double cell_size, int depth) { return std::ldexp(cell_size, -dep
 
 double poissonRadius(double cell_size, int depth) { return 0.5 * std::sqrt(3.0) * cellEdge(cell_size, depth); }
 
-int resolveOutputLevel(const HpdsConfig &c) {
-  if (c.output.level >= 0) return c.output.level;
-  if (c.output.spacing > 0.0) {
-    for (int d = 0; d <= c.hierarchy.max_depth; ++d)
-      if (poissonRadius(c.hierarchy.cell_size, d) <= c.output.spacing) return d;
+OutputResolution resolveOutput(const HpdsConfig &c) {
+  OutputResolution r;
+  const bool by_spacing = c.output.level < 0 && c.output.spacing > 0.0;
+  const bool derived = c.hierarchy.cell_size == 0.0;
+  const std::string spacing = "output.spacing " + metres(c.output.spacing);
+  bool clamped = false;  // the fixed cell's finest level is coarser than the spacing
+  if (by_spacing && derived) {
+    r.level = derivedOutputLevel(c.output.spacing, c.hierarchy.max_depth);
+    r.cell_size = cellSizeForRadius(c.output.spacing, r.level);
+  } else {
+    r.cell_size = derived ? kDefaultCellSize : c.hierarchy.cell_size;
+    r.level = c.output.level >= 0 ? c.output.level : c.hierarchy.max_depth;
+    if (by_spacing) {
+      clamped = true;  // unless a level reaches the spacing
+      for (int d = 0; d <= c.hierarchy.max_depth; ++d)
+        if (poissonRadius(r.cell_size, d) <= c.output.spacing) {
+          r.level = d;
+          clamped = false;
+          break;
+        }
+    }
   }
-  return c.hierarchy.max_depth;
+  r.radius = poissonRadius(r.cell_size, r.level);
+  if (by_spacing) r.spacing_asked = c.output.spacing;
+  const std::string result = "output level " + std::to_string(r.level) + ", r_" + std::to_string(r.level) + " = " +
+                             metres(r.radius) + ", level-0 cell " + metres(r.cell_size);
+  const std::string cell = derived ? "hierarchy.cell_size 0 (" + metres(kDefaultCellSize) + ")"
+                                   : "hierarchy.cell_size " + metres(c.hierarchy.cell_size);
+  if (by_spacing && derived) {
+    r.reason = result + ": the spacing asked (" + spacing + "), with the cell derived from it (hierarchy.cell_size 0)";
+  } else if (clamped) {
+    r.reason = result + ": hierarchy.max_depth " + std::to_string(c.hierarchy.max_depth) + ", since even its radius is "
+               "coarser than " + spacing + " at the fixed " + cell + " (raise hierarchy.max_depth, or set "
+               "hierarchy.cell_size 0 to get the spacing exactly)";
+  } else if (by_spacing) {
+    r.reason = result + ": the coarsest level with r_D <= " + spacing + " at the fixed " + cell +
+               " (radii halve from level to level; hierarchy.cell_size 0 gives the spacing exactly)";
+  } else if (c.output.level >= 0) {
+    r.reason = result + ": output.level " + std::to_string(c.output.level) + " at " + cell;
+  } else {
+    r.reason = result + ": output.level -1 and output.spacing 0, so hierarchy.max_depth " +
+               std::to_string(c.hierarchy.max_depth) + " at " + cell;
+  }
+  return r;
+}
+
+int resolveOutputLevel(const HpdsConfig &c) { return resolveOutput(c).level; }
+
+HpdsConfig resolvedConfig(const HpdsConfig &c) {
+  const OutputResolution r = resolveOutput(c);
+  HpdsConfig out = c;
+  out.hierarchy.cell_size = r.cell_size;
+  out.output.level = r.level;
+  return out;
 }
 
 }  // namespace hpds

@@ -17,7 +17,7 @@ NormalParams normalParamsFor(const HpdsConfig &config, int level) {
   p.level = level;
   p.k = config.normals.k;
   p.radius = config.normals.radius;
-  if (p.radius <= 0.0 && p.k == 0) p.radius = 2.5 * poissonRadius(config.hierarchy.cell_size, level);
+  if (p.radius <= 0.0 && p.k == 0) p.radius = 2.5 * poissonRadius(resolveOutput(config).cell_size, level);
   p.min_neighbors = config.normals.min_neighbors;
   p.neighborhood_level_offset = config.normals.neighborhood_level_offset;
   p.max_growth = config.normals.max_growth;

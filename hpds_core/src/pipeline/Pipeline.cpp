@@ -34,24 +34,26 @@ FrameCounters &FrameCounters::operator+=(const FrameCounters &o) {
 }
 
 namespace {
-/// Scan mode's deepest level read: the output levels, and the finer levels the normals average over.
-int scanDepthFor(const HpdsConfig &config, int output_level) {
+/// The deepest level read: the output levels, the finer levels the normals average over, the levels a map keeps.
+int buildDepthFor(const HpdsConfig &config, int output_level) {
   const int normals = config.normals.enabled ? output_level + std::max(0, config.normals.neighborhood_level_offset) : 0;
-  return std::min(config.hierarchy.max_depth, std::max(output_level, normals));
+  const int kept = config.mode == Mode::Map ? config.map.keep_depth : -1;
+  return std::min(config.hierarchy.max_depth, std::max({output_level, normals, kept}));
 }
 }  // namespace
 
 Pipeline::Pipeline(const HpdsConfig &config)
-    : config_((validateConfig(config), config)),
-      output_level_(resolveOutputLevel(config)),
-      scan_depth_(scanDepthFor(config, output_level_)),
-      hierarchy_(config.hierarchy.cell_size, config.hierarchy.max_depth) {}
+    : resolution_((validateConfig(config), resolveOutput(config))),
+      config_(resolvedConfig(config)),
+      output_level_(resolution_.level),
+      build_depth_(buildDepthFor(config_, output_level_)),
+      hierarchy_(config_.hierarchy.cell_size, config_.hierarchy.max_depth) {}
 
 void Pipeline::requireLevel(int level) {
   if (level < 0 || level > config_.hierarchy.max_depth)
     throw std::invalid_argument("required level " + std::to_string(level) + " is outside 0..hierarchy.max_depth (" +
                                 std::to_string(config_.hierarchy.max_depth) + ")");
-  scan_depth_ = std::max(scan_depth_, level);
+  build_depth_ = std::max(build_depth_, level);
 }
 
 FrameResult Pipeline::addFrame(const Frame &frame) {

@@ -67,10 +67,11 @@ HpdsServer::HpdsServer(ros::NodeHandle nh, ros::NodeHandle private_nh, const std
   srv_load_map_ = pnh_.advertiseService<std_srvs::Trigger::Request, std_srvs::Trigger::Response>(
       "load_map", [this](auto &req, auto &res) { return onMapService(false, req, res); });
 
-  const int output_level = processors_.front()->pipeline().outputLevel();
+  const hpds::Pipeline &pipeline = processors_.front()->pipeline();
   std::ostringstream summary;
-  summary << "hpds: " << hpds::toString(config_.hpds.mode) << " mode, output levels 0.." << output_level
-          << " (spacing " << hpds::poissonRadius(config_.hpds.hierarchy.cell_size, output_level) << " m)";
+  summary << "hpds: " << hpds::toString(config_.hpds.mode) << " mode, " << pipeline.outputResolution().reason
+          << "; levels 0.." << pipeline.buildDepth() << " built"
+          << (config_.hpds.normals.enabled ? ", normals on" : ", normals off");
   if (!target_frame_.empty()) summary << ", outputs in frame '" << target_frame_ << "'";
   if (processors_.size() > 1) summary << ", " << processors_.size() << " frames in parallel";
   ROS_INFO_STREAM_NAMED("hpds", summary.str() << "; input " << sub_.getTopic() << ", output "

@@ -22,9 +22,15 @@ enum class Mode { Scan, Map };
 /// Parses "scan" | "map"; throws std::invalid_argument naming `key`.
 [[nodiscard]] Mode parseMode(const std::string &text, const std::string &key = "mode");
 
+/// Level-0 cell edge [m] when hierarchy.cell_size is 0 and the output is not chosen by a spacing; also the largest
+/// level-0 cell a derived cell size gets (see resolveOutput).
+inline constexpr double kDefaultCellSize = 4.0;
+
 struct HierarchyConfig {
-  double cell_size = 4.0;  ///< [m] edge of a level-0 cell; level D has edge cell_size / 2^D and radius sqrt(3)/2 of it
-  int max_depth = 8;       ///< finest level, 0..21; points rejected at every level are dropped and counted
+  double cell_size = 0.0;  ///< [m] edge of a level-0 cell; level D has edge cell_size / 2^D and radius sqrt(3)/2 of it;
+                           ///< 0 = derived: the output level's radius is output.spacing exactly (see resolveOutput)
+  int max_depth = 8;       ///< finest level that may be built, 0..21 (points are only inserted down to the levels
+                           ///< that are read: Pipeline::buildDepth)
 };
 
 struct OrderConfig {
@@ -35,11 +41,11 @@ struct OrderConfig {
 
 struct OutputConfig {
   int level = -1;        ///< output level D (levels 0..D are output); -1 = derive from `spacing`, else max_depth
-  double spacing = 0.0;  ///< [m] with level = -1: the coarsest level with r_D <= spacing; 0 = unused
+  double spacing = 0.1;  ///< [m] with level = -1: the output's Poisson radius (see resolveOutput); 0 = unused
 };
 
 struct NormalConfig {
-  bool enabled = false;    ///< estimate PCA normals and curvature for the output samples
+  bool enabled = true;     ///< estimate PCA normals and curvature for the output samples
   double radius = 0.0;     ///< [m] neighbourhood radius; 0 = 2.5 * r_D of the output level (when k = 0)
   int k = 0;               ///< k nearest neighbours (within `radius` when it is > 0); 0 = radius only
   int min_neighbors = 5;   ///< fewer neighbours (the sample included) -> invalid normal (NaN, counted)
@@ -49,8 +55,10 @@ struct NormalConfig {
 };
 
 struct MapConfig {
-  double evict_distance = 0.0;  ///< [m] map mode: drop samples farther than this from the latest sensor; 0 = never
-  std::uint64_t max_samples = 0;  ///< map mode: cap on stored samples, farthest from the sensor go first; 0 = none
+  double evict_distance = 100.0;  ///< [m] map mode: drop samples farther than this from the latest sensor; 0 = never
+  std::uint64_t max_samples = 10000000;  ///< map mode: cap on stored samples, farthest from the sensor go first; 0 = none
+  int keep_depth = -1;  ///< map mode: also build and keep levels down to this one (<= max_depth); -1 = only the
+                        ///< levels the outputs read (Pipeline::buildDepth)
 };
 
 struct InputConfig {
@@ -73,8 +81,29 @@ struct HpdsConfig {
 /// Throws std::invalid_argument whose message starts with the offending key (e.g. "hierarchy.max_depth: ...").
 void validateConfig(const HpdsConfig &config);
 
-/// Output level implied by `config.output` (level, or spacing, or max_depth).
+/// The output level and the level-0 cell a config runs with, and why.
+///  - output.level -1, output.spacing S > 0, hierarchy.cell_size 0 (derived): r_L = S. L is the largest level, at
+///    most max_depth, with 2 S / sqrt(3) * 2^L <= kDefaultCellSize (else 0), and cell_size = 2 S / sqrt(3) * 2^L
+///    (raised by an ulp or two if rounding put r_L below S), so the level-0 cell lies in (2, 4] m for S <= 3.4 m.
+///  - output.level -1, spacing S > 0, cell_size fixed: the coarsest level with r_D <= S (levels halve from the cell,
+///    so r_L lies in (S/2, S]), or max_depth when even its radius exceeds S (the reason says so).
+///  - output.level D >= 0: level D; output.level -1 and spacing 0: max_depth. The cell is cell_size, or
+///    kDefaultCellSize when cell_size is 0.
+struct OutputResolution {
+  double cell_size = kDefaultCellSize;  ///< [m] level-0 cell edge the hierarchy runs with (> 0)
+  int level = 0;                        ///< output level L
+  double radius = 0.0;                  ///< [m] r_L: output samples are at least this far apart
+  double spacing_asked = 0.0;           ///< [m] output.spacing when it chose the level, else 0
+  std::string reason;                   ///< one sentence for logs and --stats: how L and cell_size were chosen
+};
+[[nodiscard]] OutputResolution resolveOutput(const HpdsConfig &config);
+
+/// resolveOutput(config).level.
 [[nodiscard]] int resolveOutputLevel(const HpdsConfig &config);
+
+/// `config` with hierarchy.cell_size and output.level set to resolveOutput's values (what a Pipeline runs with and a
+/// map file records); every other key unchanged. Resolving a resolved config changes nothing.
+[[nodiscard]] HpdsConfig resolvedConfig(const HpdsConfig &config);
 
 /// Edge of a level-`depth` cell and the Poisson radius of that level, in metres.
 [[nodiscard]] double cellEdge(double cell_size, int depth);

@@ -1,10 +1,14 @@
 // Pipeline: the per-frame flow shared by the CLI and the ROS node.
 //
 // Contract
-// - Scan mode: every frame is sampled on its own (the hierarchy is cleared first), and only levels 0..buildDepth()
-//   are built: down to the output level, or to output level + normals.neighborhood_level_offset with normals on, or
-//   to a level asked for by requireLevel, never past max_depth. Those levels are exactly what building to max_depth
-//   gives; points rejected down to buildDepth() count as dropped_depth. Map mode: one persistent
+// - The config is resolved first (resolvedConfig: the level-0 cell derived from output.spacing when
+//   hierarchy.cell_size is 0); config() and the hierarchy use the resolved values, outputResolution() says why.
+// - Only levels 0..buildDepth() are built, in both modes: the output level, + normals.neighborhood_level_offset with
+//   normals on, a level asked for by requireLevel and, in map mode, map.keep_depth; never past max_depth. Points
+//   rejected down to buildDepth() count as dropped_depth. In scan mode those levels are exactly what building to
+//   max_depth gives; in map mode finer samples of earlier frames also keep later candidates away, so a map built
+//   deeper (map.keep_depth) differs at its coarse levels too, equally valid.
+// - Scan mode: every frame is sampled on its own (the hierarchy is cleared first). Map mode: one persistent
 //   hierarchy in the fixed frame; earlier samples never move or change level; samples farther than
 //   map.evict_distance from the latest sensor position are evicted before the frame is inserted, and the store is
 //   cut back to map.max_samples (farthest first), so memory is bounded by the cap plus one frame.
@@ -51,7 +55,7 @@ struct FrameResult {
 
 class Pipeline {
  public:
-  /// Validates the config (std::invalid_argument naming the key).
+  /// Validates the config (std::invalid_argument naming the key) and runs with resolvedConfig(config).
   explicit Pipeline(const HpdsConfig &config);
 
   /// Inserts one frame (see contract).
@@ -71,14 +75,16 @@ class Pipeline {
   [[nodiscard]] PointBuffer makeCloud(const std::vector<SampleId> &ids, bool with_frame_field,
                                       double *seconds_normals = nullptr) const;
 
+  /// The resolved config: hierarchy.cell_size and output.level as the pipeline runs them (see resolvedConfig).
   [[nodiscard]] const HpdsConfig &config() const { return config_; }
+  /// How the output level and the level-0 cell were chosen from the config given (for logs and reports).
+  [[nodiscard]] const OutputResolution &outputResolution() const { return resolution_; }
   [[nodiscard]] const Hierarchy &hierarchy() const { return hierarchy_; }
   [[nodiscard]] int outputLevel() const { return output_level_; }
-  /// Deepest level a frame is inserted down to: max_depth in map mode (any level may be read later); in scan mode the
-  /// deepest level this pipeline's outputs read (see contract).
-  [[nodiscard]] int buildDepth() const { return config_.mode == Mode::Map ? config_.hierarchy.max_depth : scan_depth_; }
-  /// Scan mode: build levels 0..level too (e.g. levels a node publishes besides the output). std::invalid_argument
-  /// outside 0..max_depth. No effect in map mode, which builds every level.
+  /// Deepest level a frame is inserted down to (see contract).
+  [[nodiscard]] int buildDepth() const { return build_depth_; }
+  /// Build levels 0..level too (e.g. levels a node publishes besides the output). std::invalid_argument outside
+  /// 0..max_depth.
   void requireLevel(int level);
   [[nodiscard]] const FrameCounters &totals() const { return totals_; }
   [[nodiscard]] std::uint32_t framesProcessed() const { return frames_; }
@@ -95,9 +101,10 @@ class Pipeline {
   void replaceMap(Hierarchy &&map, std::uint32_t next_frame);
 
  private:
+  OutputResolution resolution_;
   HpdsConfig config_;
   int output_level_;
-  int scan_depth_;  // scan mode's buildDepth()
+  int build_depth_;
   Hierarchy hierarchy_;
   FrameCounters totals_;
   std::uint32_t frames_ = 0;
