@@ -41,6 +41,7 @@
 #include <thread>
 
 #include "hpds_node/FrameProcessor.hpp"
+#include "hpds_node/KeepUpCheck.hpp"
 #include "hpds_node/NodeConfig.hpp"
 #include "hpds_node/ParamBridge.hpp"
 
@@ -67,6 +68,8 @@ class HpdsServer {
   [[nodiscard]] OutputRequest subscribedOutputs() const;
   void publish(ProcessedFrame &frame);
   void takeSnapshot(std::size_t worker, double frame_seconds);
+  /// Feeds a processed frame's time to keep_up_ and logs its one warning, if any.
+  void checkKeepUp(double frame_seconds);
   void diagnose(diagnostic_updater::DiagnosticStatusWrapper &status);
 
   // Map persistence: a save or load request waiting for the worker.
@@ -103,6 +106,10 @@ class HpdsServer {
   std::uint64_t received_ = 0;  // guarded by queue_mutex_
   std::uint64_t overload_ = 0;  // guarded by queue_mutex_
   std::uint64_t next_ticket_ = 0;  // guarded by queue_mutex_: arrival order of the frames taken by the workers
+
+  // Whether the workers keep up with the input: said once, within the first frames.
+  std::mutex keep_up_mutex_;
+  std::unique_ptr<KeepUpCheck> keep_up_;  // guarded by keep_up_mutex_
 
   // Turns, in ticket order: a frame's index is handed out, and its clouds published, only after every earlier
   // frame's (a dropped frame passes both turns without using them).

@@ -30,6 +30,7 @@ HpdsServer::HpdsServer(ros::NodeHandle nh, ros::NodeHandle private_nh, const std
   NodeConfig per_worker = config_;
   if (workers > 1) per_worker.hpds.threads = 1;
   for (std::size_t w = 0; w < workers; ++w) processors_.push_back(std::make_unique<FrameProcessor>(per_worker));
+  keep_up_ = std::make_unique<KeepUpCheck>(config_.hpds, workers);
   target_frame_ = processors_.front()->targetFrame();
   const bool map_mode = config_.hpds.mode == hpds::Mode::Map;
   // Before anything is advertised: a node that cannot load its map does not appear at all.
@@ -175,16 +176,26 @@ bool HpdsServer::onMapService(bool save, std_srvs::Trigger::Request &, std_srvs:
 }
 
 void HpdsServer::onCloud(const sensor_msgs::PointCloud2::ConstPtr &msg) {
+  const double now = ros::WallTime::now().toSec();
+  bool dropped = false;
   {
     std::lock_guard<std::mutex> lock(queue_mutex_);
     ++received_;
     if (queue_.size() >= static_cast<std::size_t>(config_.ros.queue_size)) {
       queue_.pop_front();
       ++overload_;
+      dropped = true;
     }
     queue_.push_back(msg);
   }
   queue_cv_.notify_one();
+  std::string warning;
+  {
+    std::lock_guard<std::mutex> lock(keep_up_mutex_);
+    keep_up_->arrived(now);
+    if (dropped) warning = keep_up_->dropped();
+  }
+  if (!warning.empty()) ROS_WARN_STREAM_NAMED("hpds", warning);
 }
 
 // Every frame a worker takes passes both turns exactly once, whatever happens to it (the destructor passes what
@@ -271,7 +282,17 @@ void HpdsServer::workerLoop(std::size_t worker) {
       }
     }
     takeSnapshot(worker, seconds);
+    if (seconds > 0.0) checkKeepUp(seconds);
   }
+}
+
+void HpdsServer::checkKeepUp(double frame_seconds) {
+  std::string warning;
+  {
+    std::lock_guard<std::mutex> lock(keep_up_mutex_);
+    warning = keep_up_->processed(frame_seconds);
+  }
+  if (!warning.empty()) ROS_WARN_STREAM_NAMED("hpds", warning);
 }
 
 OutputRequest HpdsServer::subscribedOutputs() const {

@@ -1,0 +1,52 @@
+// KeepUpCheck: says once, early, that frames take longer to process than they take to arrive, and what to set.
+//
+// Contract
+// - arrived(t) takes the wall-clock time [s] of every received message, processed(seconds) the wall-clock time of
+//   every processed frame (conversion, pipeline, outputs), dropped() every frame dropped because the queue was full.
+//   Only the last 64 gaps and times are kept.
+// - Verdict: with the `judge_after`-th processed frame after the first (the first pays for allocations and is left
+//   out), the input period is the median gap between arrivals and the cost the median processing time. When
+//   cost > workers * period the queue must drop frames: processed() returns the warning. The verdict is taken once.
+// - dropped() returns the warning at the first overload drop, whatever the verdict (a load spike, a frame larger
+//   than the first ones), with the numbers measured so far.
+// - Each returns a non-empty text at most once over both: the warning names the measured period and cost, the share
+//   of frames lost and the settings that lower the cost, with their current values. No period before two arrivals
+//   at different times.
+// - Not thread-safe: the caller serialises the calls.
+#pragma once
+
+#include <cstddef>
+#include <deque>
+#include <string>
+
+#include "hpds/config/Config.hpp"
+
+namespace hpds_node {
+
+class KeepUpCheck {
+ public:
+  /// `config`: what the frames run with (for the advice); `workers`: frames processed at once.
+  KeepUpCheck(const hpds::HpdsConfig &config, std::size_t workers, std::size_t judge_after = 8);
+
+  void arrived(double wall_seconds);
+  /// The warning when this frame completes a failed verdict (see contract), else "".
+  [[nodiscard]] std::string processed(double seconds);
+  /// The warning at the first overload drop (see contract), else "".
+  [[nodiscard]] std::string dropped();
+
+  [[nodiscard]] bool judged() const { return judged_; }
+  [[nodiscard]] bool warned() const { return warned_; }
+
+ private:
+  [[nodiscard]] std::string warning(bool on_drop) const;
+
+  hpds::HpdsConfig config_;
+  std::size_t workers_;
+  std::size_t judge_after_;
+  bool judged_ = false, warned_ = false, first_skipped_ = false;
+  std::size_t costs_seen_ = 0;
+  double last_arrival_ = -1.0;
+  std::deque<double> gaps_, costs_;
+};
+
+}  // namespace hpds_node

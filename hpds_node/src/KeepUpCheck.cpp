@@ -1,0 +1,88 @@
+#include "hpds_node/KeepUpCheck.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <vector>
+
+namespace hpds_node {
+
+namespace {
+constexpr std::size_t kKept = 64;
+
+double median(const std::deque<double> &values) {
+  std::vector<double> v(values.begin(), values.end());
+  std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2), v.end());
+  return v[v.size() / 2];
+}
+
+void keep(std::deque<double> &values, double v) {
+  values.push_back(v);
+  if (values.size() > kKept) values.pop_front();
+}
+
+std::string format(const char *pattern, double a, double b = 0.0, double c = 0.0) {
+  char buf[160];
+  std::snprintf(buf, sizeof buf, pattern, a, b, c);
+  return buf;
+}
+}  // namespace
+
+KeepUpCheck::KeepUpCheck(const hpds::HpdsConfig &config, std::size_t workers, std::size_t judge_after)
+    : config_(config), workers_(std::max<std::size_t>(1, workers)), judge_after_(std::max<std::size_t>(1, judge_after)) {}
+
+void KeepUpCheck::arrived(double wall_seconds) {
+  // A burst (several messages at one instant) gives no period: only positive gaps count.
+  if (last_arrival_ >= 0.0 && wall_seconds > last_arrival_) keep(gaps_, wall_seconds - last_arrival_);
+  last_arrival_ = wall_seconds;
+}
+
+std::string KeepUpCheck::processed(double seconds) {
+  if (!first_skipped_) {
+    first_skipped_ = true;
+    return "";
+  }
+  keep(costs_, seconds);
+  ++costs_seen_;
+  if (judged_ || costs_seen_ < judge_after_ || gaps_.empty()) return "";
+  judged_ = true;
+  if (warned_ || !(median(costs_) > double(workers_) * median(gaps_))) return "";
+  warned_ = true;
+  return warning(false);
+}
+
+std::string KeepUpCheck::dropped() {
+  if (warned_) return "";
+  warned_ = true;
+  return warning(true);
+}
+
+std::string KeepUpCheck::warning(bool on_drop) const {
+  std::string text = "hpds: cannot keep up with the input: ";
+  if (on_drop) text += "a frame was dropped because the frames before it were still being processed; ";
+  const std::string workers = std::to_string(workers_) + (workers_ == 1 ? " worker" : " workers");
+  if (!gaps_.empty() && !costs_.empty()) {
+    const double period = median(gaps_), cost = median(costs_);
+    const double worst = *std::max_element(costs_.begin(), costs_.end());
+    const double capacity = double(workers_) * period;
+    text += "frames arrive every " + format("%.0f ms (%.1f Hz)", 1e3 * period, 1.0 / period) +
+            (on_drop ? " and take " : " but take ") + format("%.0f ms each", 1e3 * cost) + " (median of " +
+            std::to_string(costs_.size()) + " frames, " + format("%.0f ms at most", 1e3 * worst) + ", " + workers + ")";
+    if (cost > capacity) text += ", so about " + format("%.0f%%", 100.0 * (1.0 - capacity / cost)) + " of the frames will be dropped";
+  } else {
+    text += "no processing time measured yet (" + workers + ")";
+  }
+  const hpds::OutputResolution out = hpds::resolveOutput(config_);
+  text += ". Dropped frames are counted in /diagnostics. To keep up, lower the cost of a frame: a larger output.spacing (now " +
+          format("%.3g m", out.radius) + ")";
+  if (config_.normals.enabled)
+    text += ", normals.neighborhood_level_offset 0 (now " + std::to_string(config_.normals.neighborhood_level_offset) +
+            ": levels built below the output for the normals) or normals.enabled false";
+  if (!(config_.input.max_range > 0.0)) text += ", an input.max_range (now 0: every point)";
+  text += config_.mode == hpds::Mode::Scan
+              ? "; or process frames in parallel: threads (now " + std::to_string(config_.threads) + ")"
+              : "; map mode processes one frame at a time (threads only speed up the normals)";
+  return text + ".";
+}
+
+}  // namespace hpds_node

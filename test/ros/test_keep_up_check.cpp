@@ -1,0 +1,143 @@
+// KeepUpCheck: one warning, early, exactly when frames cost more than the workers have per arriving frame.
+#include <gtest/gtest.h>
+
+#include <string>
+
+#include "hpds_node/KeepUpCheck.hpp"
+
+namespace {
+
+using hpds_node::KeepUpCheck;
+
+bool contains(const std::string &text, const std::string &part) { return text.find(part) != std::string::npos; }
+
+// Frames arriving every `period` seconds, each taking `cost` seconds; returns every non-empty verdict.
+std::vector<std::string> run(KeepUpCheck &check, double period, double cost, int frames) {
+  std::vector<std::string> said;
+  for (int i = 0; i < frames; ++i) {
+    check.arrived(100.0 + period * i);
+    std::string text = check.processed(i == 0 ? 50 * cost : cost);  // the first frame is always slow
+    if (!text.empty()) said.push_back(std::move(text));
+  }
+  return said;
+}
+
+TEST(KeepUpCheck, SlowFramesAreReportedOnceWithTheNumbersAndWhatToSet) {
+  hpds::HpdsConfig config;  // the shipped defaults: spacing 0.1 m, normals on, offset 2, one thread
+  KeepUpCheck check(config, 1, 8);
+  const auto said = run(check, 0.1, 0.25, 40);
+  ASSERT_EQ(said.size(), 1u);
+  const std::string &w = said.front();
+  EXPECT_TRUE(contains(w, "cannot keep up")) << w;
+  EXPECT_TRUE(contains(w, "every 100 ms (10.0 Hz)")) << w;
+  EXPECT_TRUE(contains(w, "take 250 ms")) << w;
+  EXPECT_TRUE(contains(w, "about 60% of the frames")) << w;  // 1 - 100/250
+  EXPECT_TRUE(contains(w, "output.spacing (now 0.1 m)")) << w;
+  EXPECT_TRUE(contains(w, "normals.neighborhood_level_offset 0 (now 2")) << w;
+  EXPECT_TRUE(contains(w, "threads (now 1)")) << w;
+  EXPECT_TRUE(check.judged());
+}
+
+TEST(KeepUpCheck, TheVerdictComesWithTheNinthFrame) {
+  KeepUpCheck check(hpds::HpdsConfig{}, 1, 8);
+  for (int i = 0; i < 8; ++i) {
+    check.arrived(0.1 * i);
+    EXPECT_EQ(check.processed(0.3), "") << "frame " << i;  // frame 0 is left out, frames 1..7 are not yet 8
+  }
+  check.arrived(0.8);
+  EXPECT_NE(check.processed(0.3), "");
+  check.arrived(0.9);
+  EXPECT_EQ(check.processed(0.3), "") << "said twice";
+}
+
+TEST(KeepUpCheck, FastFramesAndEnoughWorkersSayNothing) {
+  {
+    KeepUpCheck check(hpds::HpdsConfig{}, 1, 8);
+    EXPECT_TRUE(run(check, 0.1, 0.06, 40).empty());
+    EXPECT_TRUE(check.judged());
+  }
+  {
+    // 250 ms per frame, but four workers have 400 ms per arriving frame.
+    KeepUpCheck check(hpds::HpdsConfig{}, 4, 8);
+    EXPECT_TRUE(run(check, 0.1, 0.25, 40).empty());
+  }
+  {
+    // Two workers have 200 ms: not enough for 250 ms.
+    KeepUpCheck check(hpds::HpdsConfig{}, 2, 8);
+    const auto said = run(check, 0.1, 0.25, 40);
+    ASSERT_EQ(said.size(), 1u);
+    EXPECT_TRUE(contains(said.front(), "2 workers")) << said.front();
+    EXPECT_TRUE(contains(said.front(), "about 20% of the frames")) << said.front();
+  }
+}
+
+TEST(KeepUpCheck, OneSlowFrameAmongFastOnesIsNoVerdict) {
+  KeepUpCheck check(hpds::HpdsConfig{}, 1, 8);
+  for (int i = 0; i < 20; ++i) {
+    check.arrived(0.1 * i);
+    EXPECT_EQ(check.processed(i == 5 ? 2.0 : 0.04), "");
+  }
+  EXPECT_TRUE(check.judged());
+}
+
+TEST(KeepUpCheck, NoPeriodNoVerdict) {
+  // A single message (or all at one instant, a burst) gives no input period to compare with.
+  KeepUpCheck check(hpds::HpdsConfig{}, 1, 3);
+  check.arrived(5.0);
+  for (int i = 0; i < 10; ++i) EXPECT_EQ(check.processed(1.0), "");
+  EXPECT_FALSE(check.judged());
+  check.arrived(5.0);  // a burst: a zero gap is no period either
+  EXPECT_EQ(check.processed(1.0), "");
+  EXPECT_FALSE(check.judged());
+  check.arrived(5.1);
+  EXPECT_NE(check.processed(1.0), "");
+}
+
+TEST(KeepUpCheck, TheFirstOverloadDropIsReportedOnceWithWhatWasMeasured) {
+  KeepUpCheck check(hpds::HpdsConfig{}, 1, 8);
+  for (int i = 0; i < 5; ++i) {
+    check.arrived(0.1 * i);
+    EXPECT_EQ(check.processed(i == 4 ? 0.35 : 0.06), "");
+  }
+  const std::string w = check.dropped();  // the 0.35 s frame made the queue overflow: before any verdict
+  EXPECT_TRUE(contains(w, "cannot keep up")) << w;
+  EXPECT_TRUE(contains(w, "a frame was dropped")) << w;
+  EXPECT_TRUE(contains(w, "every 100 ms (10.0 Hz) and take 60 ms each")) << w;
+  EXPECT_TRUE(contains(w, "350 ms at most")) << w;
+  EXPECT_FALSE(contains(w, "will be dropped")) << "the median keeps up: no share of frames lost to announce";
+  EXPECT_EQ(check.dropped(), "") << "said twice";
+  for (int i = 5; i < 30; ++i) {
+    check.arrived(0.1 * i);
+    EXPECT_EQ(check.processed(0.3), "") << "a verdict after the warning must stay silent";
+  }
+  EXPECT_TRUE(check.judged());
+
+  // A drop before anything was measured still says so, and what to set.
+  KeepUpCheck early(hpds::HpdsConfig{}, 1, 8);
+  const std::string e = early.dropped();
+  EXPECT_TRUE(contains(e, "no processing time measured yet")) << e;
+  EXPECT_TRUE(contains(e, "output.spacing (now 0.1 m)")) << e;
+
+  // After a failed verdict, drops add nothing.
+  KeepUpCheck slow(hpds::HpdsConfig{}, 1, 8);
+  ASSERT_EQ(run(slow, 0.1, 0.25, 20).size(), 1u);
+  EXPECT_EQ(slow.dropped(), "");
+}
+
+TEST(KeepUpCheck, AdviceFollowsTheConfig) {
+  hpds::HpdsConfig config;
+  config.mode = hpds::Mode::Map;
+  config.normals.enabled = false;
+  config.input.max_range = 80.0;
+  config.output.spacing = 0.3;
+  KeepUpCheck check(config, 1, 4);
+  const auto said = run(check, 0.1, 0.5, 10);
+  ASSERT_EQ(said.size(), 1u);
+  const std::string &w = said.front();
+  EXPECT_TRUE(contains(w, "output.spacing (now 0.3 m)")) << w;
+  EXPECT_FALSE(contains(w, "normals.")) << w;
+  EXPECT_FALSE(contains(w, "input.max_range")) << w;
+  EXPECT_TRUE(contains(w, "map mode processes one frame at a time")) << w;
+}
+
+}  // namespace
