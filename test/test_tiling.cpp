@@ -20,11 +20,16 @@ namespace fs = std::filesystem;
 using test::TiledRun;
 using test::TiledRunOptions;
 
+// Every level down to `depth` built and output, no normals, nothing evicted (a tiled build keeps every sample).
 HpdsConfig mapConfig(double cell, int depth) {
   HpdsConfig c;
   c.mode = Mode::Map;
   c.hierarchy.cell_size = cell;
   c.hierarchy.max_depth = depth;
+  c.output.level = depth;
+  c.normals.enabled = false;
+  c.map.evict_distance = 0.0;
+  c.map.max_samples = 0;
   return c;
 }
 

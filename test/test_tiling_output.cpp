@@ -21,6 +21,8 @@ HpdsConfig normalsConfig() {
   c.hierarchy.max_depth = 4;
   c.output.level = 3;
   c.normals.enabled = true;
+  c.map.evict_distance = 0.0;  // a tiled build keeps every sample
+  c.map.max_samples = 0;
   return c;
 }
 

@@ -5,7 +5,6 @@
 
 #include <cmath>
 #include <cstdio>
-#include <iomanip>
 #include <iostream>
 #include <sstream>
 #include <stdexcept>
@@ -14,15 +13,6 @@
 #include "hpds/io/AtomicFile.hpp"
 
 namespace hpds::cli {
-
-namespace {
-std::string num(double v) {
-  if (!std::isfinite(v)) return "null";
-  std::ostringstream s;
-  s << std::setprecision(9) << v;
-  return s.str();
-}
-}  // namespace
 
 RunReport reportFor(const std::string &command, const Pipeline &pipeline) {
   RunReport r;

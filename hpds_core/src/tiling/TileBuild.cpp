@@ -64,10 +64,11 @@ void validateTiledConfig(const HpdsConfig &config) {
     throw std::invalid_argument("map.max_samples: must be 0 in a tiled map build (it keeps every sample)");
 }
 
-TileBuildStats buildTile(const HpdsConfig &config, const TileGrid &grid, const TileKey &key,
+TileBuildStats buildTile(const HpdsConfig &given, const TileGrid &grid, const TileKey &key,
                          const std::vector<std::string> &bucket_paths, const std::vector<std::string> &border_paths,
                          const std::string &map_path, const std::string &border_path) {
-  validateTiledConfig(config);
+  validateTiledConfig(given);
+  const HpdsConfig config = resolvedConfig(given);  // the cell a pipeline runs with (derived from the spacing)
   TileBuildStats stats;
   Hierarchy own(config.hierarchy.cell_size, config.hierarchy.max_depth);
   {
@@ -144,10 +145,11 @@ TileBuildStats buildTile(const HpdsConfig &config, const TileGrid &grid, const T
   return stats;
 }
 
-TileFinishStats finishTile(const HpdsConfig &config, const TileGrid &grid, const TileKey &key,
+TileFinishStats finishTile(const HpdsConfig &given, const TileGrid &grid, const TileKey &key,
                            const std::string &map_path, const std::vector<std::string> &border_paths,
                            const std::string &ply_path) {
-  validateTiledConfig(config);
+  validateTiledConfig(given);
+  const HpdsConfig config = resolvedConfig(given);
   TileFinishStats stats;
   LoadedHierarchy loaded = loadHierarchy(map_path, &config.hierarchy);
   Hierarchy &h = loaded.hierarchy;

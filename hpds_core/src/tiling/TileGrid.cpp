@@ -77,8 +77,9 @@ std::array<double, 4> TileGrid::bounds(const TileKey &key) const {
   return {key.i * t, key.j * t, (key.i + 1.0) * t, (key.j + 1.0) * t};
 }
 
-int normalRing(const HpdsConfig &config) {
-  if (!config.normals.enabled) return 0;
+int normalRing(const HpdsConfig &given) {
+  if (!given.normals.enabled) return 0;
+  const HpdsConfig config = resolvedConfig(given);
   const int level = resolveOutputLevel(config);
   const double reach = neighborhoodReach(normalParamsFor(config, level), config.hierarchy.cell_size,
                                          poissonRadius(config.hierarchy.cell_size, level));

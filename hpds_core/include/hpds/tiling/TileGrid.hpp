@@ -37,7 +37,8 @@ inline constexpr int kInsertionRing = 1;
 class TileGrid {
  public:
   /// Throws std::invalid_argument ("tile size: ...") unless tile_size is finite and a whole multiple k >= 1 of
-  /// hierarchy.cell_size (within a relative 1e-9; the tiles then use k * cell_size exactly), k <= 2^20.
+  /// hierarchy.cell_size (within a relative 1e-9; the tiles then use k * cell_size exactly), k <= 2^20. Pass the
+  /// cell the pipeline runs with, resolvedConfig(config).hierarchy: a derived cell_size (0) is refused here.
   TileGrid(const HierarchyConfig &hierarchy, double tile_size);
 
   [[nodiscard]] double cellSize() const { return cell_size_; }
