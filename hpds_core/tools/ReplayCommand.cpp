@@ -10,6 +10,7 @@
 #include <fstream>
 #include <iostream>
 #include <optional>
+#include <set>
 #include <sstream>
 #include <stdexcept>
 
@@ -20,6 +21,7 @@
 #include "hpds/io/AtomicFile.hpp"
 #include "hpds/io/PlyWriter.hpp"
 #include "hpds_node/FrameProcessor.hpp"
+#include "hpds_node/SequenceGaps.hpp"
 
 namespace hpds::cli {
 
@@ -98,6 +100,8 @@ std::string messageSummary(std::size_t messages, const std::string &topic, const
     << s.dropped[int(hpds_node::DropReason::NoTransform)] << " without transform to '" << target << "', "
     << s.dropped[int(hpds_node::DropReason::LayoutChanged)] << " with other fields than the map, " << wrong_type
     << " not PointCloud2";
+  if (const std::uint64_t lost = s.dropped[int(hpds_node::DropReason::LostUpstream)])
+    m << ", " << lost << " missing from the recording (gaps in header.seq)";
   return m.str();
 }
 
@@ -151,6 +155,8 @@ int runReplay(const ReplayArgs &a) {
   RunReport report = reportFor("replay", processor.pipeline());
   PointBuffer ply;
   std::uint64_t wrong_type = 0;
+  hpds_node::SequenceGaps gaps;
+  std::set<std::string> not_carried;
   Progress progress(clouds.size());
   std::size_t index = 0;
   const auto t_run = std::chrono::steady_clock::now();
@@ -161,7 +167,9 @@ int runReplay(const ReplayArgs &a) {
       ++wrong_type;
       continue;
     }
-    // 2. The node's steps: validate, transform at the stamp, shared processing.
+    // 2. The node's steps: count what the recording lost, validate, transform at the stamp, shared processing.
+    const std::uint64_t lost = gaps.observe(m.getCallerId(), msg->header.seq);
+    if (lost > 0) processor.countDrop(hpds_node::DropReason::LostUpstream, lost);
     if (processor.check(*msg) != hpds_node::CloudError::None) continue;
     Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
     if (!target.empty() &&
@@ -171,6 +179,7 @@ int runReplay(const ReplayArgs &a) {
     }
     hpds_node::ProcessedFrame frame = processor.process(*msg, pose, hpds_node::OutputRequest::all());
     if (!frame.processed) continue;
+    not_carried.insert(frame.fields_not_carried.begin(), frame.fields_not_carried.end());
     if (scan)
       for (std::size_t d = 0; d < report.samples_per_level.size(); ++d)
         report.samples_per_level[d] += frame.counters.accepted_per_level[d];
@@ -221,6 +230,9 @@ int runReplay(const ReplayArgs &a) {
   std::cout << levelSummary(report);
   std::cout << "messages: " << messageSummary(clouds.size(), a.topic, s, wrong_type, target) << "\n";
   std::cout << "wrote " << a.output << "\n";
+  for (const std::string &name : not_carried)
+    std::cerr << "hpds: warning: input field '" << name << "' is not in the output: hpds writes its own '" << name
+              << "' or keeps the name for it; rename the field to keep it\n";
   if (!a.stats.empty()) {
     // The report of `hpds sample`, plus the message counts only a replay has.
     report.extra.emplace_back("messages", messagesJson(s, wrong_type));

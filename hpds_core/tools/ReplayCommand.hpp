@@ -13,7 +13,10 @@
 // - Settings: --config takes the node's YAML (config keys plus an optional `ros:` section); sampling flags
 //   override it, then the ROS flags (--fixed-frame, ...). Invalid values fail before the bag is read.
 // - Messages that the node would drop (malformed, no transform, other fields than the map) are dropped and
-//   counted the same way; the counts are printed and written to --stats.
+//   counted the same way, and gaps in the recorded header.seq as lost_upstream; the counts are printed and written
+//   to --stats. A replay that processes no frame fails (exit 1, the counts in the error) and writes nothing.
+// - Output paths are checked before the bag is opened (OutputPaths.hpp: the bag is never its own output) and written
+//   atomically: an existing output is replaced only by a complete one.
 // This header is ROS-free so that the CLI main can include it.
 #pragma once
 

@@ -2,6 +2,7 @@
 #include <chrono>
 #include <cmath>
 #include <iostream>
+#include <map>
 #include <mutex>
 #include <stdexcept>
 
@@ -11,6 +12,7 @@
 #include "RunReport.hpp"
 #include "hpds/io/HierarchyFile.hpp"
 #include "hpds/util/ParallelFor.hpp"
+#include "hpds/pipeline/OutputCloud.hpp"
 #include "hpds/pipeline/Pipeline.hpp"
 #include "hpds/pipeline/ScanFrames.hpp"
 #include "hpds/io/PlyWriter.hpp"
@@ -86,10 +88,17 @@ int runSample(const SampleArgs &a) {
   const bool scan = config.mode == Mode::Scan;
   const bool frame_field = scan && a.inputs.size() > 1;
   // One frame through a pipeline: read, insert, and in scan mode its output cloud.
+  // Input fields the output cannot carry (their names are hpds's own), with the first input that had each.
+  std::map<std::string, std::string> not_carried;
+  std::mutex not_carried_mutex;
   auto runFrame = [&](Pipeline &p, std::size_t i, StageSeconds &seconds, PointBuffer *cloud) {
     auto t0 = std::chrono::steady_clock::now();
     Frame frame;
     frame.points = readPointCloud(a.inputs[i]);
+    for (const std::string &name : fieldsNotCarried(frame.points.layout())) {
+      const std::lock_guard<std::mutex> lock(not_carried_mutex);
+      not_carried.try_emplace(name, a.inputs[i]);
+    }
     frame.stamp = static_cast<double>(i);
     if (!poses.empty()) frame.sensor_to_fixed = poses[i];
     seconds.read += since(t0);
@@ -143,6 +152,10 @@ int runSample(const SampleArgs &a) {
     totals = pipeline.totals();
   }
   progress.finish();
+  for (const auto &[name, input] : not_carried)
+    std::cerr << "hpds: warning: input field '" << name << "' (of '" << input
+              << "' and maybe others) is not in the output: hpds writes its own '" << name
+              << "' or keeps the name for it; rename the field to keep it\n";
   if (scan) {
     for (std::size_t d = 0; d < report.samples_per_level.size(); ++d) report.samples_per_level[d] = totals.accepted_per_level[d];
   } else {

@@ -8,6 +8,7 @@
 #include <stdexcept>
 
 #include "hpds/io/HierarchyFile.hpp"
+#include "hpds/pipeline/OutputCloud.hpp"
 
 namespace hpds_node {
 
@@ -21,6 +22,10 @@ const char *toString(DropReason reason) {
       return "overload";
     case DropReason::NoSubscribers:
       return "no_subscribers";
+    case DropReason::InternalError:
+      return "internal_error";
+    case DropReason::LostUpstream:
+      return "lost_upstream";
   }
   return "unknown";
 }
@@ -107,7 +112,9 @@ CloudError FrameProcessor::check(const sensor_msgs::PointCloud2 &msg, std::strin
   return e;
 }
 
-void FrameProcessor::countDrop(DropReason reason) { ++stats_.dropped[static_cast<int>(reason)]; }
+void FrameProcessor::countDrop(DropReason reason, std::uint64_t frames) {
+  stats_.dropped[static_cast<int>(reason)] += frames;
+}
 
 void FrameProcessor::saveMap(const std::string &path) const {
   if (config_.hpds.mode != hpds::Mode::Map)
@@ -136,6 +143,7 @@ ProcessedFrame FrameProcessor::process(const sensor_msgs::PointCloud2 &msg, cons
     ++stats_.malformed[static_cast<int>(r.malformed)];
     return r;
   }
+  r.fields_not_carried = hpds::fieldsNotCarried(frame.points.layout());
   frame.stamp = msg.header.stamp.toSec();
   if (!target.empty()) frame.sensor_to_fixed = sensor_to_target;
 

@@ -1,14 +1,37 @@
 // hpds_node: the standalone entry point of HpdsServer (the nodelet is the other one).
+//
+// roscpp's own stop paths (its SIGINT handler, the XML-RPC "shutdown" of rosnode kill and roslaunch) call
+// ros::shutdown() at once, which takes rosconsole down with it: the map save on shutdown would then be saved or lost
+// without a word. Both only ask the loop below to stop; the server shuts down (and logs) while roscpp is still up.
 #include <ros/ros.h>
+#include <ros/xmlrpc_manager.h>
 
+#include <csignal>
 #include <stdexcept>
 
 #include "hpds_node/HpdsServer.hpp"
 
+namespace {
+
+volatile std::sig_atomic_t g_stop_requested = 0;
+
+void onSignal(int) { g_stop_requested = 1; }
+
+void onShutdownRequest(XmlRpc::XmlRpcValue &, XmlRpc::XmlRpcValue &result) {
+  g_stop_requested = 1;
+  result = ros::xmlrpc::responseInt(1, "", 0);
+}
+
+}  // namespace
+
 int main(int argc, char **argv) {
-  ros::init(argc, argv, "hpds");
+  ros::init(argc, argv, "hpds", ros::init_options::NoSigintHandler);
+  std::signal(SIGINT, onSignal);
+  std::signal(SIGTERM, onSignal);
   ros::NodeHandle nh;
   ros::NodeHandle pnh("~");
+  ros::XMLRPCManager::instance()->unbind("shutdown");
+  ros::XMLRPCManager::instance()->bind("shutdown", onShutdownRequest);
   std::unique_ptr<hpds_node::HpdsServer> server;
   try {
     server = std::make_unique<hpds_node::HpdsServer>(nh, pnh, ros::this_node::getName());
@@ -19,7 +42,10 @@ int main(int argc, char **argv) {
     ROS_FATAL_STREAM("hpds: not starting: " << e.what());
     return 1;
   }
-  ros::spin();
-  server.reset();  // stop the worker while roscpp is still up
-  return 0;
+  ros::CallbackQueue &queue = *ros::getGlobalCallbackQueue();
+  while (!g_stop_requested && ros::ok()) queue.callAvailable(ros::WallDuration(0.1));
+  const bool saved = server->shutdown();  // stops the workers, saves and logs while roscpp is still up
+  server.reset();
+  ros::shutdown();
+  return saved ? 0 : 1;
 }

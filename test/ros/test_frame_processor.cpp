@@ -138,6 +138,24 @@ TEST(FrameProcessor, Float64AndOrganizedNanInput) {
   EXPECT_TRUE(r.output.is_dense);
 }
 
+// Input fields named like hpds's own are not in the output; the processor says which, so the node can warn.
+TEST(FrameProcessor, InputFieldsWithHpdsNamesAreReported) {
+  hpds::PointLayout layout;
+  for (const char *a : {"x", "y", "z", "curvature"}) layout.append(a, hpds::FieldType::Float32);
+  layout.append("level", hpds::FieldType::UInt8);
+  layout.append("ring", hpds::FieldType::UInt16);
+  hpds::PointBuffer cloud(layout, 50);
+  for (std::size_t i = 0; i < cloud.size(); ++i)
+    for (int a = 0; a < 3; ++a) hpds::writeFromDouble(cloud.record(i), layout.fields[a], 0.3 * double(i) + a);
+  FrameProcessor processor(NodeConfig{});
+  const auto r = processor.process(toMsg(cloud, 1.0), Eigen::Isometry3d::Identity(), OutputRequest::all());
+  ASSERT_TRUE(r.processed);
+  EXPECT_EQ(r.fields_not_carried, (std::vector<std::string>{"curvature", "level"}));
+  const hpds::PointBuffer out = hpds_test::toBuffer(r.output);
+  EXPECT_NE(out.layout().find("ring"), nullptr);
+  EXPECT_EQ(out.layout().find("curvature"), nullptr) << "normals are off: no curvature field at all";
+}
+
 TEST(FrameProcessor, OutputIsAlignedForPackedInputFields) {
   // 1-byte fields first, so x y z (float32) sit at odd offsets, then an int16, a count-3 uint16 and a float64, all
   // packed: the output must still be aligned, and every input field must keep its bytes.

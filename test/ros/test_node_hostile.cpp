@@ -1,8 +1,12 @@
-// rostest node: malformed and hostile PointCloud2 messages keep hpds alive, each counted where it belongs.
-// Runs without the shared data (clouds are generated here).
+// rostest node: malformed and hostile PointCloud2 messages keep hpds alive, each counted where it belongs; gaps in
+// header.seq are counted as lost upstream; every kind of drop is also logged (seen on /rosout). Runs without the
+// shared data (clouds are generated here).
 //
-// Parameters: ~target (hpds with a deep queue), ~overload_target (hpds with queue_size 1).
+// Parameters: ~target (hpds with a deep queue), ~overload_target (hpds with queue_size 1), ~seq_target (hpds for the
+// numbering gaps), ~log_target (hpds without a transform to its output frame, queue_size 1).
 #include <gtest/gtest.h>
+#include <rosgraph_msgs/Log.h>
+#include <topic_tools/shape_shifter.h>
 
 #include <cstring>
 #include <limits>
@@ -208,6 +212,121 @@ TEST_F(HostileTest, OverloadDropsTheOldestAndCountsIt) {
       << "processed " << diag.value("frames processed") << " overload " << diag.value("dropped overload");
   EXPECT_GT(diag.value("dropped overload"), 0.0);
   EXPECT_LT(diag.value("frames processed"), double(n));
+}
+
+// Every message one node logs, from /rosout (every node publishes its log there; rostest runs no rosout node, so
+// there is no /rosout_agg).
+class LogCollector {
+ public:
+  LogCollector(ros::NodeHandle &nh, const std::string &node) : node_(node) {
+    sub_ = nh.subscribe<rosgraph_msgs::Log>("/rosout", 1000, [this](const rosgraph_msgs::Log::ConstPtr &m) {
+      if (m->name != node_) return;
+      std::lock_guard<std::mutex> lock(mutex_);
+      lines_.push_back(*m);
+    });
+  }
+  /// True when a line of `level` holding every one of `parts` has arrived.
+  bool has(std::uint8_t level, const std::vector<std::string> &parts) const {
+    std::lock_guard<std::mutex> lock(mutex_);
+    for (const rosgraph_msgs::Log &l : lines_) {
+      if (l.level != level) continue;
+      bool all = true;
+      for (const std::string &p : parts) all = all && l.msg.find(p) != std::string::npos;
+      if (all) return true;
+    }
+    return false;
+  }
+  std::string dump() const {
+    std::lock_guard<std::mutex> lock(mutex_);
+    std::string s;
+    for (const rosgraph_msgs::Log &l : lines_) s += "[" + std::to_string(l.level) + "] " + l.msg + "\n";
+    return s;
+  }
+  bool connected() const { return sub_.getNumPublishers() > 0; }
+
+ private:
+  std::string node_;
+  ros::Subscriber sub_;
+  mutable std::mutex mutex_;
+  std::vector<rosgraph_msgs::Log> lines_;
+};
+
+// The message as a ShapeShifter, whose header.seq roscpp passes on as it is (rosbag play works the same way): the
+// only way to publish a numbering with gaps.
+boost::shared_ptr<topic_tools::ShapeShifter> asShapeShifter(const PointCloud2 &msg) {
+  const std::uint32_t size = ros::serialization::serializationLength(msg);
+  std::vector<std::uint8_t> bytes(size);
+  ros::serialization::OStream out(bytes.data(), size);
+  ros::serialization::serialize(out, msg);
+  auto shifter = boost::make_shared<topic_tools::ShapeShifter>();
+  shifter->morph(ros::message_traits::md5sum<PointCloud2>(), ros::message_traits::datatype<PointCloud2>(),
+                 ros::message_traits::definition<PointCloud2>(), "");
+  ros::serialization::IStream in(bytes.data(), size);
+  shifter->read(in);
+  return shifter;
+}
+
+TEST_F(HostileTest, GapsInHeaderSeqAreCountedAsLostUpstreamAndLogged) {
+  const std::string target = ros::NodeHandle("~").param<std::string>("seq_target", "/hpds_seq");
+  LogCollector logs(nh_, target);
+  hpds_test::DiagnosticsReader diag(nh_, target.substr(1));
+  Collector<PointCloud2> output(nh_, target + "/output");
+  const std::vector<std::uint32_t> seqs = {0, 1, 2, 5, 6, 10, 11};  // 2 + 3 missing
+  ros::Publisher pub = asShapeShifter(*validCloud(10, 1, ros::Time(1, 0)))->advertise(nh_, target + "/input", 100);
+  ASSERT_TRUE(hpds_test::waitFor(
+      [&] { return pub.getNumSubscribers() > 0 && output.connected() && logs.connected() && diag.updates() > 0; },
+      30.0));
+  for (std::size_t i = 0; i < seqs.size(); ++i) {
+    auto m = validCloud(500, 300 + std::uint32_t(i), ros::Time(120 + i, 0));
+    m->header.seq = seqs[i];
+    pub.publish(*asShapeShifter(*m));
+    ros::WallDuration(0.01).sleep();
+  }
+  ASSERT_TRUE(hpds_test::waitFor([&] { return diag.value("frames processed") == double(seqs.size()); }, 30.0))
+      << "processed " << diag.value("frames processed");
+  EXPECT_EQ(diag.value("frames received"), double(seqs.size()));
+  EXPECT_EQ(diag.value("dropped lost_upstream"), 5.0);
+  EXPECT_EQ(diag.value("dropped total"), 5.0);
+  EXPECT_TRUE(hpds_test::waitFor(
+      [&] { return logs.has(rosgraph_msgs::Log::WARN, {"never arrived", "counted as lost_upstream"}); }, 10.0))
+      << logs.dump();
+}
+
+// Each reason a frame is dropped for is logged (throttled), not only counted. A node that has no transform to its
+// output frame and a queue of one: a malformed message, then a burst of valid ones, each of which waits for tf.
+TEST_F(HostileTest, DropsAreLoggedNotOnlyCounted) {
+  const std::string target = ros::NodeHandle("~").param<std::string>("log_target", "/hpds_logs");
+  LogCollector logs(nh_, target);
+  hpds_test::DiagnosticsReader diag(nh_, target.substr(1));
+  Collector<PointCloud2> output(nh_, target + "/output");
+  ros::Publisher pub = nh_.advertise<PointCloud2>(target + "/input", 100);
+  ASSERT_TRUE(hpds_test::waitFor(
+      [&] { return pub.getNumSubscribers() > 0 && output.connected() && logs.connected() && diag.updates() > 0; },
+      30.0));
+  auto bad = validCloud(100, 1, ros::Time(200, 0));
+  bad->row_step = 7;
+  pub.publish(bad);
+  ros::WallDuration(0.1).sleep();
+  const int burst = 10;
+  for (int i = 0; i < burst; ++i) pub.publish(validCloud(100, 400 + i, ros::Time(201 + i, 0)));
+  ASSERT_TRUE(hpds_test::waitFor(
+      [&] {
+        return diag.value("dropped malformed") + diag.value("dropped no_transform") + diag.value("dropped overload") +
+                   diag.value("dropped lost_upstream") ==
+               double(burst + 1);
+      },
+      60.0))
+      << "malformed " << diag.value("dropped malformed") << ", no_transform " << diag.value("dropped no_transform")
+      << ", overload " << diag.value("dropped overload");
+  EXPECT_GT(diag.value("dropped overload"), 0.0);
+  EXPECT_TRUE(hpds_test::waitFor(
+      [&] {
+        return logs.has(rosgraph_msgs::Log::ERROR, {"dropped malformed PointCloud2", "bad_row_step"}) &&
+               logs.has(rosgraph_msgs::Log::WARN, {"no transform", "counted as no_transform"}) &&
+               logs.has(rosgraph_msgs::Log::WARN, {"counted as overload", "ros.queue_size 1"});
+      },
+      10.0))
+      << logs.dump();
 }
 
 }  // namespace

@@ -6,16 +6,27 @@
 //   byte-identical ~output and ~new_samples to the reference, which has only seen the frames up to the save.
 //   Missing, corrupt and truncated files are refused with the reason and the node's map stays as it was; a save
 //   into a missing directory is refused with the reason.
-// - Both services answer success=false with a clear message in scan mode (a nodelet) and without ros/map_file.
+// - Both services answer success=false with a clear message in scan mode (a nodelet) and without ros/map_file (also
+//   when it was set after the start, which the node does not see).
+// - Frames that arrive during a long save are received and counted (the services have their own thread).
 // - A restart: HpdsServers created in this process with ros/load_map_on_start and ros/save_map_on_shutdown
 //   continue each other's map exactly; one facing a corrupt file refuses to start.
 //
-// Parameters: ~target, ~input (its input topic), ~map_dir (created here), ~scan_target, ~nofile_target.
+// Parameters: ~target, ~input (its input topic), ~map_dir (created here), ~scan_target, ~nofile_target,
+// ~fifo_target and ~fifo_input (a map-mode node whose ros/map_file is a FIFO this test creates).
 #include <gtest/gtest.h>
 #include <std_srvs/Trigger.h>
 
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <cerrno>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
+#include <functional>
+#include <thread>
 
 #include "RosTestUtil.hpp"
 #include "hpds/io/HierarchyFile.hpp"
@@ -215,8 +226,99 @@ TEST(NodePersistenceRefused, ScanModeAndNoMapFile) {
     EXPECT_TRUE(contains(r.message, "scan mode") && contains(r.message, "need mode: map")) << r.message;
     r = call(nofile + service);
     EXPECT_FALSE(r.success);
-    EXPECT_TRUE(contains(r.message, nofile + "/ros/map_file is not set")) << r.message;
+    EXPECT_TRUE(contains(r.message, nofile + "/ros/map_file was not set when the node started")) << r.message;
   }
+  // Set at run time: the node does not use it (parameters are read at start), and says so rather than "not set".
+  const std::string later = (mapDir() / "set_later.hpdsmap").string();
+  ros::param::set(nofile + "/ros/map_file", later);
+  const auto r = call(nofile + "/save_map");
+  EXPECT_FALSE(r.success);
+  EXPECT_TRUE(contains(r.message, "it is '" + later + "' now, but parameters are read only at start")) << r.message;
+  EXPECT_FALSE(fs::exists(later));
+  ros::param::del(nofile + "/ros/map_file");
+}
+
+// A save runs on the worker, but the services have their own thread: the subscriber keeps taking frames while the
+// map is written, and each one is processed or counted (overload) instead of vanishing in roscpp's queue. The map
+// file is a FIFO, so the save provably lasts until this test reads it.
+TEST(NodePersistenceBusy, FramesKeepArrivingAndAreCountedWhileTheMapIsSaved) {
+  ros::NodeHandle pnh("~");
+  const std::string target = pnh.param<std::string>("fifo_target", "/hpds_persist_fifo");
+  const std::string input = pnh.param<std::string>("fifo_input", "/fifo_points");
+  const hpds_node::NodeConfig config = hpds_node::loadNodeConfigFromParams(ros::NodeHandle(target));
+  const fs::path fifo = config.ros.map_file;
+  ASSERT_FALSE(fifo.empty());
+  fs::create_directories(fifo.parent_path());
+  fs::remove(fifo);
+  ASSERT_EQ(::mkfifo(fifo.c_str(), 0644), 0) << std::strerror(errno);
+  ros::NodeHandle nh;
+  Collector<PointCloud2> output(nh, target + "/output");
+  hpds_test::DiagnosticsReader diag(nh, target.substr(1));
+  ros::Publisher pub = nh.advertise<PointCloud2>(input, 100);
+  ASSERT_TRUE(hpds_test::waitFor([&] { return output.connected() && pub.getNumSubscribers() > 0; }, 30.0));
+  ASSERT_TRUE(hpds_test::waitFor([&] { return diag.updates() > 0; }, 30.0));
+  const hpds::SyntheticLidar lidar = makeLidar();
+  for (int i = 0; i < 3; ++i) {
+    pub.publish(frameMsg(lidar, i));
+    ASSERT_TRUE(hpds_test::waitFor([&] { return output.size() >= std::size_t(i + 1); }, 60.0));
+  }
+
+  std_srvs::Trigger::Response r;
+  std::thread caller([&] { r = call(target + "/save_map"); });
+  // Returns once the node has opened the FIFO for writing: the save is running, and blocks until it is read.
+  const int fd = ::open(fifo.c_str(), O_RDONLY);
+  const int burst = 40;
+  double received_during_save = -1.0;
+  if (fd >= 0) {
+    for (int k = 0; k < burst; ++k) {  // 50 Hz
+      pub.publish(frameMsg(lidar, 3 + k % 5));
+      ros::WallDuration(0.02).sleep();
+    }
+    hpds_test::waitFor([&] { return diag.value("frames received") == double(3 + burst); }, 30.0);
+    received_during_save = diag.value("frames received");
+  }
+  // Let the save finish (whatever happened above, so that the call returns).
+  std::vector<std::uint8_t> saved;
+  std::uint8_t buf[65536];
+  for (ssize_t n; fd >= 0 && (n = ::read(fd, buf, sizeof buf)) > 0;) saved.insert(saved.end(), buf, buf + n);
+  if (fd >= 0) ::close(fd);
+  caller.join();
+  ASSERT_GE(fd, 0) << std::strerror(errno);
+
+  EXPECT_EQ(received_during_save, double(3 + burst)) << "frames were lost while the map was saved";
+  EXPECT_TRUE(r.success) << r.message;
+  std::size_t reported = 0;
+  ASSERT_EQ(std::sscanf(r.message.c_str(), "saved %zu samples", &reported), 1) << r.message;
+  const hpds::LoadedHierarchy loaded = hpds::loadHierarchyBytes(saved.data(), saved.size(), "fifo");
+  EXPECT_EQ(loaded.hierarchy.sampleCount(), reported);
+  EXPECT_EQ(loaded.next_frame, 3u);
+  // Every frame accounted for: processed, or dropped from the full queue while the worker was saving.
+  EXPECT_TRUE(hpds_test::waitFor(
+      [&] { return diag.value("frames processed") + diag.value("dropped overload") == double(3 + burst); }, 60.0))
+      << "processed " << diag.value("frames processed") << ", overload " << diag.value("dropped overload");
+  EXPECT_GT(diag.value("dropped overload"), 0.0);
+  EXPECT_EQ(diag.value("dropped lost_upstream"), 0.0);
+  fs::remove(fifo);
+}
+
+// diagnostic_period becomes a wall timer period: a value ros::WallDuration cannot hold (or no number) is refused at
+// start, naming the parameter, instead of throwing later from the timer.
+TEST(NodeParameters, DiagnosticPeriodIsBounded) {
+  const std::string ns = "/hpds_bad_period";
+  ros::NodeHandle nh;
+  for (const auto &set : std::vector<std::function<void()>>{
+           [&] { ros::param::set(ns + "/diagnostic_period", 1e12); },
+           [&] { ros::param::set(ns + "/diagnostic_period", 0.0); },
+           [&] { ros::param::set(ns + "/diagnostic_period", std::string("often")); }}) {
+    set();
+    try {
+      hpds_node::HpdsServer server(nh, ros::NodeHandle(ns), "hpds_bad_period");
+      ADD_FAILURE() << "started with a bad diagnostic_period";
+    } catch (const std::invalid_argument &e) {
+      EXPECT_TRUE(contains(e.what(), ns + "/diagnostic_period: must be a number of seconds in (0, 3600]")) << e.what();
+    }
+  }
+  ros::param::del(ns);
 }
 
 // ros/load_map_on_start + ros/save_map_on_shutdown: three lives of one node (HpdsServers created here, on the

@@ -13,6 +13,13 @@ bool isOwnName(const std::string &n) {
 }
 }  // namespace
 
+std::vector<std::string> fieldsNotCarried(const PointLayout &input) {
+  std::vector<std::string> names;
+  for (const auto &f : input.fields)
+    if (isOwnName(f.name) && f.name != "x" && f.name != "y" && f.name != "z") names.push_back(f.name);
+  return names;
+}
+
 PointLayout outputLayout(const PointLayout &input, bool with_normals, bool with_frame) {
   // x y z first, then the other fields by decreasing element size (stable: listed order within a size), each at the
   // next offset that is a multiple of its element size: readers may then load any field as an aligned value, and

@@ -43,9 +43,11 @@
 
 namespace hpds_node {
 
-/// Why a frame was not processed, beyond malformed messages (which are counted per CloudError).
-enum class DropReason { NoTransform = 0, LayoutChanged, Overload, NoSubscribers };
-inline constexpr int kDropReasonCount = 4;
+/// Why a frame was not processed, beyond malformed messages (which are counted per CloudError). InternalError: the
+/// processing threw (a bug or an exhausted resource); LostUpstream: never received, known from a header.seq gap
+/// (SequenceGaps.hpp).
+enum class DropReason { NoTransform = 0, LayoutChanged, Overload, NoSubscribers, InternalError, LostUpstream };
+inline constexpr int kDropReasonCount = 6;
 [[nodiscard]] const char *toString(DropReason reason);
 
 /// Which outputs to build for this frame (the node asks only for topics with subscribers).
@@ -67,6 +69,8 @@ struct ProcessedFrame {
   std::string why;  ///< reason text for the log when not processed
 
   hpds::FrameCounters counters;
+  /// Input fields the outputs do not carry, their names being hpds's own (hpds::fieldsNotCarried): to be said.
+  std::vector<std::string> fields_not_carried;
   bool has_output = false, has_new_samples = false, has_local_map = false;
   sensor_msgs::PointCloud2 output, new_samples, local_map;
   std::vector<std::pair<int, sensor_msgs::PointCloud2>> levels;  ///< (D, cloud) for the requested levels
@@ -103,8 +107,9 @@ class FrameProcessor {
   ProcessedFrame process(const sensor_msgs::PointCloud2 &msg, const Eigen::Isometry3d &sensor_to_target,
                          const OutputRequest &wants);
 
-  /// Counts a frame dropped before process() (no transform, overload, nobody listening).
-  void countDrop(DropReason reason);
+  /// Counts a frame dropped before or instead of process() (no transform, overload, nobody listening, an internal
+  /// error, lost upstream).
+  void countDrop(DropReason reason, std::uint64_t frames = 1);
 
   /// Map mode: writes the map to `path` (see contract). Throws std::invalid_argument in scan mode and
   /// std::runtime_error ("<path>: <problem>") when the file cannot be written; the map is never changed.

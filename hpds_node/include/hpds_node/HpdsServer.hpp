@@ -1,29 +1,38 @@
 // HpdsServer: the ROS side of hpds, one class behind both entry points (node main, nodelet onInit).
 //
 // Contract
-// - Construction reads the private parameters (config_file, then the config keys and `ros/*`, see NodeConfig.hpp)
-//   and throws std::invalid_argument naming the parameter when one is invalid: the node must not start with a
-//   half-understood configuration.
+// - Construction reads the private parameters (config_file, then the config keys and `ros/*`, see NodeConfig.hpp,
+//   and diagnostic_period) and throws std::invalid_argument naming the parameter when one is invalid: the node must
+//   not start with a half-understood configuration.
 // - Topics (private, remap them): ~input (sensor_msgs/PointCloud2) in; ~output, and in map mode ~new_samples and
 //   ~local_map, plus ~level_<D> for each ros.publish_levels entry, out. Diagnostics on /diagnostics.
-// - Threads: the subscriber callback only queues the message (ros.queue_size deep; when full the oldest is
-//   dropped and counted as overload, so the newest frame wins); a worker thread validates, waits for tf (at most
-//   ros.tf_timeout of wall time, then drops and counts), runs its FrameProcessor and publishes. Map mode has one
-//   worker. Scan mode has `threads` workers (0 = all cores), each with its own processor running one thread: frames
-//   are taken in arrival order, get their frame index (the insertion-order seed) in that order after the checks
-//   that may drop them, and are published in that order, so the output is the same for any number of workers.
+// - Every frame is processed or counted as dropped, with its reason, in the diagnostics, and logged (throttled):
+//   - the subscriber callback only queues the message (OrderedWorkerPool, ros.queue_size deep; when full the oldest
+//     is dropped: overload) and counts gaps in header.seq per publisher (lost_upstream: frames that never arrived,
+//     e.g. dropped by a publisher's or roscpp's queue);
+//   - a worker validates (malformed <reason>), waits for tf (at most ros.tf_timeout of wall time: no_transform),
+//     runs its FrameProcessor (layout_changed) and publishes; anything the processing throws is counted
+//     (internal_error) and logged with its message, and the worker carries on.
+//   Map mode has one worker. Scan mode has `threads` workers (0 = all cores), each with its own processor running
+//   one thread: frames are taken in arrival order, get their frame index (the insertion-order seed) in that order
+//   after the checks that may drop them, and are published in that order, so the output is the same for any number
+//   of workers.
 // - Work is skipped when nobody listens: scan mode drops the frame (counted as no_subscribers) before converting;
 //   map mode still inserts it (the map must stay complete) but builds only the clouds that have subscribers.
-// - Services (private, std_srvs/Trigger): ~save_map writes the map to ros.map_file, ~load_map replaces the map
-//   with that file's. Both run on the worker thread between two frames (a frame is never half-inserted when the
-//   map is saved or replaced) and take priority over queued frames; the caller waits for the result. Response:
-//   success with the path and the sample count, or success=false with the exact error (scan mode, ros.map_file
-//   unset, a missing/corrupt/truncated/incompatible file, a failed write). A failed load leaves the map untouched.
+// - Services (private, std_srvs/Trigger) are served by their own callback queue and thread, so a long save never
+//   holds up the subscriber: ~save_map writes the map to ros.map_file, ~load_map replaces the map with that file's.
+//   Both run on the worker between two frames (a frame is never half-inserted when the map is saved or replaced)
+//   and take priority over queued frames; the caller waits for the result. Response: success with the path and the
+//   sample count, or success=false with the exact error (scan mode, ros.map_file unset, a missing/corrupt/
+//   truncated/incompatible file, a failed write). A failed load leaves the map untouched. Parameters are read at
+//   start: a ros/map_file set later is not used, and the response says so.
 // - ros.load_map_on_start (map mode): the constructor loads ros.map_file before subscribing. A missing file starts
 //   an empty map (ROS_WARN); any other load error throws std::runtime_error naming the file: the node must not
 //   start on an unreadable map (and, with ros.save_map_on_shutdown, overwrite it with an empty one).
-// - Destruction stops the worker after its current frame (queued frames are lost) and then, with
-//   ros.save_map_on_shutdown, saves the map to ros.map_file (a failure is logged: nothing else can be done).
+// - shutdown() (also called by the destructor) stops the input, answers pending service calls, stops the workers
+//   after their current frame (queued frames are discarded and logged) and then, with ros.save_map_on_shutdown,
+//   saves the map to ros.map_file, logging the outcome (ROS_ERROR on failure). It returns false when that save
+//   failed. Call it while roscpp's logging still works (before ros::shutdown()), or the outcome goes unseen.
 #pragma once
 
 #include <diagnostic_updater/diagnostic_updater.h>
@@ -33,17 +42,20 @@
 #include <tf2_ros/buffer.h>
 #include <tf2_ros/transform_listener.h>
 
-#include <condition_variable>
-#include <deque>
-#include <future>
+#include <ros/callback_queue.h>
+#include <ros/spinner.h>
+
 #include <memory>
 #include <mutex>
-#include <thread>
+#include <set>
+#include <string>
 
 #include "hpds_node/FrameProcessor.hpp"
 #include "hpds_node/KeepUpCheck.hpp"
 #include "hpds_node/NodeConfig.hpp"
+#include "hpds_node/OrderedWorkerPool.hpp"
 #include "hpds_node/ParamBridge.hpp"
+#include "hpds_node/SequenceGaps.hpp"
 
 namespace hpds_node {
 
@@ -56,67 +68,57 @@ class HpdsServer {
   HpdsServer(const HpdsServer &) = delete;
   HpdsServer &operator=(const HpdsServer &) = delete;
 
+  /// See the contract; false when the shutdown save failed. Idempotent.
+  bool shutdown();
+
  private:
-  void onCloud(const sensor_msgs::PointCloud2::ConstPtr &msg);
-  // A frame's place in the stream: the index and publish turns it must take (or pass) in arrival order.
-  class Turns;
-  void workerLoop(std::size_t worker);
-  /// Returns the processing time of the frame, 0 when it was dropped.
-  double handle(const sensor_msgs::PointCloud2::ConstPtr &msg, std::size_t worker, Turns &turns);
+  void onCloud(const ros::MessageEvent<const sensor_msgs::PointCloud2> &event);
+  void handle(const sensor_msgs::PointCloud2::ConstPtr &msg, std::size_t worker, OrderedWorkerPool::Turns &turns);
+  void onInternalError(std::size_t worker, const std::string &what);
   bool waitForPose(const std::string &target, const std_msgs::Header &header, Eigen::Isometry3d &pose,
                    std::string *why);
   [[nodiscard]] OutputRequest subscribedOutputs() const;
+  void warnFieldNotCarriedOnce(const std::string &name);
   void publish(ProcessedFrame &frame);
+  // ServerDiagnostics.cpp
   void takeSnapshot(std::size_t worker, double frame_seconds);
   /// Feeds a processed frame's time to keep_up_ and logs its one warning, if any.
   void checkKeepUp(double frame_seconds);
   void diagnose(diagnostic_updater::DiagnosticStatusWrapper &status);
 
-  // Map persistence: a save or load request waiting for the worker.
-  struct MapCommand {
-    bool save = false;
-    std::promise<std::pair<bool, std::string>> done;  // (success, message)
-  };
+  // Map persistence.
   bool onMapService(bool save, std_srvs::Trigger::Request &req, std_srvs::Trigger::Response &res);
-  /// Worker thread (or the constructor/destructor, when no worker runs): performs the save or load.
+  /// On the worker (or when no worker runs): performs the save or load.
   [[nodiscard]] std::pair<bool, std::string> runMapCommand(bool save);
   void loadMapOnStart();
+  /// What the parameter server holds for ros/map_file now, when it differs from what the node started with.
+  [[nodiscard]] std::string mapFileSetSinceStart() const;
 
   ros::NodeHandle nh_, pnh_;
   NodeConfig config_;
   // One per worker, used by that worker only (map mode has one).
   std::vector<std::unique_ptr<FrameProcessor>> processors_;
   std::string target_frame_;
+  // Checked before updater_ is built: diagnostic_updater reads it too, and throws on a value ros::Duration cannot hold.
+  double diagnostic_period_;
+  diagnostic_updater::Updater updater_;
 
   tf2_ros::Buffer tf_buffer_;
   std::unique_ptr<tf2_ros::TransformListener> tf_listener_;
   ros::Publisher pub_output_, pub_new_samples_, pub_local_map_;
   std::vector<ros::Publisher> pub_levels_;
   ros::Subscriber sub_;
-  ros::ServiceServer srv_save_map_, srv_load_map_;
-  diagnostic_updater::Updater updater_;
   ros::WallTimer diagnostics_timer_;
 
-  // Queue between the subscriber callback and the worker.
-  std::mutex queue_mutex_;
-  std::condition_variable queue_cv_;
-  std::deque<sensor_msgs::PointCloud2::ConstPtr> queue_;
-  std::deque<std::shared_ptr<MapCommand>> commands_;  // run before queue_; every one is answered
-  bool stopping_ = false;
-  std::uint64_t received_ = 0;  // guarded by queue_mutex_
-  std::uint64_t overload_ = 0;  // guarded by queue_mutex_
-  std::uint64_t next_ticket_ = 0;  // guarded by queue_mutex_: arrival order of the frames taken by the workers
+  // Counts of the subscriber callback (guarded by input_mutex_).
+  std::mutex input_mutex_;
+  std::uint64_t received_ = 0, overload_ = 0, lost_upstream_ = 0;
+  SequenceGaps sequence_gaps_;
+  std::set<std::string> fields_not_carried_;  // already warned about
 
   // Whether the workers keep up with the input: said once, within the first frames.
   std::mutex keep_up_mutex_;
   std::unique_ptr<KeepUpCheck> keep_up_;  // guarded by keep_up_mutex_
-
-  // Turns, in ticket order: a frame's index is handed out, and its clouds published, only after every earlier
-  // frame's (a dropped frame passes both turns without using them).
-  std::mutex turn_mutex_;
-  std::condition_variable turn_cv_;
-  std::uint64_t index_turn_ = 0, publish_turn_ = 0;  // guarded by turn_mutex_
-  std::uint32_t next_frame_index_ = 0;               // guarded by turn_mutex_
 
   // What the diagnostics see: a copy the worker refreshes after every frame.
   struct Snapshot {
@@ -132,9 +134,15 @@ class HpdsServer {
   ros::WallTime window_start_;
   std::uint64_t window_received_ = 0;
   ProcessorStats window_stats_;
-  std::uint64_t window_overload_ = 0;
+  std::uint64_t window_overload_ = 0, window_lost_upstream_ = 0;
 
-  std::vector<std::thread> workers_;  // last: started once everything above exists
+  std::unique_ptr<OrderedWorkerPool> pool_;  // started once everything above exists
+  // Services: their own queue and thread, declared after the pool so that they are torn down first.
+  ros::CallbackQueue service_queue_;
+  std::unique_ptr<ros::AsyncSpinner> service_spinner_;
+  ros::ServiceServer srv_save_map_, srv_load_map_;
+  bool shut_down_ = false;
+  bool shutdown_ok_ = true;
 };
 
 }  // namespace hpds_node

@@ -1,9 +1,6 @@
 #include "hpds_node/HpdsServer.hpp"
 
-#include <yaml-cpp/yaml.h>
-
 #include <algorithm>
-#include <charconv>
 #include <cmath>
 #include <filesystem>
 #include <sstream>
@@ -15,7 +12,23 @@ namespace hpds_node {
 
 namespace {
 
-double mean(double sum, std::uint64_t n) { return n ? sum / double(n) : 0.0; }
+// diagnostic_period: a wall timer period, which ros::WallDuration must be able to hold.
+double diagnosticPeriod(const ros::NodeHandle &pnh) {
+  double period = 1.0;
+  XmlRpc::XmlRpcValue value;
+  if (!pnh.getParam("diagnostic_period", value)) return period;
+  if (value.getType() == XmlRpc::XmlRpcValue::TypeDouble) {
+    period = static_cast<double>(value);
+  } else if (value.getType() == XmlRpc::XmlRpcValue::TypeInt) {
+    period = static_cast<int>(value);
+  } else {
+    period = NAN;
+  }
+  if (!(std::isfinite(period) && period > 0.0 && period <= 3600.0))
+    throw std::invalid_argument("parameter " + pnh.getNamespace() +
+                                "/diagnostic_period: must be a number of seconds in (0, 3600]");
+  return period;
+}
 
 }  // namespace
 
@@ -23,6 +36,7 @@ HpdsServer::HpdsServer(ros::NodeHandle nh, ros::NodeHandle private_nh, const std
     : nh_(nh),
       pnh_(private_nh),
       config_(loadNodeConfigFromParams(private_nh)),
+      diagnostic_period_(diagnosticPeriod(private_nh)),
       updater_(nh, private_nh, name) {
   // Scan mode: frames are independent, so `threads` workers take one frame each, each processor on one thread.
   const std::size_t workers =
@@ -50,56 +64,74 @@ HpdsServer::HpdsServer(ros::NodeHandle nh, ros::NodeHandle private_nh, const std
   window_start_ = ros::WallTime::now();
   // Reported on a wall-clock timer: the updater's own rate limit runs on ROS time, which stops with a bag under
   // use_sim_time, and the final counts of a replay would never be published.
-  double period = pnh_.param("diagnostic_period", 1.0);
-  if (!(period > 0.0)) period = 1.0;
-  diagnostics_timer_ = nh_.createWallTimer(ros::WallDuration(period), [this](const ros::WallTimerEvent &) {
-    updater_.force_update();
+  diagnostics_timer_ = nh_.createWallTimer(ros::WallDuration(diagnostic_period_), [this](const ros::WallTimerEvent &) {
+    // The updater re-reads ~diagnostic_period on every update, and a value set at run time that ros::Duration
+    // cannot hold makes it throw: that must cost a report, not the node.
+    try {
+      updater_.force_update();
+    } catch (const std::exception &e) {
+      ROS_ERROR_STREAM_THROTTLE_NAMED(10.0, "hpds", "hpds: diagnostics not published: " << e.what());
+    }
   });
   snapshot_.stats.resize(processors_.size());
   snapshot_.memory.resize(processors_.size());
   for (std::size_t w = 0; w < processors_.size(); ++w) takeSnapshot(w, 0.0);
 
-  for (std::size_t w = 0; w < processors_.size(); ++w) workers_.emplace_back([this, w] { workerLoop(w); });
-  // roscpp's own queue only has to absorb bursts while onCloud runs; the counted dropping happens in queue_.
+  pool_ = std::make_unique<OrderedWorkerPool>(
+      processors_.size(), static_cast<std::size_t>(config_.ros.queue_size),
+      [this](const sensor_msgs::PointCloud2::ConstPtr &msg, std::size_t worker, OrderedWorkerPool::Turns &turns) {
+        handle(msg, worker, turns);
+      },
+      [this](std::size_t worker, const std::string &what) { onInternalError(worker, what); });
+  // roscpp's own queue only has to absorb bursts while onCloud runs; the counted dropping happens in the pool.
   sub_ = pnh_.subscribe("input", static_cast<std::uint32_t>(config_.ros.queue_size) + 4, &HpdsServer::onCloud, this);
-  // Advertised in scan mode too, so that a call gets a clear answer rather than "service does not exist".
-  srv_save_map_ = pnh_.advertiseService<std_srvs::Trigger::Request, std_srvs::Trigger::Response>(
+  // Advertised in scan mode too, so that a call gets a clear answer rather than "service does not exist". Served
+  // on their own thread: a save of a large map must not stop the subscriber callback, or roscpp's queue would drop
+  // frames while it runs.
+  ros::NodeHandle service_nh(pnh_);
+  service_nh.setCallbackQueue(&service_queue_);
+  srv_save_map_ = service_nh.advertiseService<std_srvs::Trigger::Request, std_srvs::Trigger::Response>(
       "save_map", [this](auto &req, auto &res) { return onMapService(true, req, res); });
-  srv_load_map_ = pnh_.advertiseService<std_srvs::Trigger::Request, std_srvs::Trigger::Response>(
+  srv_load_map_ = service_nh.advertiseService<std_srvs::Trigger::Request, std_srvs::Trigger::Response>(
       "load_map", [this](auto &req, auto &res) { return onMapService(false, req, res); });
+  service_spinner_ = std::make_unique<ros::AsyncSpinner>(1, &service_queue_);
+  service_spinner_->start();
 
-  const hpds::Pipeline &pipeline = processors_.front()->pipeline();
+  const int output_level = processors_.front()->pipeline().outputLevel();
   std::ostringstream summary;
-  summary << "hpds: " << hpds::toString(config_.hpds.mode) << " mode, " << pipeline.outputResolution().reason
-          << "; levels 0.." << pipeline.buildDepth() << " built"
-          << (config_.hpds.normals.enabled ? ", normals on" : ", normals off");
+  summary << "hpds: " << hpds::toString(config_.hpds.mode) << " mode, output levels 0.." << output_level
+          << " (spacing " << hpds::poissonRadius(config_.hpds.hierarchy.cell_size, output_level) << " m)";
   if (!target_frame_.empty()) summary << ", outputs in frame '" << target_frame_ << "'";
   if (processors_.size() > 1) summary << ", " << processors_.size() << " frames in parallel";
   ROS_INFO_STREAM_NAMED("hpds", summary.str() << "; input " << sub_.getTopic() << ", output "
                                               << pub_output_.getTopic());
 }
 
-HpdsServer::~HpdsServer() {
+HpdsServer::~HpdsServer() { shutdown(); }
+
+bool HpdsServer::shutdown() {
+  if (shut_down_) return shutdown_ok_;
+  shut_down_ = true;
   sub_.shutdown();
-  // A service call in progress waits for the worker, which is still running: it is answered before this returns.
+  // A service call in progress waits for a worker, which is still running: it is answered before the spinner stops.
+  if (service_spinner_) service_spinner_->stop();
   srv_save_map_.shutdown();
   srv_load_map_.shutdown();
-  {
-    std::lock_guard<std::mutex> lock(queue_mutex_);
-    stopping_ = true;
-  }
-  queue_cv_.notify_all();
-  for (std::thread &t : workers_)
-    if (t.joinable()) t.join();
-  // The worker is gone: the map is complete (no frame half-inserted) and nothing else touches it.
+  const std::size_t discarded = pool_ ? pool_->stop() : 0;
+  if (discarded > 0)
+    ROS_WARN_STREAM_NAMED("hpds", "hpds: shutdown: " << discarded << " received frame(s) were still queued and are "
+                                                     << "not processed");
+  // The workers are gone: the map is complete (no frame half-inserted) and nothing else touches it.
   if (config_.ros.save_map_on_shutdown && config_.hpds.mode == hpds::Mode::Map) {
     const auto [ok, message] = runMapCommand(true);
+    shutdown_ok_ = ok;
     if (ok) {
       ROS_INFO_STREAM_NAMED("hpds", "hpds: shutdown: " << message);
     } else {
       ROS_ERROR_STREAM_NAMED("hpds", "hpds: shutdown: the map was not saved: " << message);
     }
   }
+  return shutdown_ok_;
 }
 
 void HpdsServer::loadMapOnStart() {
@@ -140,32 +172,33 @@ std::pair<bool, std::string> HpdsServer::runMapCommand(bool save) {
   }
 }
 
+std::string HpdsServer::mapFileSetSinceStart() const {
+  std::string now;
+  if (!pnh_.getParam("ros/map_file", now) || now == config_.ros.map_file) return "";
+  return now;
+}
+
 bool HpdsServer::onMapService(bool save, std_srvs::Trigger::Request &, std_srvs::Trigger::Response &res) {
   const char *service = save ? "~save_map" : "~load_map";
   res.success = false;
+  const std::string changed = mapFileSetSinceStart();
   if (config_.hpds.mode != hpds::Mode::Map) {
     res.message = "this node runs in scan mode, which keeps no map: saving and loading need mode: map";
   } else if (config_.ros.map_file.empty()) {
-    res.message = "parameter " + pnh_.getNamespace() + "/ros/map_file is not set (the path of the map file)";
+    res.message = "parameter " + pnh_.getNamespace() + "/ros/map_file was not set when the node started";
+    if (!changed.empty())
+      res.message += " (it is '" + changed + "' now, but parameters are read only at start: restart the node)";
   } else {
     // Run by the worker between two frames; answered there (or refused here when the node is stopping).
-    auto command = std::make_shared<MapCommand>();
-    command->save = save;
-    std::future<std::pair<bool, std::string>> result = command->done.get_future();
-    bool queued = false;
-    {
-      std::lock_guard<std::mutex> lock(queue_mutex_);
-      if (!stopping_) {
-        commands_.push_back(command);
-        queued = true;
-      }
-    }
-    if (queued) {
-      queue_cv_.notify_all();
-      std::tie(res.success, res.message) = result.get();
-    } else {
-      res.message = "the node is shutting down";
-    }
+    std::pair<bool, std::string> result{false, "the node is shutting down"};
+    pool_->runBetweenFrames([&](std::size_t worker) {
+      result = runMapCommand(save);
+      takeSnapshot(worker, 0.0);
+    });
+    std::tie(res.success, res.message) = result;
+    if (!changed.empty())
+      res.message += " (ros/map_file is '" + changed + "' now, but parameters are read only at start: this node "
+                     "uses '" + config_.ros.map_file + "' until it is restarted)";
   }
   if (res.success) {
     ROS_INFO_STREAM_NAMED("hpds", "hpds: " << service << ": " << res.message);
@@ -175,20 +208,32 @@ bool HpdsServer::onMapService(bool save, std_srvs::Trigger::Request &, std_srvs:
   return true;  // the outcome is in the response: a false return would hide the message from the caller
 }
 
-void HpdsServer::onCloud(const sensor_msgs::PointCloud2::ConstPtr &msg) {
+void HpdsServer::onCloud(const ros::MessageEvent<const sensor_msgs::PointCloud2> &event) {
+  const sensor_msgs::PointCloud2::ConstPtr &msg = event.getConstMessage();
   const double now = ros::WallTime::now().toSec();
-  bool dropped = false;
+  std::uint64_t lost = 0, lost_total = 0, overload_total = 0;
   {
-    std::lock_guard<std::mutex> lock(queue_mutex_);
+    std::lock_guard<std::mutex> lock(input_mutex_);
     ++received_;
-    if (queue_.size() >= static_cast<std::size_t>(config_.ros.queue_size)) {
-      queue_.pop_front();
-      ++overload_;
-      dropped = true;
-    }
-    queue_.push_back(msg);
+    lost = sequence_gaps_.observe(event.getPublisherName(), msg->header.seq);
+    lost_upstream_ += lost;
+    lost_total = lost_upstream_;
   }
-  queue_cv_.notify_one();
+  const bool dropped = pool_->push(msg);
+  if (dropped) {
+    std::lock_guard<std::mutex> lock(input_mutex_);
+    overload_total = ++overload_;
+  }
+  if (lost > 0)
+    ROS_WARN_STREAM_THROTTLE_NAMED(5.0, "hpds", "hpds: " << lost << " frame(s) from " << event.getPublisherName()
+                                                         << " never arrived (header.seq jumped to " << msg->header.seq
+                                                         << "): lost before hpds received them (" << lost_total
+                                                         << " so far, counted as lost_upstream)");
+  if (dropped)
+    ROS_WARN_STREAM_THROTTLE_NAMED(5.0, "hpds", "hpds: dropped the oldest queued frame: frames arrive faster than "
+                                                "they are processed ("
+                                                    << overload_total << " so far, counted as overload; ros.queue_size "
+                                                    << config_.ros.queue_size << ")");
   std::string warning;
   {
     std::lock_guard<std::mutex> lock(keep_up_mutex_);
@@ -198,101 +243,23 @@ void HpdsServer::onCloud(const sensor_msgs::PointCloud2::ConstPtr &msg) {
   if (!warning.empty()) ROS_WARN_STREAM_NAMED("hpds", warning);
 }
 
-// Every frame a worker takes passes both turns exactly once, whatever happens to it (the destructor passes what
-// is left), so a later frame never waits forever. Its predecessors are all held by running workers, which finish
-// their frames before stopping.
-class HpdsServer::Turns {
- public:
-  Turns(HpdsServer &server, std::uint64_t ticket) : s_(server), ticket_(ticket) {}
-  Turns(const Turns &) = delete;
-  Turns &operator=(const Turns &) = delete;
-  ~Turns() {
-    if (!indexed_) passIndexTurn();
-    if (!publishing_) waitToPublish();
-    {
-      std::lock_guard<std::mutex> lock(s_.turn_mutex_);
-      ++s_.publish_turn_;
-    }
-    s_.turn_cv_.notify_all();
-  }
-  /// The frame's index in the stream of frames that passed the checks.
-  std::uint32_t takeIndex() { return indexTurn(/*take=*/true); }
-  /// Returns once every earlier frame has been published or dropped.
-  void waitToPublish() {
-    if (!indexed_) passIndexTurn();
-    std::unique_lock<std::mutex> lock(s_.turn_mutex_);
-    s_.turn_cv_.wait(lock, [this] { return s_.publish_turn_ == ticket_; });
-    publishing_ = true;
-  }
-  /// A dropped frame: its index turn goes by without an index.
-  void passIndexTurn() { indexTurn(/*take=*/false); }
-
- private:
-  std::uint32_t indexTurn(bool take) {
-    std::uint32_t index = 0;
-    {
-      std::unique_lock<std::mutex> lock(s_.turn_mutex_);
-      s_.turn_cv_.wait(lock, [this] { return s_.index_turn_ == ticket_; });
-      if (take) index = s_.next_frame_index_++;
-      ++s_.index_turn_;
-    }
-    indexed_ = true;
-    s_.turn_cv_.notify_all();
-    return index;
-  }
-
-  HpdsServer &s_;
-  std::uint64_t ticket_;
-  bool indexed_ = false, publishing_ = false;
-};
-
-void HpdsServer::workerLoop(std::size_t worker) {
-  for (;;) {
-    sensor_msgs::PointCloud2::ConstPtr msg;
-    std::shared_ptr<MapCommand> command;
-    std::uint64_t ticket = 0;
-    {
-      std::unique_lock<std::mutex> lock(queue_mutex_);
-      queue_cv_.wait(lock, [this] { return stopping_ || !queue_.empty() || !commands_.empty(); });
-      // Map commands first, and all of them before stopping: each caller is waiting for its answer.
-      if (!commands_.empty()) {
-        command = commands_.front();
-        commands_.pop_front();
-      } else if (stopping_) {
-        return;
-      } else {
-        msg = queue_.front();
-        queue_.pop_front();
-        ticket = next_ticket_++;
-      }
-    }
-    if (command) {
-      command->done.set_value(runMapCommand(command->save));
-      takeSnapshot(worker, 0.0);
-      continue;
-    }
-    double seconds = 0.0;
-    {
-      Turns turns(*this, ticket);
-      try {
-        seconds = handle(msg, worker, turns);
-      } catch (const std::exception &e) {
-        // A bug must not take the node down with it; the frame is lost and said so.
-        ROS_ERROR_STREAM_THROTTLE_NAMED(5.0, "hpds", "hpds: frame dropped by an internal error: " << e.what());
-      }
-    }
-    takeSnapshot(worker, seconds);
-    if (seconds > 0.0) checkKeepUp(seconds);
-  }
+void HpdsServer::onInternalError(std::size_t worker, const std::string &what) {
+  // A bug or an exhausted resource must not take the node down with it; the frame is lost, counted and said so.
+  processors_[worker]->countDrop(DropReason::InternalError);
+  ROS_ERROR_STREAM_THROTTLE_NAMED(5.0, "hpds", "hpds: frame dropped by an internal error ("
+                                                   << processors_[worker]->stats().dropped[int(DropReason::InternalError)]
+                                                   << " so far, counted as internal_error): " << what);
+  takeSnapshot(worker, 0.0);
 }
 
-void HpdsServer::checkKeepUp(double frame_seconds) {
-  std::string warning;
+void HpdsServer::warnFieldNotCarriedOnce(const std::string &name) {
   {
-    std::lock_guard<std::mutex> lock(keep_up_mutex_);
-    warning = keep_up_->processed(frame_seconds);
+    std::lock_guard<std::mutex> lock(input_mutex_);
+    if (!fields_not_carried_.insert(name).second) return;
   }
-  if (!warning.empty()) ROS_WARN_STREAM_NAMED("hpds", warning);
+  ROS_WARN_STREAM_NAMED("hpds", "hpds: input field '" << name << "' is not in the outputs: hpds writes its own '"
+                                                      << name << "' or keeps the name for it; rename the field in "
+                                                      << "the input to keep it");
 }
 
 OutputRequest HpdsServer::subscribedOutputs() const {
@@ -312,56 +279,67 @@ bool HpdsServer::waitForPose(const std::string &target, const std_msgs::Header &
   for (;;) {
     if (tf_buffer_.canTransform(target, header.frame_id, header.stamp))
       return lookupSensorPose(tf_buffer_, target, header.frame_id, header.stamp, pose, why);
-    if (ros::WallTime::now() >= deadline || !ros::ok()) break;
-    {
-      std::lock_guard<std::mutex> lock(queue_mutex_);
-      if (stopping_) break;
-    }
+    if (ros::WallTime::now() >= deadline || !ros::ok() || pool_->stopping()) break;
     ros::WallDuration(0.002).sleep();
   }
   return lookupSensorPose(tf_buffer_, target, header.frame_id, header.stamp, pose, why);
 }
 
-double HpdsServer::handle(const sensor_msgs::PointCloud2::ConstPtr &msg, std::size_t worker, Turns &turns) {
+void HpdsServer::handle(const sensor_msgs::PointCloud2::ConstPtr &msg, std::size_t worker,
+                        OrderedWorkerPool::Turns &turns) {
   FrameProcessor &processor = *processors_[worker];
+  const auto count = [&](DropReason r) { return processor.stats().dropped[int(r)]; };
+  const OutputRequest wants = subscribedOutputs();
+  double seconds = 0.0;
   // 1. Validate before any work.
   std::string why;
   const CloudError error = processor.check(*msg, &why);
   if (error != CloudError::None) {
     ROS_ERROR_STREAM_THROTTLE_NAMED(5.0, "hpds", "hpds: dropped malformed PointCloud2 ("
-                                                      << toString(error) << "): " << why);
-    return 0.0;
-  }
-
-  // 2. Nobody listening: scan mode has nothing to keep, map mode still has to grow the map.
-  const OutputRequest wants = subscribedOutputs();
-  if (config_.hpds.mode == hpds::Mode::Scan && !wants.any()) {
+                                                      << toString(error) << ", " << processor.stats().malformedTotal()
+                                                      << " malformed so far): " << why);
+  } else if (config_.hpds.mode == hpds::Mode::Scan && !wants.any()) {
+    // 2. Nobody listening: scan mode has nothing to keep (map mode still has to grow the map).
     processor.countDrop(DropReason::NoSubscribers);
-    return 0.0;
+  } else {
+    // 3. Sensor pose in the target frame at the message stamp.
+    Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
+    if (!target_frame_.empty() && !waitForPose(target_frame_, msg->header, pose, &why)) {
+      processor.countDrop(DropReason::NoTransform);
+      ROS_WARN_STREAM_THROTTLE_NAMED(5.0, "hpds", "hpds: dropped frame at "
+                                                      << msg->header.stamp << ": no transform '" << msg->header.frame_id
+                                                      << "' -> '" << target_frame_ << "' ("
+                                                      << count(DropReason::NoTransform)
+                                                      << " so far, counted as no_transform): " << why);
+    } else {
+      // 4. Shared per-frame processing, then publish what was built, in arrival order. With one worker its
+      //    pipeline counts the frames itself; several take the index of their frame in the stream.
+      const std::uint32_t index = turns.takeIndex();
+      if (processors_.size() > 1) processor.setNextFrameIndex(index);
+      ProcessedFrame frame = processor.process(*msg, pose, wants);
+      if (!frame.processed) {
+        ROS_ERROR_STREAM_THROTTLE_NAMED(5.0, "hpds", "hpds: dropped frame (" << toString(frame.drop) << ", "
+                                                                              << count(frame.drop)
+                                                                              << " so far): " << frame.why);
+      } else {
+        for (const std::string &name : frame.fields_not_carried) warnFieldNotCarriedOnce(name);
+        turns.waitToPublish();
+        publish(frame);
+        seconds = frame.seconds;
+      }
+    }
   }
+  takeSnapshot(worker, seconds);
+  if (seconds > 0.0) checkKeepUp(seconds);
+}
 
-  // 3. Sensor pose in the target frame at the message stamp.
-  Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
-  if (!target_frame_.empty() && !waitForPose(target_frame_, msg->header, pose, &why)) {
-    processor.countDrop(DropReason::NoTransform);
-    ROS_WARN_STREAM_THROTTLE_NAMED(5.0, "hpds", "hpds: dropped frame at " << msg->header.stamp << ": no transform '"
-                                                                           << msg->header.frame_id << "' -> '"
-                                                                           << target_frame_ << "': " << why);
-    return 0.0;
+void HpdsServer::checkKeepUp(double frame_seconds) {
+  std::string warning;
+  {
+    std::lock_guard<std::mutex> lock(keep_up_mutex_);
+    warning = keep_up_->processed(frame_seconds);
   }
-
-  // 4. Shared per-frame processing, then publish what was built, in arrival order. With one worker its pipeline
-  //    counts the frames itself; several take the index of their frame in the stream.
-  const std::uint32_t index = turns.takeIndex();
-  if (processors_.size() > 1) processor.setNextFrameIndex(index);
-  ProcessedFrame frame = processor.process(*msg, pose, wants);
-  if (!frame.processed) {
-    ROS_ERROR_STREAM_THROTTLE_NAMED(5.0, "hpds", "hpds: dropped frame: " << frame.why);
-    return 0.0;
-  }
-  turns.waitToPublish();
-  publish(frame);
-  return frame.seconds;
+  if (!warning.empty()) ROS_WARN_STREAM_NAMED("hpds", warning);
 }
 
 void HpdsServer::publish(ProcessedFrame &frame) {
@@ -386,90 +364,6 @@ void HpdsServer::publish(ProcessedFrame &frame) {
     for (std::size_t i = 0; i < config_.ros.publish_levels.size(); ++i)
       if (config_.ros.publish_levels[i] == level) send(pub_levels_[i], cloud);
   }
-}
-
-void HpdsServer::takeSnapshot(std::size_t worker, double frame_seconds) {
-  // Each worker reports its own processor; the hierarchy shown is the one of the frame finished last.
-  const FrameProcessor &processor = *processors_[worker];
-  const hpds::Hierarchy &h = processor.pipeline().hierarchy();
-  std::vector<std::size_t> per_level;
-  for (int d = 0; d <= processor.pipeline().buildDepth(); ++d) per_level.push_back(h.countAtLevel(d));
-  const ProcessorStats stats = processor.stats();
-  const std::size_t total = h.sampleCount(), memory = h.memUsage();
-  std::lock_guard<std::mutex> lock(snapshot_mutex_);
-  snapshot_.stats[worker] = stats;
-  snapshot_.memory[worker] = memory;
-  snapshot_.samples_per_level = std::move(per_level);
-  snapshot_.samples_total = total;
-  snapshot_.seconds_max_window = std::max(snapshot_.seconds_max_window, frame_seconds);
-}
-
-void HpdsServer::diagnose(diagnostic_updater::DiagnosticStatusWrapper &status) {
-  Snapshot s;
-  {
-    std::lock_guard<std::mutex> lock(snapshot_mutex_);
-    s = snapshot_;
-    snapshot_.seconds_max_window = 0.0;
-  }
-  std::uint64_t received, overload;
-  {
-    std::lock_guard<std::mutex> lock(queue_mutex_);
-    received = received_;
-    overload = overload_;
-  }
-  const ros::WallTime now = ros::WallTime::now();
-  const double window = std::max(1e-6, (now - window_start_).toSec());
-  ProcessorStats t;
-  for (const ProcessorStats &one : s.stats) t += one;
-  std::size_t memory_bytes = 0;
-  for (std::size_t m : s.memory) memory_bytes += m;
-  const ProcessorStats &w = window_stats_;
-  const std::uint64_t frames_window = t.processed - w.processed;
-  const std::uint64_t dropped_window =
-      (t.droppedTotal() - w.droppedTotal()) + (overload - window_overload_) -
-      (t.dropped[int(DropReason::NoSubscribers)] - w.dropped[int(DropReason::NoSubscribers)]);
-
-  status.add("input rate [Hz]", double(received - window_received_) / window);
-  status.add("frames received", received);
-  status.add("frames processed", t.processed);
-  status.add("frames empty", t.empty);
-  status.add("processing time mean [ms]", 1e3 * mean(t.seconds_sum - w.seconds_sum, frames_window));
-  status.add("processing time max [ms]", 1e3 * s.seconds_max_window);
-  status.add("processing time mean, all frames [ms]", 1e3 * mean(t.seconds_sum, t.processed));
-  status.add("processing time max, all frames [ms]", 1e3 * t.seconds_max);
-  status.add("dropped total", t.droppedTotal() + overload);
-  status.add("dropped malformed", t.malformedTotal());
-  for (int e = 1; e < kCloudErrorCount; ++e)
-    status.add(std::string("dropped malformed ") + toString(CloudError(e)), t.malformed[e]);
-  status.add("dropped overload", overload);
-  for (DropReason r : {DropReason::NoTransform, DropReason::LayoutChanged, DropReason::NoSubscribers})
-    status.add(std::string("dropped ") + toString(r), t.dropped[int(r)]);
-  status.add("points input", t.points.input);
-  status.add("points skipped invalid", t.points.skipped_invalid);
-  status.add("points skipped zero", t.points.skipped_zero);
-  status.add("points skipped range", t.points.skipped_range);
-  status.add("points out of key range", t.points.out_of_range);
-  status.add("points dropped past the deepest level", t.points.dropped_depth);
-  status.add("deepest level built", s.samples_per_level.empty() ? 0 : s.samples_per_level.size() - 1);
-  status.add("samples stored", s.samples_total);
-  for (std::size_t d = 0; d < s.samples_per_level.size(); ++d)
-    status.add("samples level " + std::to_string(d), s.samples_per_level[d]);
-  status.add("memory in use [bytes]", memory_bytes);
-
-  if (dropped_window > 0) {
-    status.summaryf(diagnostic_msgs::DiagnosticStatus::WARN, "%llu frames dropped in the last %.1f s",
-                    static_cast<unsigned long long>(dropped_window), window);
-  } else if (received == window_received_) {
-    status.summary(diagnostic_msgs::DiagnosticStatus::OK, "waiting for input");
-  } else {
-    status.summaryf(diagnostic_msgs::DiagnosticStatus::OK, "%.1f Hz in, %.1f ms per frame",
-                    double(received - window_received_) / window,
-                    1e3 * mean(t.seconds_sum - w.seconds_sum, frames_window));
-  }
-  window_start_ = now;
-  window_received_ = received;
-  window_overload_ = overload;
-  window_stats_ = t;
 }
 
 }  // namespace hpds_node

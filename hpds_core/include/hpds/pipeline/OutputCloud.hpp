@@ -7,6 +7,7 @@
 // (as PCL's padded point types are); the padding bytes are zero. Consumers find fields by name, not position.
 #pragma once
 
+#include <string>
 #include <vector>
 
 #include "hpds/sampling/Hierarchy.hpp"
@@ -14,6 +15,11 @@
 #include "hpds/points/PointBuffer.hpp"
 
 namespace hpds {
+
+/// The input fields the output does not carry because their names are hpds's own (level, normal_x/y/z, curvature,
+/// frame; also when hpds does not write them this time), in input order: callers say so rather than drop them
+/// silently. Rename such a field to keep it.
+[[nodiscard]] std::vector<std::string> fieldsNotCarried(const PointLayout &input);
 
 [[nodiscard]] PointLayout outputLayout(const PointLayout &input, bool with_normals, bool with_frame);
 

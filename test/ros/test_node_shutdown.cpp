@@ -1,0 +1,166 @@
+// rostest node: the shutdown of the standalone node says what became of the map. This test starts hpds_node
+// processes itself (output captured in a file), feeds them frames and stops them the ways a user does: Ctrl-C
+// (SIGINT), roslaunch's escalation (SIGTERM) and `rosnode kill` (XML-RPC shutdown). With ros/save_map_on_shutdown
+// the log must say "saved N samples" (and the file hold them) or, when the save fails, an ERROR line and exit
+// status 1: never nothing, which is what happened while the save ran after roscpp had taken its logging down.
+//
+// Parameters: ~node_binary (the hpds_node executable), ~map_dir (created here).
+#include <gtest/gtest.h>
+
+#include <fcntl.h>
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <cstdio>
+#include <filesystem>
+
+#include "RosTestUtil.hpp"
+#include "hpds/io/HierarchyFile.hpp"
+#include "hpds/eval/SyntheticLidar.hpp"
+
+namespace {
+
+namespace fs = std::filesystem;
+using hpds_test::Collector;
+using hpds_test::contains;
+using sensor_msgs::PointCloud2;
+
+std::string readText(const fs::path &p) {
+  const std::vector<std::uint8_t> b = hpds_test::readBytes(p);
+  return std::string(b.begin(), b.end());
+}
+
+// Starts hpds_node as `name` in map mode, saving to `map_file` on shutdown, with its output in `log`.
+pid_t startNode(const std::string &name, const std::string &map_file, const fs::path &log) {
+  const std::string binary = ros::NodeHandle("~").param<std::string>("node_binary", "");
+  std::vector<std::string> args = {binary,
+                                   "__name:=" + name,
+                                   "_mode:=map",
+                                   "_ros/fixed_frame:=odom",
+                                   "_ros/local_map_rate:=0.0",
+                                   "_ros/save_map_on_shutdown:=true",
+                                   "_ros/map_file:=" + map_file,
+                                   "_hierarchy/max_depth:=6",
+                                   "_output/level:=4",
+                                   "~input:=/" + name + "_points"};
+  const pid_t pid = ::fork();
+  if (pid == 0) {
+    const int fd = ::open(log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    ::dup2(fd, 1);
+    ::dup2(fd, 2);
+    std::vector<char *> argv;
+    for (std::string &s : args) argv.push_back(s.data());
+    argv.push_back(nullptr);
+    ::execv(argv[0], argv.data());
+    ::_exit(127);
+  }
+  return pid;
+}
+
+// Exit status of `pid` (128 + signal when killed), or -1 when it does not end within `seconds`.
+int waitExit(pid_t pid, double seconds) {
+  const ros::WallTime deadline = ros::WallTime::now() + ros::WallDuration(seconds);
+  int status = 0;
+  while (::waitpid(pid, &status, WNOHANG) == 0) {
+    if (ros::WallTime::now() > deadline) {
+      ::kill(pid, SIGKILL);
+      ::waitpid(pid, &status, 0);
+      return -1;
+    }
+    ros::WallDuration(0.02).sleep();
+  }
+  return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+}
+
+class NodeShutdown : public testing::Test {
+ protected:
+  void SetUp() override {
+    std::string dir = ros::NodeHandle("~").param<std::string>("map_dir", "");
+    if (dir.empty()) dir = (fs::temp_directory_path() / "hpds_test_shutdown").string();
+    dir_ = dir;
+    fs::remove_all(dir_);
+    fs::create_directories(dir_);
+  }
+
+  // Starts the node, sends it three frames (waiting for each one's output), stops it with `stop`, and returns its
+  // exit status and log.
+  std::pair<int, std::string> runAndStop(const std::string &name, const std::string &map_file,
+                                         const std::function<void(pid_t)> &stop) {
+    const fs::path log = dir_ / (name + ".log");
+    const pid_t pid = startNode(name, map_file, log);
+    EXPECT_GT(pid, 0);
+    Collector<PointCloud2> output(nh_, "/" + name + "/output");
+    ros::Publisher pub = nh_.advertise<PointCloud2>("/" + name + "_points", 8);
+    const bool up = hpds_test::waitFor([&] { return output.connected() && pub.getNumSubscribers() > 0; }, 60.0);
+    EXPECT_TRUE(up) << name << " did not come up:\n" << readText(log);
+    if (up) {
+      hpds::SyntheticLidarConfig c;
+      c.beams = 16;
+      c.azimuth_steps = 600;
+      c.frames = 3;
+      c.emit_no_returns = false;
+      const hpds::SyntheticLidar lidar(c);
+      for (int i = 0; i < 3; ++i) {
+        pub.publish(hpds_test::fixedFrameMsg(lidar, i, "odom", ros::Time(100 + i, 0)));
+        EXPECT_TRUE(hpds_test::waitFor([&] { return output.size() >= std::size_t(i + 1); }, 60.0))
+            << "no output for frame " << i << ":\n" << readText(log);
+      }
+    }
+    stop(pid);
+    const int status = waitExit(pid, 60.0);
+    return {status, readText(log)};
+  }
+
+  // The log says "saved N samples ... to '<file>'" and the file holds N samples.
+  void expectSaved(const std::string &log, const std::string &file) {
+    const std::size_t at = log.find("hpds: shutdown: saved ");
+    ASSERT_NE(at, std::string::npos) << "the shutdown save was not logged:\n" << log;
+    EXPECT_TRUE(contains(log.substr(at), "to '" + file + "'")) << log;
+    std::size_t samples = 0;
+    ASSERT_EQ(std::sscanf(log.c_str() + at, "hpds: shutdown: saved %zu samples", &samples), 1) << log;
+    EXPECT_GT(samples, 0u);
+    const hpds::LoadedHierarchy loaded = hpds::loadHierarchy(file);
+    EXPECT_EQ(loaded.hierarchy.sampleCount(), samples);
+    EXPECT_EQ(loaded.next_frame, 3u);
+  }
+
+  fs::path dir_;
+  ros::NodeHandle nh_;
+};
+
+TEST_F(NodeShutdown, CtrlCSavesTheMapAndSaysSo) {
+  const std::string file = (dir_ / "sigint.hpdsmap").string();
+  const auto [status, log] = runAndStop("hpds_shutdown_sigint", file, [](pid_t pid) { ::kill(pid, SIGINT); });
+  EXPECT_EQ(status, 0) << log;
+  expectSaved(log, file);
+}
+
+TEST_F(NodeShutdown, SigtermSavesTheMapAndSaysSo) {
+  const std::string file = (dir_ / "sigterm.hpdsmap").string();
+  const auto [status, log] = runAndStop("hpds_shutdown_sigterm", file, [](pid_t pid) { ::kill(pid, SIGTERM); });
+  EXPECT_EQ(status, 0) << log;
+  expectSaved(log, file);
+}
+
+TEST_F(NodeShutdown, RosnodeKillSavesTheMapAndSaysSo) {
+  const std::string file = (dir_ / "rosnode.hpdsmap").string();
+  const auto [status, log] = runAndStop("hpds_shutdown_rosnode", file, [](pid_t) {
+    EXPECT_EQ(std::system("rosnode kill /hpds_shutdown_rosnode > /dev/null 2>&1"), 0);
+  });
+  EXPECT_EQ(status, 0) << log;
+  expectSaved(log, file);
+}
+
+TEST_F(NodeShutdown, AFailedSaveIsAnErrorLineAndExitStatusOne) {
+  const std::string file = (dir_ / "no_such_dir" / "m.hpdsmap").string();
+  const auto [status, log] = runAndStop("hpds_shutdown_fail", file, [](pid_t pid) { ::kill(pid, SIGINT); });
+  EXPECT_EQ(status, 1) << log;
+  EXPECT_TRUE(contains(log, "[ERROR]") && contains(log, "hpds: shutdown: the map was not saved: saving the map failed: " +
+                                                            file + ": cannot create a temporary file beside it"))
+      << log;
+}
+
+}  // namespace
+
+int main(int argc, char **argv) { return hpds_test::runRosTests(argc, argv, "test_node_shutdown"); }
