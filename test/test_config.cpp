@@ -246,6 +246,13 @@ TEST(ConfigYaml, InvalidDocumentsNameTheKey) {
       {"normals: {max_growth: 0.5}", "normals.max_growth", "1..1024"},
       {"normals: {k: 4}", "normals.k", "min_neighbors"},
       {"threads: -1", "threads", "0..1024"},
+      // size-like values beyond their bounds (each took 30-60 s per frame)
+      {"normals: {k: 2000000000}", "normals.k", "must be in 0..1024"},
+      {"normals: {min_neighbors: 5000}", "normals.min_neighbors", "must be in 3..1024"},
+      {"normals: {radius: 1e6}", "normals.radius", "(64 radii of level 8, the finest level the normals read)"},
+      {"output: {level: 3}\nnormals: {radius: 30.0, neighborhood_level_offset: 0}", "normals.radius",
+       "64 radii of level 3"},
+      {"order: {feature_radius: 1e6}", "order.feature_radius", "(64 radii of level 8, the output level)"},
       // unknown keys
       {"bogus: 1", "bogus", "unknown key"},
       {"hierarchy: {max_dpeth: 3}", "hierarchy.max_dpeth", "did you mean 'hierarchy.max_depth'"},
@@ -304,6 +311,20 @@ TEST(ConfigYaml, FileErrorsNameThePath) {
 
   message = errorOf([&] { (void)hpds::loadConfigFile(dir.string()); });
   EXPECT_NE(message.find("directory"), std::string::npos) << message;
+
+  // Devices and oversized files: refused before they are read (/dev/zero grew without bound, a 6 MB YAML sequence
+  // took 1.4 GB).
+  message = errorOf([&] { (void)hpds::loadConfigFile("/dev/zero"); });
+  EXPECT_EQ(message, "config file '/dev/zero': not a regular file (a config is a YAML text file)");
+  const std::string big = (dir / "big.yaml").string();
+  std::string sequence = "threads: [";
+  while (sequence.size() <= hpds::kMaxConfigBytes) sequence += "1, ";
+  writeFile(big, sequence + "1]\n");
+  message = errorOf([&] { (void)hpds::loadConfigFile(big); });
+  EXPECT_EQ(message, "config file '" + big + "': larger than 262144 bytes, the most a config file may have");
+  message = errorOf([&] { (void)hpds::loadConfigString(sequence + "1]\n"); });
+  EXPECT_EQ(message.rfind("(document): ", 0), 0u) << message;
+  EXPECT_NE(message.find("more than the 262144 a config may have"), std::string::npos) << message;
 
   const std::string broken = (dir / "broken.yaml").string();
   writeFile(broken, "mode: scan\nhierarchy: [1,\n");

@@ -329,6 +329,37 @@ TEST(HostileCli, ConfigOfALoneCommaIsRefusedNotHung) {
       << log;
 }
 
+// Inputs that grew without bound or wrapped around: a config that is a device, a negative seed (2^64 - 1 on the CLI
+// while YAML refused it), a feature order on 100 000 coincident points (59 s before the feature cell cap; here it
+// must simply finish, the work bound itself is tested in test_pipeline), and input fields whose names are hpds's
+// own, which must not vanish without a word.
+TEST(HostileCli, UnboundedInputsAreRefusedOrBoundedAndShadowedFieldsAreSaid) {
+  const auto tmp = test::scratchDir("hostile_bounds");
+  writePcd((tmp / "f.pcd").string(), typedCloud(FieldType::Float32, gridPoints(3, 1.0)));
+  runCases({
+      {"sample " + q(tmp / "f.pcd") + " -o " + q(tmp / "o.ply") + " --config /dev/zero", 1,
+       "config file '/dev/zero': not a regular file"},
+      {"sample " + q(tmp / "f.pcd") + " -o " + q(tmp / "o.ply") + " --seed -1", 2,
+       "--seed: must be an integer in 0..18446744073709551615, got '-1'"},
+      {"sample " + q(tmp / "f.pcd") + " -o " + q(tmp / "o.ply") + " --threads 5000", 1, "threads: must be in 0..1024"},
+  });
+  EXPECT_FALSE(fs::exists(tmp / "o.ply"));
+
+  PointLayout l;
+  for (const char *a : {"x", "y", "z"}) l.append(a, FieldType::Float32);
+  l.append("level", FieldType::UInt8);
+  l.append("normal_x", FieldType::Float32);
+  PointBuffer same(l, 100000);
+  for (std::size_t i = 0; i < same.size(); ++i)
+    for (int a = 0; a < 3; ++a) writeFromDouble(same.record(i), l.fields[a], 2.5);
+  writePly((tmp / "same.ply").string(), same);
+  std::string log;
+  ASSERT_EQ(hpds("sample " + q(tmp / "same.ply") + " -o " + q(tmp / "s.ply") + " --order sphericity", &log), 0) << log;
+  for (const char *name : {"level", "normal_x"})
+    EXPECT_NE(log.find(std::string("hpds: warning: input field '") + name + "'"), std::string::npos) << log;
+  EXPECT_NE(log.find("rename the field to keep it"), std::string::npos) << log;
+}
+
 // Found by fuzz_pcd: a uchar `red` without green/blue was sampled and written to the PLY, which the PLY reader then
 // refused ("colour properties red/green/blue must all be present"; PCL's reader cannot pack such a set), so
 // `hpds verify` could not read `hpds sample`'s output. Such PLY files are now read by hpds's own vertex reader,

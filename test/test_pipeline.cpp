@@ -13,6 +13,7 @@
 #include <set>
 
 #include "TestData.hpp"
+#include "hpds/normals/LocalPca.hpp"
 #include "hpds/sampling/InsertionOrderer.hpp"
 #include "hpds/normals/NormalEstimator.hpp"
 #include "hpds/pipeline/Pipeline.hpp"
@@ -649,6 +650,53 @@ TEST(InsertionOrder, FeatureOrdersSortDescendingByBruteForceFeature) {
     for (std::size_t k = 1; k < order.size(); ++k)
       ASSERT_GE(feature[order[k - 1]] + 1e-4, feature[order[k]]) << toString(kind) << " not descending at " << k;
   }
+}
+
+// Degenerate input keeps the feature orders linear: 100 000 coincident points (59 s before the cap) and a dense
+// cluster under a radius that covers it all read at most 27 * kFeatureCellCap points per PCA; a dense plane keeps its
+// features (the representatives are a fair sample); a frame without an overfull cell is computed exactly.
+TEST(InsertionOrder, FeatureWorkStaysLinearOnDegenerateInput) {
+  const std::size_t n = 100000;
+  std::vector<double> same(3 * n, 1.5);
+  std::vector<std::uint32_t> all(n);
+  std::iota(all.begin(), all.end(), 0u);
+  std::uint64_t read = 0;
+  std::vector<float> f = localFeature(same.data(), all, InsertionOrder::Sphericity, 0.1, 2, &read);
+  EXPECT_LE(read, n * 27 * kFeatureCellCap);
+  for (float v : f) ASSERT_EQ(v, 0.0f) << "coincident points have no shape";
+
+  std::mt19937_64 rng(5);
+  std::uniform_real_distribution<double> u(-1, 1);
+  std::vector<double> plane;
+  for (std::size_t i = 0; i < n; ++i) plane.insert(plane.end(), {u(rng), u(rng), 0.001 * u(rng)});
+  for (const double radius : {0.2, 1e6}) {  // about a thousand points per cell, and everything in one cell
+    SCOPED_TRACE(radius);
+    f = localFeature(plane.data(), all, InsertionOrder::SurfaceVariation, radius, 2, &read);
+    EXPECT_LE(read, n * 27 * kFeatureCellCap);
+    // The exact surface variation of a plane 2 mm thick over 2 m (radius 1e6) or 20 cm: tiny either way.
+    for (std::size_t i = 0; i < n; i += 997) EXPECT_LT(f[i], 2e-3) << i;
+  }
+
+  // Below the cap: exactly the brute-force PCA of every neighbour within the radius.
+  std::vector<double> sparse;
+  for (int i = 0; i < 2000; ++i) sparse.insert(sparse.end(), {u(rng), u(rng), 0.2 * u(rng) * u(rng)});
+  std::vector<std::uint32_t> few(2000);
+  std::iota(few.begin(), few.end(), 0u);
+  const double radius = 0.2;
+  f = localFeature(sparse.data(), few, InsertionOrder::Sphericity, radius, 1, &read);
+  std::uint64_t expected_read = 0;
+  for (std::uint32_t i : few) {
+    PcaAccumulator acc(&sparse[3 * i]);
+    for (std::uint32_t j : few) {
+      const double dx = sparse[3 * j] - sparse[3 * i], dy = sparse[3 * j + 1] - sparse[3 * i + 1],
+                   dz = sparse[3 * j + 2] - sparse[3 * i + 2];
+      if (dx * dx + dy * dy + dz * dz < radius * radius) acc.add(&sparse[3 * j]);
+    }
+    expected_read += acc.count();
+    const float exact = acc.count() < 3 ? 0.0f : static_cast<float>(acc.solve(false).sphericity());
+    ASSERT_NEAR(f[i], exact, 1e-5) << i;
+  }
+  EXPECT_EQ(read, expected_read);
 }
 
 TEST(InsertionOrder, SphericityPutsFeaturePointsIntoCoarseLevels) {

@@ -1,6 +1,7 @@
 // `hpds analyze` and `hpds render` end to end on a small synthetic drive: the files they promise, the blue-noise
 // properties the analysis must find in an hpds sampling (and not in the grid baselines), and clear errors.
 #include <gtest/gtest.h>
+#include <yaml-cpp/yaml.h>
 
 #include <cmath>
 #include <cstring>
@@ -126,6 +127,53 @@ TEST_F(QualityCli, BadInputGivesClearErrors) {
   EXPECT_EQ(runHpds("analyze " + shellQuote(*dir_ / "map.ply") + " --cell-size 4 -o " + shellQuote(*dir_ / "bad") + " --patch 500,500,4 "
                  "--no-plots", &log), 1);
   EXPECT_NE(log.find("--patch"), std::string::npos) << log;
+}
+
+// Size-like flags are bounded (errors name the flag and the bound), an inverted crop is refused instead of ignored,
+// and analysis.json stays valid JSON whatever the path holds.
+TEST_F(QualityCli, SizeLikeFlagsAreBoundedAndPathsEscaped) {
+  struct Case {
+    std::string args;
+    int code;
+    std::string message;
+  };
+  const std::string map = shellQuote(*dir_ / "map.ply"), out = " -o " + shellQuote(*dir_ / "bounded");
+  const std::vector<Case> cases = {
+      {"render " + map + out + " --width 20000", 2, "--width: must be an integer in 16..8192, got '20000'"},
+      {"render " + map + out + " --height 0", 2, "--height: must be an integer in 16..8192"},
+      {"render " + map + out + " --splat inf", 2, "--splat: must be a finite number in [0, 1e+06], got 'inf'"},
+      {"render " + map + out + " --splat 1000", 1, "px a splat may have"},
+      {"render " + map + out + " --frame 4294967297", 2, "--frame: must be an integer in 0..4294967295"},
+      {"render " + map + out + " --crop 5,0,0,1,1,1", 1, "--crop: x0 = 5.000000 > x1 = 1.000000"},
+      {"render " + map + out + " --threads 5000", 2, "--threads: must be an integer in 0..1024"},
+      {"analyze " + map + " --cell-size 4" + out + " --rdf-bins 2000000000", 2, "--rdf-bins: must be an integer in 1..10000"},
+      {"analyze " + map + " --cell-size 4" + out + " --freq-max 1e9", 2, "--freq-max: must be a finite number"},
+      {"analyze " + map + " --cell-size 4" + out + " --seed -1", 2, "--seed: must be an integer in 0..18446744073709551615"},
+      {"analyze " + map + " --cell-size nan" + out, 2, "--cell-size: must be a finite number"},
+      {"verify " + map + " --cell-size 0", 1, "--cell-size: must be > 0"},
+      {"synth -o " + shellQuote(*dir_ / "synth_bounded") + " --beams 2000", 2, "--beams: must be an integer in 1..1024"},
+      {"synth -o " + shellQuote(*dir_ / "synth_bounded") + " --beams 1024 --azimuth-steps 100000", 1,
+       "rays per frame, more than the 4194304"},
+  };
+  for (const Case &c : cases) {
+    std::string log;
+    EXPECT_EQ(runHpds(c.args, &log), c.code) << c.args << "\n" << log;
+    EXPECT_NE(log.find(c.message), std::string::npos) << c.args << "\n" << log;
+  }
+  EXPECT_FALSE(std::filesystem::exists(*dir_ / "bounded" / "render_level_top.png")) << "drew before refusing";
+
+  // A path with a quote and a backslash: analysis.json still parses, and gives the path back.
+  const auto odd = *dir_ / "a \"quoted\" \\ dir";
+  std::filesystem::create_directories(odd);
+  std::filesystem::copy_file(*dir_ / "map.ply", odd / "map.ply");
+  std::string log;
+  ASSERT_EQ(runHpds("analyze " + shellQuote(odd / "map.ply") + " --cell-size 4 -o " + shellQuote(odd / "out") +
+                        " --plane-band 0.04 --no-plots",
+                    &log),
+            0)
+      << log;
+  const YAML::Node json = YAML::LoadFile((odd / "out" / "analysis.json").string());
+  EXPECT_EQ(json["sampling"].as<std::string>(), (odd / "map.ply").string());
 }
 
 }  // namespace

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <limits>
 #include <stdexcept>
+#include <string>
 
 namespace hpds {
 
@@ -22,38 +23,69 @@ Eigen::Vector3d viewCoords(const Eigen::Vector3d &p, ViewDirection v) {
   return p;
 }
 
+// The extent drawn and its scale, shared by renderPoints and renderScale.
+struct Framing {
+  Eigen::AlignedBox2d extent;
+  std::vector<std::size_t> used;  // the points drawn
+  double scale = 0.0;             // pixels per metre
+};
+
+Framing frame(const std::vector<Eigen::Vector3d> &points, const RenderOptions &o) {
+  if (o.max_width <= 2 * o.margin_px + 1 || o.max_height <= 2 * o.margin_px + 1)
+    throw std::invalid_argument("renderPoints: image too small for its margin");
+  if (o.max_width > kMaxRenderSide || o.max_height > kMaxRenderSide)
+    throw std::invalid_argument("renderPoints: " + std::to_string(o.max_width) + " x " + std::to_string(o.max_height) +
+                                " px, more than the " + std::to_string(kMaxRenderSide) + " px a side may have");
+  Framing f;
+  const bool cropped = !o.crop.isEmpty();
+  f.used.reserve(points.size());
+  for (std::size_t i = 0; i < points.size(); ++i) {
+    if (!points[i].allFinite() || (cropped && !o.crop.contains(points[i]))) continue;
+    f.used.push_back(i);
+    if (!cropped) f.extent.extend(viewCoords(points[i], o.view).head<2>());
+  }
+  if (cropped) {
+    f.extent.extend(viewCoords(o.crop.min(), o.view).head<2>());
+    f.extent.extend(viewCoords(o.crop.max(), o.view).head<2>());
+  }
+  if (f.extent.isEmpty()) return f;
+  const Eigen::Vector2d span = (f.extent.max() - f.extent.min()).cwiseMax(1e-9);
+  // The extent maps onto pixel centres, so its far edge needs one pixel more than span * scale.
+  const double avail_w = o.max_width - 2 * o.margin_px - 1, avail_h = o.max_height - 2 * o.margin_px - 1;
+  f.scale = std::min(avail_w / span.x(), avail_h / span.y());
+  return f;
+}
+
 }  // namespace
+
+double renderScale(const std::vector<Eigen::Vector3d> &points, const RenderOptions &options) {
+  return frame(points, options).scale;
+}
 
 RgbImage renderPoints(const std::vector<Eigen::Vector3d> &points, const std::vector<Rgb> &colors,
                       const RenderOptions &o, const std::vector<double> *priority) {
   if (colors.size() != points.size()) throw std::invalid_argument("renderPoints: one colour per point is required");
   if (priority && priority->size() != points.size())
     throw std::invalid_argument("renderPoints: one priority per point is required");
-  if (o.max_width <= 2 * o.margin_px + 1 || o.max_height <= 2 * o.margin_px + 1)
-    throw std::invalid_argument("renderPoints: image too small for its margin");
-  const bool cropped = !o.crop.isEmpty();
-  Eigen::AlignedBox2d extent;
-  std::vector<std::size_t> used;
-  used.reserve(points.size());
-  for (std::size_t i = 0; i < points.size(); ++i) {
-    if (!points[i].allFinite() || (cropped && !o.crop.contains(points[i]))) continue;
-    used.push_back(i);
-    if (!cropped) extent.extend(viewCoords(points[i], o.view).head<2>());
-  }
-  if (cropped) {
-    extent.extend(viewCoords(o.crop.min(), o.view).head<2>());
-    extent.extend(viewCoords(o.crop.max(), o.view).head<2>());
-  }
+  if (!(std::isfinite(o.splat_radius) && o.splat_radius >= 0.0))
+    throw std::invalid_argument("splat_radius: must be a finite number >= 0 [m]");
+  const Framing f = frame(points, o);
+  const Eigen::AlignedBox2d &extent = f.extent;
+  const double scale = f.scale;
   if (extent.isEmpty()) return RgbImage(o.max_width, o.max_height, o.background[0], o.background[1], o.background[2]);
   const Eigen::Vector2d span = (extent.max() - extent.min()).cwiseMax(1e-9);
-  // The extent maps onto pixel centres, so its far edge needs one pixel more than span * scale.
-  const double avail_w = o.max_width - 2 * o.margin_px - 1, avail_h = o.max_height - 2 * o.margin_px - 1;
-  const double scale = std::min(avail_w / span.x(), avail_h / span.y());  // pixels per metre
   const int w = static_cast<int>(std::ceil(span.x() * scale - 1e-9)) + 1 + 2 * o.margin_px;
   const int h = static_cast<int>(std::ceil(span.y() * scale - 1e-9)) + 1 + 2 * o.margin_px;
+  const double rp = std::max(0.5, o.splat_radius * scale);
+  // A disc costs its area per point: larger ones made a render of a million points run for hours.
+  if (rp > kMaxSplatPixels)
+    throw std::invalid_argument("splat_radius: " + std::to_string(o.splat_radius) + " m is " +
+                                std::to_string(std::lround(rp)) + " px at this picture's scale, more than the " +
+                                std::to_string(int(kMaxSplatPixels)) + " px a splat may have (at most " +
+                                std::to_string(kMaxSplatPixels / scale) + " m here)");
+  const std::vector<std::size_t> &used = f.used;
   RgbImage img(w, h, o.background[0], o.background[1], o.background[2]);
   std::vector<double> depth(static_cast<std::size_t>(w) * h, -std::numeric_limits<double>::infinity());
-  const double rp = std::max(0.5, o.splat_radius * scale);
   const int reach = static_cast<int>(std::ceil(rp));
   for (std::size_t i : used) {
     const Eigen::Vector3d v = viewCoords(points[i], o.view);

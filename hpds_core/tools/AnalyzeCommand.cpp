@@ -416,20 +416,30 @@ void addAnalyzeCommand(CLI::App &app) {
   cmd->add_option("--poses", a->poses, "KITTI poses of the inputs (as given to hpds sample)");
   cmd->add_option("--patch", a->patch, "cx,cy,size [m]: the square xy patch to analyse (default: found automatically)")
       ->delimiter(',')
-      ->expected(3);
-  cmd->add_option("--patch-size", a->patch_size, "[m] edge of the automatically found patch")->capture_default_str();
+      ->expected(3)
+      ->check(finiteIn(-1e9, 1e9));
+  cmd->add_option("--patch-size", a->patch_size, "[m] edge of the automatically found patch")
+      ->capture_default_str()
+      ->check(finiteIn(1e-6, 1e4));
   cmd->add_option("--plane-band", a->plane_band, "[m] samples within this distance of the patch plane are analysed")
-      ->capture_default_str();
+      ->capture_default_str()
+      ->check(finiteIn(0.0, 1e4));
   cmd->add_option("--grid-offset", a->grid_offset,
                   "baseline grids start at this fraction of a cell; 0.5 keeps a flat ground at z = 0 mid-cell")
       ->capture_default_str();
-  cmd->add_option("--compare-level", a->compare_level, "level of the baseline comparison (default: the finest)");
-  cmd->add_option("--frame", a->frame, "scan-mode files: the frame to analyse (default: the first)");
-  cmd->add_option("--seed", a->seed, "seed of the random baselines")->capture_default_str();
-  cmd->add_option("--rdf-bins", a->rdf_bins, "RDF bins")->capture_default_str();
-  cmd->add_option("--rdf-max", a->rdf_max, "RDF range in units of r_D")->capture_default_str();
-  cmd->add_option("--freq-max", a->freq_max, "spectrum range in units of 1/r_D")->capture_default_str();
-  cmd->add_option("--threads", a->threads, "worker threads for the spectra, 0 = all cores")->capture_default_str();
+  cmd->add_option("--compare-level", a->compare_level, "level of the baseline comparison (default: the finest)")
+      ->check(integerIn(-1, 21));
+  cmd->add_option("--frame", a->frame, "scan-mode files: the frame to analyse (default: the first)")
+      ->check(integerIn(0, 4294967295));
+  cmd->add_option("--seed", a->seed, "seed of the random baselines")->capture_default_str()->check(unsigned64());
+  cmd->add_option("--rdf-bins", a->rdf_bins, "RDF bins")->capture_default_str()->check(integerIn(1, 10000));
+  cmd->add_option("--rdf-max", a->rdf_max, "RDF range in units of r_D")->capture_default_str()->check(finiteIn(1e-3, 100.0));
+  cmd->add_option("--freq-max", a->freq_max, "spectrum range in units of 1/r_D")
+      ->capture_default_str()
+      ->check(finiteIn(1e-3, 64.0));
+  cmd->add_option("--threads", a->threads, "worker threads for the spectra, 0 = all cores")
+      ->capture_default_str()
+      ->check(integerIn(0, 1024));
   cmd->add_flag("--no-plots", a->no_plots, "write data and PNG images only, do not run the plot script");
   cmd->add_option("--plot-script", a->plot_script, "plot script (default: scripts/plot_quality.py of the source tree)");
   cmd->callback([a] { runAnalyze(*a); });

@@ -1,8 +1,63 @@
 #include "CliOptions.hpp"
 
+#include <charconv>
+#include <cmath>
+#include <cstdlib>
+#include <sstream>
+
 #include "hpds/config/ConfigYaml.hpp"
 
 namespace hpds::cli {
+
+namespace {
+
+std::string text(double v) {
+  std::ostringstream s;
+  s << v;
+  return s.str();
+}
+
+}  // namespace
+
+CLI::Validator finiteIn(double lo, double hi) {
+  const std::string range = "a finite number in [" + text(lo) + ", " + text(hi) + "]";
+  return CLI::Validator(
+      [=](std::string &value) -> std::string {
+        double v = 0.0;
+        const char *begin = value.c_str();
+        char *end = nullptr;
+        v = std::strtod(begin, &end);
+        if (end == begin || *end != '\0' || !std::isfinite(v) || v < lo || v > hi)
+          return "must be " + range + ", got '" + value + "'";
+        return "";
+      },
+      range);
+}
+
+CLI::Validator integerIn(long long lo, long long hi) {
+  const std::string range = "an integer in " + std::to_string(lo) + ".." + std::to_string(hi);
+  return CLI::Validator(
+      [=](std::string &value) -> std::string {
+        long long v = 0;
+        const auto [end, ec] = std::from_chars(value.data(), value.data() + value.size(), v);
+        if (ec != std::errc() || end != value.data() + value.size() || v < lo || v > hi)
+          return "must be " + range + ", got '" + value + "'";
+        return "";
+      },
+      range);
+}
+
+CLI::Validator unsigned64() {
+  return CLI::Validator(
+      [](std::string &value) -> std::string {
+        std::uint64_t v = 0;
+        const auto [end, ec] = std::from_chars(value.data(), value.data() + value.size(), v);
+        if (ec != std::errc() || end != value.data() + value.size())
+          return "must be an integer in 0..18446744073709551615, got '" + value + "'";
+        return "";
+      },
+      "0..2^64-1");
+}
 
 void addSamplingOptions(CLI::App &app, SamplingOptions &o) {
   app.add_option("--config", o.config_file, "YAML config (see config/hpds.yaml); flags override it");
@@ -19,7 +74,7 @@ void addSamplingOptions(CLI::App &app, SamplingOptions &o) {
       "--normals,!--no-normals", [&o](std::int64_t count) { o.normals = count > 0; },
       "estimate PCA normals and curvature, or not (normals.enabled; default: the config's, on)");
   app.add_option("--order", o.order, "random | input | sphericity | surface_variation (order.type)");
-  app.add_option("--seed", o.seed, "seed of the random order (order.seed)");
+  app.add_option("--seed", o.seed, "seed of the random order (order.seed)")->check(unsigned64());
   app.add_option("--mode", o.mode, "scan | map (mode)");
   app.add_option("--threads", o.threads, "worker threads, 0 = all cores (threads)");
 }
@@ -44,12 +99,15 @@ HpdsConfig resolveConfig(const SamplingOptions &o) {
 }
 
 void addCellSizeOptions(CLI::App &app, CellSizeOptions &o) {
-  auto *cell = app.add_option("--cell-size", o.cell_size, "[m] level-0 cell edge the sampling was made with");
+  auto *cell = app.add_option("--cell-size", o.cell_size, "[m] level-0 cell edge the sampling was made with")
+                   ->check(finiteIn(0.0, 1e6));
   auto *spacing = app.add_option("--spacing", o.spacing,
                                  "[m] or: the --spacing (output.spacing) the sampling was made with, the cell derived "
-                                 "from it as hpds sample does when no cell size is fixed");
+                                 "from it as hpds sample does when no cell size is fixed")
+                      ->check(finiteIn(0.0, 1e6));
   auto *depth = app.add_option("--max-depth", o.max_depth, "with --spacing: the hierarchy.max_depth of the sampling")
-                    ->capture_default_str();
+                    ->capture_default_str()
+                    ->check(integerIn(0, 21));
   cell->excludes(spacing);
   depth->needs(spacing);
 }

@@ -23,6 +23,13 @@ struct SamplingOptions {
   std::optional<int> threads;
 };
 
+/// Flag values that are numbers within bounds: a finite number in [lo, hi]; an integer in [lo, hi]; an unsigned
+/// 64-bit integer (a leading '-', which CLI11 would wrap to 2^64 - 1, is refused). Failures are CLI11 validation
+/// errors naming the flag and the bound (exit status 2).
+[[nodiscard]] CLI::Validator finiteIn(double lo, double hi);
+[[nodiscard]] CLI::Validator integerIn(long long lo, long long hi);
+[[nodiscard]] CLI::Validator unsigned64();
+
 /// Registers --config, --cell-size, --max-depth, --level, --spacing, --normals/--no-normals, --order, --seed, --mode,
 /// --threads.
 void addSamplingOptions(CLI::App &app, SamplingOptions &options);

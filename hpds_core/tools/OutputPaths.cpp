@@ -1,6 +1,7 @@
 #include "OutputPaths.hpp"
 
 #include "hpds/io/AtomicFile.hpp"
+#include "hpds/io/HierarchyFile.hpp"
 
 #include <sys/stat.h>
 #include <unistd.h>
@@ -16,13 +17,6 @@ namespace hpds::cli {
 namespace {
 
 namespace fs = std::filesystem;
-
-// Extensions of the files hpds reads or writes: none of them may name a file of another format.
-const std::vector<std::string> &knownExtensions() {
-  static const std::vector<std::string> known = {".pcd", ".ply", ".bin", ".bag", ".json", ".yaml",
-                                                 ".yml", ".png", ".csv", ".txt", ".py"};
-  return known;
-}
 
 std::string lowerExtension(const std::string &path) {
   std::string ext = fs::path(path).extension().string();
@@ -75,8 +69,7 @@ void checkExtension(const OutputPath &o) {
       list += (i == 0 ? "" : i + 1 == o.extensions.size() ? " or " : ", ") + o.extensions[i];
     refuse(o.flag, o.path, "must end in " + list + " (" + o.format + " is written there)");
   }
-  const auto &known = knownExtensions();
-  if (std::find(known.begin(), known.end(), ext) != known.end())
+  if (isOtherFormatName(o.path))
     refuse(o.flag, o.path, "has the extension of another format (" + ext + "); " + o.format +
                                " needs another name, e.g. map.hpdsmap");
 }

@@ -7,6 +7,7 @@
 #include <iostream>
 #include <stdexcept>
 
+#include "CliOptions.hpp"
 #include "Commands.hpp"
 #include "OutputPaths.hpp"
 #include "QualityIo.hpp"
@@ -83,11 +84,20 @@ std::vector<double> featureValues(const SamplingCloud &c, const RenderArgs &a, d
 }
 
 void runRender(const RenderArgs &a) {
+  for (const std::string &colour : a.colors)
+    if (colour != "level" && colour != "normal" && colour != "feature")
+      throw std::invalid_argument("--color: expected level, normal or feature, got '" + colour + "'");
+  for (const std::string &view : a.views) (void)parseView(view);
   std::vector<std::string> pictures;
   for (const std::string &colour : a.colors)
     for (const std::string &view : a.views) pictures.push_back(a.prefix + "_" + colour + "_" + view + ".png");
   checkPaths({{"input", a.cloud}}, {}, {{"-o", a.out_dir, pictures}});
   if (!a.crop.empty() && a.crop.size() != 6) throw std::invalid_argument("--crop: expected x0,y0,z0,x1,y1,z1");
+  for (int k = 0; k < 3 && !a.crop.empty(); ++k)
+    if (a.crop[k] > a.crop[k + 3])
+      throw std::invalid_argument(std::string("--crop: ") + "xyz"[k] + "0 = " + std::to_string(a.crop[k]) + " > " +
+                                  "xyz"[k] + "1 = " + std::to_string(a.crop[k + 3]) +
+                                  " (the box is x0,y0,z0 of its lower corner, then x1,y1,z1 of its upper one)");
   SamplingCloud c = loadSampling(a.cloud);
   if (!c.frame.empty() && a.frame >= 0) c = keepFrame(c, static_cast<std::uint32_t>(a.frame));
   // Keep what will be drawn, so spacing and features describe the picture, not the whole file.
@@ -110,8 +120,21 @@ void runRender(const RenderArgs &a) {
   RenderOptions o;
   o.max_width = a.width;
   o.max_height = a.height;
-  o.splat_radius = a.splat > 0.0 ? a.splat : 0.5 * spacing;
   o.crop = box;
+  // The splat in pixels is what costs: bounded at each view's scale before anything is drawn (the default, half
+  // the median spacing, shrinks to fit).
+  std::vector<double> splat;
+  for (const std::string &view : a.views) {
+    o.view = parseView(view);
+    const double scale = renderScale(kept.xyz, o);
+    const double max_splat = scale > 0.0 ? kMaxSplatPixels / scale : 0.0;
+    if (a.splat > max_splat && scale > 0.0)
+      throw std::invalid_argument("--splat: " + std::to_string(a.splat) + " m is " +
+                                  std::to_string(std::lround(a.splat * scale)) + " px in the " + view +
+                                  " view, more than the " + std::to_string(int(kMaxSplatPixels)) +
+                                  " px a splat may have (at most " + std::to_string(max_splat) + " m here)");
+    splat.push_back(a.splat > 0.0 ? a.splat : std::min(0.5 * spacing, max_splat));
+  }
   for (const std::string &colour : a.colors) {
     std::vector<Rgb> rgb(kept.xyz.size());
     std::vector<double> priority;
@@ -137,8 +160,10 @@ void runRender(const RenderArgs &a) {
     } else {
       throw std::invalid_argument("--color: expected level, normal or feature, got '" + colour + "'");
     }
-    for (const std::string &view : a.views) {
+    for (std::size_t v = 0; v < a.views.size(); ++v) {
+      const std::string &view = a.views[v];
       o.view = parseView(view);
+      o.splat_radius = splat[v];
       const std::string path = (fs::path(a.out_dir) / (a.prefix + "_" + colour + "_" + view + ".png")).string();
       writePng(path, renderPoints(kept.xyz, rgb, o, priority.empty() ? nullptr : &priority));
       std::cout << "wrote " << path << "\n";
@@ -156,16 +181,22 @@ void addRenderCommand(CLI::App &app) {
   cmd->add_option("--prefix", a->prefix, "file name prefix")->capture_default_str();
   cmd->add_option("--color", a->colors, "level, normal, feature (comma separated)")->delimiter(',')->capture_default_str();
   cmd->add_option("--view", a->views, "top, front, side (comma separated)")->delimiter(',')->capture_default_str();
-  cmd->add_option("--crop", a->crop, "x0,y0,z0,x1,y1,z1 [m]: draw only this box")->delimiter(',')->expected(6);
-  cmd->add_option("--max-level", a->max_level, "draw levels 0..D only");
-  cmd->add_option("--frame", a->frame, "scan-mode files: draw this frame only");
-  cmd->add_option("--width", a->width, "[px] maximum image width")->capture_default_str();
-  cmd->add_option("--height", a->height, "[px] maximum image height")->capture_default_str();
-  cmd->add_option("--splat", a->splat, "[m] point disc radius (default: half the median spacing)");
+  cmd->add_option("--crop", a->crop, "x0,y0,z0,x1,y1,z1 [m]: draw only this box")
+      ->delimiter(',')
+      ->expected(6)
+      ->check(finiteIn(-1e9, 1e9));
+  cmd->add_option("--max-level", a->max_level, "draw levels 0..D only")->check(integerIn(-1, 21));
+  cmd->add_option("--frame", a->frame, "scan-mode files: draw this frame only")->check(integerIn(0, 4294967295));
+  // A picture of 8192 x 8192 already takes 0.7 GB (colour and depth buffers).
+  cmd->add_option("--width", a->width, "[px] maximum image width")->capture_default_str()->check(integerIn(16, 8192));
+  cmd->add_option("--height", a->height, "[px] maximum image height")->capture_default_str()->check(integerIn(16, 8192));
+  cmd->add_option("--splat", a->splat, "[m] point disc radius (default: half the median spacing)")
+      ->check(finiteIn(0.0, 1e6));
   cmd->add_option("--feature", a->feature, "curvature (the file's, else surface variation) | surface_variation | "
                                            "sphericity")->capture_default_str();
-  cmd->add_option("--feature-radius", a->feature_radius, "[m] PCA radius of computed features (default: 3 x spacing)");
-  cmd->add_option("--threads", a->threads, "worker threads, 0 = all cores")->capture_default_str();
+  cmd->add_option("--feature-radius", a->feature_radius, "[m] PCA radius of computed features (default: 3 x spacing)")
+      ->check(finiteIn(0.0, 1e6));
+  cmd->add_option("--threads", a->threads, "worker threads, 0 = all cores")->capture_default_str()->check(integerIn(0, 1024));
   cmd->callback([a] { runRender(*a); });
 }
 

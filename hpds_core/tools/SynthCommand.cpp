@@ -4,6 +4,7 @@
 #include <iostream>
 #include <stdexcept>
 
+#include "CliOptions.hpp"
 #include "Commands.hpp"
 #include "OutputPaths.hpp"
 #include "hpds/eval/SyntheticLidar.hpp"
@@ -13,6 +14,9 @@
 namespace hpds::cli {
 
 namespace {
+
+// 4 M rays: twice a 128-beam sensor at 0.1 degree, about 100 MB per frame.
+constexpr long long kMaxPointsPerFrame = 1 << 22;
 
 struct SynthArgs {
   std::string out_dir;
@@ -32,6 +36,10 @@ void runSynth(SynthArgs a) {
   if (a.format != "pcd" && a.format != "bin" && a.format != "ply")
     throw std::invalid_argument("--format: expected pcd, ply or bin, got '" + a.format + "'");
   a.lidar.scene = parseScene(a.scene);
+  if (static_cast<long long>(a.lidar.beams) * a.lidar.azimuth_steps > kMaxPointsPerFrame)
+    throw std::invalid_argument("--beams x --azimuth-steps: " + std::to_string(a.lidar.beams) + " x " +
+                                std::to_string(a.lidar.azimuth_steps) + " rays per frame, more than the " +
+                                std::to_string(kMaxPointsPerFrame) + " a synthetic frame may have");
   checkPaths({}, {}, {{"-o", a.out_dir, {}}});
   const SyntheticLidar lidar(a.lidar);
   std::filesystem::create_directories(a.out_dir);
@@ -57,13 +65,15 @@ void addSynthCommand(CLI::App &app) {
   auto a = std::make_shared<SynthArgs>();
   CLI::App *cmd = app.add_subcommand("synth", "write a synthetic spinning-lidar stream (frames + KITTI poses)");
   cmd->add_option("-o,--output", a->out_dir, "output directory (frame_NNNNNN.<format> and poses.txt)")->required();
-  cmd->add_option("--frames", a->lidar.frames, "number of frames")->capture_default_str();
-  cmd->add_option("--seed", a->lidar.seed, "scene and noise seed")->capture_default_str();
+  cmd->add_option("--frames", a->lidar.frames, "number of frames")->capture_default_str()->check(integerIn(1, 100000));
+  cmd->add_option("--seed", a->lidar.seed, "scene and noise seed")->capture_default_str()->check(unsigned64());
   cmd->add_option("--scene", a->scene, "urban | planar_urban | curved_objects")->capture_default_str();
-  cmd->add_option("--beams", a->lidar.beams, "beams (rings)")->capture_default_str();
-  cmd->add_option("--azimuth-steps", a->lidar.azimuth_steps, "columns per revolution")->capture_default_str();
-  cmd->add_option("--speed", a->lidar.speed, "[m per frame] sensor speed")->capture_default_str();
-  cmd->add_option("--noise", a->lidar.range_noise, "[m] range noise sigma")->capture_default_str();
+  cmd->add_option("--beams", a->lidar.beams, "beams (rings)")->capture_default_str()->check(integerIn(1, 1024));
+  cmd->add_option("--azimuth-steps", a->lidar.azimuth_steps, "columns per revolution")
+      ->capture_default_str()
+      ->check(integerIn(1, 100000));
+  cmd->add_option("--speed", a->lidar.speed, "[m per frame] sensor speed")->capture_default_str()->check(finiteIn(-100.0, 100.0));
+  cmd->add_option("--noise", a->lidar.range_noise, "[m] range noise sigma")->capture_default_str()->check(finiteIn(0.0, 10.0));
   cmd->add_option("--format", a->format, "pcd | ply | bin (KITTI: x y z intensity only)")->capture_default_str();
   cmd->callback([a] { runSynth(*a); });
 }

@@ -1,6 +1,7 @@
 // `hpds verify SAMPLING.ply --cell-size C | --spacing S [--input INPUT]`: an independent check of a written sampling (k-d trees,
 // not the sampler's grids). Prints a per-level table; exit code 1 on any violation.
 #include <iostream>
+#include <stdexcept>
 
 #include "CliOptions.hpp"
 #include "Commands.hpp"
@@ -24,7 +25,7 @@ void addVerifyCommand(CLI::App &app) {
   cmd->add_option("sampling", a->sampling, "sampling written by hpds sample (needs x y z level)")->required();
   addCellSizeOptions(*cmd, a->cell);
   cmd->add_option("--input", a->input, "input cloud, same frame as the sampling: also check coverage <= 2 r_D");
-  cmd->add_option("--threads", a->threads, "worker threads, 0 = all cores")->capture_default_str();
+  cmd->add_option("--threads", a->threads, "worker threads, 0 = all cores")->capture_default_str()->check(integerIn(0, 1024));
   cmd->callback([a] {
     const double cell_size = resolveCellSize(a->cell);
     const PointBuffer sampling = readPointCloud(a->sampling);

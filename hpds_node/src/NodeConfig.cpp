@@ -5,13 +5,12 @@
 #include <algorithm>
 #include <charconv>
 #include <cmath>
-#include <fstream>
-#include <iterator>
 #include <limits>
 #include <sstream>
 #include <stdexcept>
 
 #include "hpds/config/ConfigYaml.hpp"
+#include "hpds/io/HierarchyFile.hpp"
 #include "hpds/config/YamlScalar.hpp"
 
 namespace hpds_node {
@@ -151,12 +150,13 @@ std::string quoted(const std::string &s) {
 }  // namespace
 
 void validateRosConfig(const RosConfig &ros, const hpds::HpdsConfig &config) {
-  if (!std::isfinite(ros.tf_timeout) || ros.tf_timeout < 0.0)
-    fail("ros.tf_timeout", "must be a finite number >= 0 [s], got " + formatDouble(ros.tf_timeout));
-  if (!std::isfinite(ros.local_map_radius) || ros.local_map_radius <= 0.0)
-    fail("ros.local_map_radius", "must be a finite number > 0 [m], got " + formatDouble(ros.local_map_radius));
-  if (!std::isfinite(ros.local_map_rate) || ros.local_map_rate < 0.0)
-    fail("ros.local_map_rate", "must be a finite number >= 0 [Hz] (0 = off), got " + formatDouble(ros.local_map_rate));
+  // Upper bounds: a wait, radius or rate beyond them is a typo, and tf_timeout must fit ros::WallDuration.
+  if (!std::isfinite(ros.tf_timeout) || ros.tf_timeout < 0.0 || ros.tf_timeout > 60.0)
+    fail("ros.tf_timeout", "must be in 0..60 [s], got " + formatDouble(ros.tf_timeout));
+  if (!std::isfinite(ros.local_map_radius) || ros.local_map_radius <= 0.0 || ros.local_map_radius > 1e6)
+    fail("ros.local_map_radius", "must be > 0 and <= 1e6 [m], got " + formatDouble(ros.local_map_radius));
+  if (!std::isfinite(ros.local_map_rate) || ros.local_map_rate < 0.0 || ros.local_map_rate > 1000.0)
+    fail("ros.local_map_rate", "must be in 0..1000 [Hz] (0 = off), got " + formatDouble(ros.local_map_rate));
   if (ros.queue_size < 1 || ros.queue_size > 1000)
     fail("ros.queue_size", "must be in 1..1000, got " + std::to_string(ros.queue_size));
   for (std::size_t i = 0; i < ros.publish_levels.size(); ++i) {
@@ -170,6 +170,8 @@ void validateRosConfig(const RosConfig &ros, const hpds::HpdsConfig &config) {
   if (config.mode == hpds::Mode::Map && ros.fixed_frame.empty())
     fail("ros.fixed_frame", "must be set in map mode (the frame the map is built in)");
   if (ros.map_file.find('\0') != std::string::npos) fail("ros.map_file", "contains a NUL character");
+  if (hpds::isOtherFormatName(ros.map_file))
+    fail("ros.map_file", "'" + ros.map_file + "' has the extension of another format; name the map e.g. map.hpdsmap");
   for (const auto &[key, on] : {std::pair<const char *, bool>{"ros.load_map_on_start", ros.load_map_on_start},
                                 {"ros.save_map_on_shutdown", ros.save_map_on_shutdown}}) {
     if (!on) continue;
@@ -186,6 +188,9 @@ const std::vector<std::string> &nodeOnlyKeys() {
 void applyNodeConfigYaml(const std::string &yaml_text, NodeConfig &config, const std::string &source) {
   const std::vector<std::string> &ignored_keys = nodeOnlyKeys();
   const std::string suffix = source.empty() ? "" : " (in " + source + ")";
+  if (yaml_text.size() > hpds::kMaxConfigBytes)
+    throw std::invalid_argument("(document): " + std::to_string(yaml_text.size()) + " bytes, more than the " +
+                                std::to_string(hpds::kMaxConfigBytes) + " a config may have" + suffix);
   YAML::Node root;
   try {
     root = YAML::Load(yaml_text);
@@ -225,11 +230,8 @@ void applyNodeConfigYaml(const std::string &yaml_text, NodeConfig &config, const
 }
 
 NodeConfig loadNodeConfigFile(const std::string &path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw std::invalid_argument("config file '" + path + "': cannot be opened");
-  const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
   NodeConfig config;
-  applyNodeConfigYaml(text, config, path);
+  applyNodeConfigYaml(hpds::readConfigFile(path), config, path);
   return config;
 }
 

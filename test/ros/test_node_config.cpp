@@ -73,6 +73,10 @@ TEST(NodeConfig, ErrorsNameTheKeyAndLeaveTheConfigUnchanged) {
       {"cell_size: 4.0", "cell_size:"},
       {"ros: {tf_timeout: -1}", "ros.tf_timeout:"},
       {"ros: {tf_timeout: \"0.1\"}", "ros.tf_timeout:"},
+      {"ros: {tf_timeout: 1e12}", "ros.tf_timeout: must be in 0..60 [s]"},
+      {"ros: {local_map_radius: 1e12}", "ros.local_map_radius: must be > 0 and <= 1e6 [m]"},
+      {"ros: {local_map_rate: 1e9}", "ros.local_map_rate: must be in 0..1000 [Hz]"},
+      {"mode: map\nros: {fixed_frame: odom, map_file: /tmp/m.PLY}", "ros.map_file: '/tmp/m.PLY' has the extension"},
       {"ros: {queue_size: 0}", "ros.queue_size:"},
       {"ros: {queue_size: 1.5}", "ros.queue_size:"},
       {"ros: {local_map_radius: 0}", "ros.local_map_radius:"},
@@ -96,6 +100,21 @@ TEST(NodeConfig, ErrorsNameTheKeyAndLeaveTheConfigUnchanged) {
   EXPECT_THROW(hpds_node::applyNodeConfigYaml("ros: {queue_size: 2}\nhierarchy: {max_depth: 99}", c, ""),
                std::invalid_argument);
   EXPECT_EQ(c.ros.queue_size, 7) << "strong guarantee";
+}
+
+TEST(NodeConfig, ConfigFilesMustBeSmallRegularFiles) {
+  for (const std::string path : {"/dev/zero", "/dev/null"}) {
+    try {
+      (void)hpds_node::loadNodeConfigFile(path);
+      ADD_FAILURE() << path << " was read";
+    } catch (const std::invalid_argument &e) {
+      EXPECT_EQ(std::string(e.what()), "config file '" + path + "': not a regular file (a config is a YAML text file)");
+    }
+  }
+  NodeConfig c;
+  std::string sequence = "ros: {publish_levels: [";
+  while (sequence.size() <= hpds::kMaxConfigBytes) sequence += "1, ";
+  EXPECT_THROW(hpds_node::applyNodeConfigYaml(sequence + "1]}", c, "rosparam"), std::invalid_argument);
 }
 
 TEST(NodeConfig, MapPersistenceKeys) {

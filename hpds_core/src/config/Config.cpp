@@ -1,5 +1,6 @@
 #include "hpds/config/Config.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <stdexcept>
@@ -73,6 +74,34 @@ std::string metres(double v) {
   std::snprintf(buf, sizeof buf, "%.6g m", v);
   return buf;
 }
+
+// Neighbourhood sizes bound the work per frame: a PCA reads every sample (normals) or point (feature orders) inside
+// its neighbourhood, so k, and a radius measured in the radii of the finest level read, must stay well below the
+// values that took 30-60 s per frame (normals.k 2e9, normals.radius 1e6 m, order.feature_radius 1e6 m).
+constexpr int kMaxNeighbours = 1024;
+constexpr double kMaxRadiusInLevelRadii = 64.0;
+
+void validateNeighbourhoods(const HpdsConfig &c) {
+  if (c.normals.k > kMaxNeighbours)
+    fail("normals.k", "must be in 0.." + std::to_string(kMaxNeighbours) + ", got " + std::to_string(c.normals.k));
+  if (c.normals.min_neighbors > kMaxNeighbours)
+    fail("normals.min_neighbors",
+         "must be in 3.." + std::to_string(kMaxNeighbours) + ", got " + std::to_string(c.normals.min_neighbors));
+  const OutputResolution resolved = resolveOutput(c);  // a derived cell (0) is measured as the pipeline runs it
+  const int output = resolved.level;
+  // Normals read the samples of levels up to output + neighborhood_level_offset; feature orders raw points, which
+  // the feature cell cap keeps bounded anyway, measured against the output level.
+  const int finest = std::min(c.hierarchy.max_depth, output + c.normals.neighborhood_level_offset);
+  const auto bound = [&](const std::string &key, double value, int level, const std::string &what) {
+    const double limit = kMaxRadiusInLevelRadii * poissonRadius(resolved.cell_size, level);
+    if (value > limit)
+      fail(key, "must be <= " + std::to_string(limit) + " m (64 radii of level " + std::to_string(level) + ", " +
+                    what + "), got " + std::to_string(value));
+  };
+  bound("normals.radius", c.normals.radius, finest, "the finest level the normals read");
+  bound("order.feature_radius", c.order.feature_radius, output, "the output level");
+}
+
 }  // namespace
 
 void validateConfig(const HpdsConfig &c) {
@@ -114,6 +143,7 @@ void validateConfig(const HpdsConfig &c) {
   if (c.input.max_range > 0.0 && c.input.max_range <= c.input.min_range)
     fail("input.max_range", "must be 0 (off) or > input.min_range");
   if (c.threads < 0 || c.threads > 1024) fail("threads", "must be in 0..1024 (0 = all cores), got " + std::to_string(c.threads));
+  validateNeighbourhoods(c);
 }
 
 double cellEdge(double cell_size, int depth) { return std::ldexp(cell_size, -depth); }

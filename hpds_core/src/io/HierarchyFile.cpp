@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <array>
+#include <cctype>
 #include <cerrno>
 #include <cmath>
 #include <cstdio>
@@ -372,6 +373,16 @@ LoadedHierarchy loadHierarchyBytes(const std::uint8_t *data, std::size_t size, c
   if (!hostIsLittleEndian()) fail(name, "map files are little-endian; this host is not");
   MemorySource src(data, size);
   return parse(src, size, name, expected);
+}
+
+bool isOtherFormatName(const std::string &path) {
+  const std::size_t dot = path.rfind('.');
+  if (dot == std::string::npos || path.find('/', dot) != std::string::npos) return false;
+  std::string ext = path.substr(dot);
+  for (char &c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  for (const char *other : {".pcd", ".ply", ".bin", ".bag", ".json", ".yaml", ".yml", ".png", ".csv", ".txt"})
+    if (ext == other) return true;
+  return false;
 }
 
 void saveMap(const std::string &path, const Pipeline &pipeline) {

@@ -1,6 +1,8 @@
 #include "hpds/sampling/InsertionOrderer.hpp"
 
 #include <algorithm>
+#include <atomic>
+#include <cmath>
 #include <numeric>
 #include <stdexcept>
 
@@ -44,20 +46,92 @@ void seededShuffle(std::vector<std::uint32_t> &indices, std::uint64_t seed) {
   for (std::size_t i = indices.size(); i > 1; --i) std::swap(indices[i - 1], indices[below(state, i)]);
 }
 
+namespace {
+
+// The points that stand for `candidates` in the neighbour search (see the contract), with their weights (indexed by
+// point); empty when no cell exceeds the cap, i.e. every candidate stands for itself.
+struct Representatives {
+  std::vector<std::uint32_t> points;
+  std::vector<std::uint32_t> weight;
+};
+
+Representatives representatives(const double *xyz, const std::vector<std::uint32_t> &candidates, double radius) {
+  struct Keyed {
+    std::int64_t k[3];
+    std::uint32_t index;
+  };
+  std::vector<Keyed> keyed;
+  keyed.reserve(candidates.size());
+  for (std::uint32_t i : candidates) {
+    Keyed e{{0, 0, 0}, i};
+    for (int a = 0; a < 3; ++a) {
+      // Beyond +-2^52 cells a cell key is no longer exact; such far points are their own cell (FrameGridIndex
+      // gives them no neighbours anyway).
+      const double c = std::floor(xyz[3 * std::size_t(i) + a] / radius);
+      e.k[a] = std::isfinite(c) && std::abs(c) < 4.5e15 ? static_cast<std::int64_t>(c) : std::int64_t(i) + (1ll << 60);
+    }
+    keyed.push_back(e);
+  }
+  std::sort(keyed.begin(), keyed.end(), [](const Keyed &a, const Keyed &b) {
+    if (a.k[0] != b.k[0]) return a.k[0] < b.k[0];
+    if (a.k[1] != b.k[1]) return a.k[1] < b.k[1];
+    if (a.k[2] != b.k[2]) return a.k[2] < b.k[2];
+    return a.index < b.index;
+  });
+  Representatives r;
+  bool capped = false;
+  std::uint32_t max_index = 0;
+  for (std::uint32_t i : candidates) max_index = std::max(max_index, i);
+  for (std::size_t begin = 0, end; begin < keyed.size(); begin = end) {
+    for (end = begin + 1; end < keyed.size() && std::equal(keyed[end].k, keyed[end].k + 3, keyed[begin].k); ++end) {
+    }
+    const std::size_t n = end - begin;
+    const std::size_t stride = n > kFeatureCellCap ? (n + kFeatureCellCap - 1) / kFeatureCellCap : 1;
+    if (stride > 1 && !capped) {
+      capped = true;
+      r.weight.assign(std::size_t(max_index) + 1, 1);
+      for (std::size_t j = 0; j < begin; ++j) r.points.push_back(keyed[j].index);
+    }
+    if (!capped) continue;
+    for (std::size_t j = begin; j < end; j += stride) {
+      r.points.push_back(keyed[j].index);
+      r.weight[keyed[j].index] = static_cast<std::uint32_t>(std::min(stride, end - j));
+    }
+  }
+  if (capped) std::sort(r.points.begin(), r.points.end());
+  return r;
+}
+
+}  // namespace
+
 std::vector<float> localFeature(const double *xyz, const std::vector<std::uint32_t> &candidates, InsertionOrder kind,
-                                double feature_radius, int threads) {
+                                double feature_radius, int threads, std::uint64_t *neighbours_read) {
   if (!(feature_radius > 0.0)) throw std::invalid_argument("order.feature_radius: must be > 0 for feature orders");
   std::vector<float> feature(candidates.size(), 0.0f);
-  const FrameGridIndex index(xyz, candidates, feature_radius);
+  const Representatives reps = representatives(xyz, candidates, feature_radius);
+  const bool capped = !reps.points.empty();
+  const FrameGridIndex index(xyz, capped ? reps.points : candidates, feature_radius);
+  std::atomic<std::uint64_t> read{0};
   parallelFor(candidates.size(), threads, [&](std::size_t b, std::size_t e) {
+    std::uint64_t visited = 0;
     for (std::size_t i = b; i < e; ++i) {
       PcaAccumulator acc(xyz + 3 * std::size_t(candidates[i]));
-      index.forEachNeighbor(candidates[i], [&](std::uint32_t j) { acc.add(xyz + 3 * std::size_t(j)); });
+      if (capped) {
+        index.forEachNeighbor(candidates[i], [&](std::uint32_t j) {
+          acc.add(xyz + 3 * std::size_t(j), reps.weight[j]);
+          ++visited;
+        });
+      } else {
+        index.forEachNeighbor(candidates[i], [&](std::uint32_t j) { acc.add(xyz + 3 * std::size_t(j)); });
+        visited += acc.count();
+      }
       if (acc.count() < 3) continue;
       const LocalPca pca = acc.solve(/*accurate=*/false);
       feature[i] = static_cast<float>(kind == InsertionOrder::Sphericity ? pca.sphericity() : pca.surfaceVariation());
     }
+    read += visited;
   });
+  if (neighbours_read) *neighbours_read = read;
   return feature;
 }
 

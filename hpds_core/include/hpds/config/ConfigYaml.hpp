@@ -13,6 +13,7 @@
 // - yaml-cpp stays out of this header so callers (the CLI, the ROS node) need not see it.
 #pragma once
 
+#include <cstddef>
 #include <string>
 #include <vector>
 
@@ -20,7 +21,16 @@
 
 namespace hpds {
 
-/// Reads the YAML file at `path` over the defaults; errors name `path`. An empty file gives the defaults.
+/// The most a config (file or text) may hold: real ones are a few kilobytes, and yaml-cpp needs a few hundred bytes
+/// of memory per YAML node.
+inline constexpr std::size_t kMaxConfigBytes = 256 * 1024;
+
+/// The text of a config file: a regular file (not a device or FIFO) of at most kMaxConfigBytes; otherwise
+/// std::invalid_argument "config file '<path>': <problem>".
+[[nodiscard]] std::string readConfigFile(const std::string &path);
+
+/// Reads the YAML file at `path` (readConfigFile) over the defaults; errors name `path`. An empty file gives the
+/// defaults.
 [[nodiscard]] HpdsConfig loadConfigFile(const std::string &path);
 
 /// Same as loadConfigFile for YAML held in memory.

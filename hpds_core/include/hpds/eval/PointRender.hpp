@@ -11,6 +11,8 @@
 //   normal n to ((n + 1) / 2) * 255 per axis (x red, y green, z blue), the paper's normal images; scalarColor maps
 //   t in [0, 1] (clamped; NaN -> grey) through a dark-blue -> teal -> yellow ramp with increasing lightness, so
 //   the value order survives greyscale printing.
+// - Bounds (std::invalid_argument beyond them): each side at most kMaxRenderSide px; a splat of at most
+//   kMaxSplatPixels px radius, since a disc costs its area per point; a finite splat_radius >= 0.
 // - Non-finite points are skipped. Deterministic.
 #pragma once
 
@@ -36,6 +38,12 @@ struct RenderOptions {
   Rgb background{255, 255, 255};
   Eigen::AlignedBox3d crop;  ///< empty (default): every point; else only points inside, and the view fits the box
 };
+
+inline constexpr int kMaxRenderSide = 16384;
+inline constexpr double kMaxSplatPixels = 16.0;
+
+/// Pixels per metre renderPoints uses for these points and options (0 when nothing is drawn).
+[[nodiscard]] double renderScale(const std::vector<Eigen::Vector3d> &points, const RenderOptions &options);
 
 [[nodiscard]] RgbImage renderPoints(const std::vector<Eigen::Vector3d> &points, const std::vector<Rgb> &colors,
                                     const RenderOptions &options, const std::vector<double> *priority = nullptr);

@@ -53,6 +53,11 @@ void saveHierarchy(const std::string &path, const Hierarchy &hierarchy, std::uin
 [[nodiscard]] LoadedHierarchy loadHierarchyBytes(const std::uint8_t *data, std::size_t size,
                                                  const std::string &name, const HierarchyConfig *expected = nullptr);
 
+/// True when `path` ends (case-insensitively) in the extension of another format hpds reads or writes (.pcd, .ply,
+/// .bin, .bag, .json, .yaml, .yml, .png, .csv, .txt): a map file named like that is refused, so that saving a map
+/// can never replace a point cloud, a bag or a config.
+[[nodiscard]] bool isOtherFormatName(const std::string &path);
+
 /// Saves the pipeline's map and its frame counter (framesProcessed()).
 void saveMap(const std::string &path, const Pipeline &pipeline);
 

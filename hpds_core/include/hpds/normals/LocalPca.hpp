@@ -31,6 +31,15 @@ class PcaAccumulator {
     s_[0] += x, s_[1] += y, s_[2] += z;
     ss_[0] += x * x, ss_[1] += x * y, ss_[2] += x * z, ss_[3] += y * y, ss_[4] += y * z, ss_[5] += z * z;
   }
+  /// `p` counted `weight` times (a representative of that many points).
+  void add(const double p[3], std::size_t weight) {
+    const double w = static_cast<double>(weight);
+    const double x = p[0] - ref_[0], y = p[1] - ref_[1], z = p[2] - ref_[2];
+    n_ += weight;
+    s_[0] += w * x, s_[1] += w * y, s_[2] += w * z;
+    ss_[0] += w * x * x, ss_[1] += w * x * y, ss_[2] += w * x * z, ss_[3] += w * y * y, ss_[4] += w * y * z,
+        ss_[5] += w * z * z;
+  }
   [[nodiscard]] std::size_t count() const { return n_; }
   /// Eigen-decomposition of the covariance; `accurate` uses Eigen's iterative solver, else its closed form.
   [[nodiscard]] LocalPca solve(bool accurate = true) const;
