@@ -1,7 +1,8 @@
 # Entry points a fresh Debian bookworm clone needs: every target installs what is missing, configures and builds.
 #   make demo   synthetic lidar stream -> map-mode sampling with normals -> PLY -> verify -> per-level summary
 #   make test   every test (GoogleTest suites and ROS tests) through ctest
-#   make test-sanitize   the same tests built with AddressSanitizer + UndefinedBehaviorSanitizer (in build-asan/)
+#   make test-sanitize   the same tests, node and ROS tests included, built with AddressSanitizer +
+#                        UndefinedBehaviorSanitizer (in build-asan/)
 #   make fuzz   libFuzzer targets for every parser of outside data, FUZZ_SECONDS each (in build-fuzz/)
 # catkin and rostest need Debian's python3, not a pyenv one that may come first on PATH.
 export PATH := /usr/bin:/bin:$(PATH)
@@ -12,9 +13,10 @@ DEMO_DIR ?= $(BUILD)/demo
 ASAN_BUILD ?= build-asan
 FUZZ_BUILD ?= build-fuzz
 FUZZ_SECONDS ?= 60
-# The node's tests under ASan need more than this build (a sanitized nodelet cannot load into a plain manager):
-# opt in with ASAN_NODE=ON.
-ASAN_NODE ?= OFF
+# The node, the nodelet and their ROS tests are sanitized too whenever ROS is installed (the tests that start Debian's
+# uninstrumented nodelet manager preload the sanitizer runtimes for it); ASAN_NODE=OFF leaves them out.
+ASAN_NODE ?=
+ASAN_NODE_FLAG := $(if $(ASAN_NODE),-DHPDS_BUILD_NODE=$(ASAN_NODE),-UHPDS_BUILD_NODE)
 HPDS := $(BUILD)/hpds
 
 .PHONY: all deps configure build test test-sanitize fuzz demo bench clean
@@ -37,7 +39,7 @@ test: build
 # Any ASan/UBSan report aborts its test (UB is non-recoverable in that build), so "no failures" means "no reports".
 test-sanitize: deps
 	@mkdir -p $(ASAN_BUILD)
-	@cmake -S . -B $(ASAN_BUILD) -DCMAKE_BUILD_TYPE=RelWithDebInfo -DHPDS_SANITIZE=ON -DHPDS_BUILD_NODE=$(ASAN_NODE) > $(ASAN_BUILD)/configure.log 2>&1 || { cat $(ASAN_BUILD)/configure.log; exit 1; }
+	@cmake -S . -B $(ASAN_BUILD) -DCMAKE_BUILD_TYPE=RelWithDebInfo -DHPDS_SANITIZE=ON $(ASAN_NODE_FLAG) > $(ASAN_BUILD)/configure.log 2>&1 || { cat $(ASAN_BUILD)/configure.log; exit 1; }
 	@cmake --build $(ASAN_BUILD) -j$(JOBS)
 	@cd $(ASAN_BUILD) && ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=halt_on_error=1:print_stacktrace=1 \
 	  ctest --output-on-failure -j$(JOBS) --timeout 1800

@@ -836,6 +836,23 @@ TEST(BadInput, PcdAsciiAndCompressedBodies) {
   check("ascii_long_line.pcd", xyzPcdHeader(1, "ascii") + "1 2 3 4\n", {"4 values, expected 3"});
   check("ascii_few_lines.pcd", xyzPcdHeader(3, "ascii") + "1 2 3\n4 5 6\n", {"truncated", "3 points", "holds 2"});
   check("ascii_blank_line.pcd", xyzPcdHeader(2, "ascii") + "1 2 3\n \n4 5 6\n", {"0 values"});
+  // Integer fields take plain integers of their type's range: PCL read "1e2" as 1 on the first line and 100 later
+  // (its stream keeps its state), and wrapped values beyond the type.
+  const std::string ring = "VERSION 0.7\nFIELDS x y z ring\nSIZE 4 4 4 2\nTYPE F F F U\nCOUNT 1 1 1 1\nWIDTH 2\n"
+                           "HEIGHT 1\nPOINTS 2\nDATA ascii\n";
+  check("ascii_int_exponent.pcd", ring + "1 2 3 1e2\n4 5 6 1e2\n",
+        {"line 1", "'1e2' is not an integer in 0..65535, as field 'ring' (TYPE U, SIZE 2) needs"});
+  check("ascii_int_decimal.pcd", ring + "1 2 3 7\n4 5 6 1.5\n", {"line 2", "'1.5' is not an integer"});
+  check("ascii_int_range.pcd", ring + "1 2 3 70000\n4 5 6 1\n", {"'70000' is not an integer in 0..65535"});
+  check("ascii_int_negative.pcd", ring + "1 2 3 -1\n4 5 6 1\n", {"'-1' is not an integer in 0..65535"});
+  check("ascii_int_nan.pcd", ring + "1 2 3 nan\n4 5 6 1\n", {"'nan' is not an integer"});
+  writeBytes(dir / "ascii_int_ok.pcd", ring + "1 2 3 +65535\n1e2 5 6 100\n");
+  const PointBuffer ok = readPointCloud((dir / "ascii_int_ok.pcd").string());
+  ASSERT_EQ(ok.size(), 2u);
+  const PointField *fr = ok.layout().find("ring"), *fx = ok.layout().find("x");
+  EXPECT_EQ(readAsDouble(ok.record(0), *fr), 65535.0);
+  EXPECT_EQ(readAsDouble(ok.record(1), *fr), 100.0);
+  EXPECT_EQ(readAsDouble(ok.record(1), *fx), 100.0) << "float fields take any number";
 
   const std::string raw = xyzBody(4);
   const std::string packed = lzfLiterals(raw);

@@ -4,6 +4,8 @@
 #include <cstring>
 #include <fstream>
 #include <limits>
+#include <optional>
+#include <utility>
 
 #include "ReaderSupport.hpp"
 
@@ -224,6 +226,27 @@ std::string pcdTruncated(const PcdHeader &h, std::uint64_t data_bytes) {
          " bytes but data holds " + std::to_string(data_bytes) + " bytes";
 }
 
+bool isIntegerType(FieldType t) { return t != FieldType::Float32 && t != FieldType::Float64; }
+
+std::pair<std::int64_t, std::int64_t> integerRange(FieldType t) {
+  switch (t) {
+    case FieldType::Int8:
+      return {-128, 127};
+    case FieldType::UInt8:
+      return {0, 255};
+    case FieldType::Int16:
+      return {-32768, 32767};
+    case FieldType::UInt16:
+      return {0, 65535};
+    case FieldType::Int32:
+      return {-2147483648LL, 2147483647LL};
+    case FieldType::UInt32:
+      return {0, 4294967295LL};
+    default:
+      return {0, 0};
+  }
+}
+
 void checkPcdAscii(const std::string &path, const PcdHeader &h) {
   std::ifstream in(path, std::ios::binary);
   if (!in) fail(path, std::string("cannot open: ") + std::strerror(errno));
@@ -242,8 +265,23 @@ void checkPcdAscii(const std::string &path, const PcdHeader &h) {
     if (tok.size() != elements_per_line)
       fail(path,
            where + " has " + std::to_string(tok.size()) + " values, expected " + std::to_string(elements_per_line));
-    for (const auto &t : tok)
-      if (!isNumber(t) && !iequals(t, "nan")) fail(path, where + ": " + quote(t) + " is not a number");
+    std::size_t k = 0;
+    for (std::size_t f = 0; f < h.types.size(); ++f)
+      for (std::uint32_t c = 0; c < h.counts[f]; ++c, ++k) {
+        const std::string_view t = tok[k];
+        if (!isIntegerType(h.types[f])) {
+          if (!isNumber(t) && !iequals(t, "nan")) fail(path, where + ": " + quote(t) + " is not a number");
+          continue;
+        }
+        // PCL reads integer fields with a stream it reuses across values: "1e2" or "1.5" gave 1 on the first line
+        // and 100 or 1.5 later, and values beyond the type wrapped. Only plain integers within the type pass.
+        const std::optional<std::int64_t> v = parseInteger<std::int64_t>(t);
+        const auto [lo, hi] = integerRange(h.types[f]);
+        if (!v || *v < lo || *v > hi)
+          fail(path, where + ": " + quote(t) + " is not an integer in " + std::to_string(lo) + ".." +
+                         std::to_string(hi) + ", as field '" + h.names[f] + "' (TYPE " +
+                         (lo < 0 ? "I" : "U") + ", SIZE " + std::to_string(h.sizes[f]) + ") needs");
+      }
     ++found;
   }
   if (in.bad()) fail(path, std::string("read failed: ") + std::strerror(errno));
