@@ -23,6 +23,7 @@
 
 #include <cerrno>
 #include <cstdio>
+#include <atomic>
 #include <cstring>
 #include <filesystem>
 #include <functional>
@@ -236,6 +237,32 @@ TEST(NodePersistenceRefused, ScanModeAndNoMapFile) {
   EXPECT_TRUE(contains(r.message, "it is '" + later + "' now, but parameters are read only at start")) << r.message;
   EXPECT_FALSE(fs::exists(later));
   ros::param::del(nofile + "/ros/map_file");
+}
+
+// Issue 24 item 5: one segfault was seen during a ~save_map call on a node without ros/map_file. Under TSan only
+// roscpp's own service path races (the response written by the service thread while the poll thread closes the
+// connection); nothing in hpds. A storm of calls from two clients, answered one by one, must leave the nodes
+// alive and answering.
+TEST(NodePersistenceRefused, AStormOfCallsIsAnsweredAndTheNodesSurvive) {
+  ros::NodeHandle pnh("~");
+  const std::string nofile = pnh.param<std::string>("nofile_target", "/hpds_persist_nofile");
+  const std::string scan = pnh.param<std::string>("scan_target", "/hpds_persist_scan");
+  std::atomic<int> answered{0};
+  auto caller = [&](const std::string &target) {
+    for (int i = 0; i < 100; ++i) {
+      std_srvs::Trigger srv;
+      if (ros::service::call(target + (i % 2 ? "/load_map" : "/save_map"), srv) && !srv.response.success) ++answered;
+    }
+  };
+  std::thread a(caller, nofile), b(caller, scan);
+  a.join();
+  b.join();
+  EXPECT_EQ(answered.load(), 200);
+  for (const std::string &target : {nofile, scan}) {
+    const auto r = call(target + "/save_map");
+    EXPECT_FALSE(r.success);
+    EXPECT_FALSE(r.message.empty()) << target << " did not answer after the storm";
+  }
 }
 
 // A save runs on the worker, but the services have their own thread: the subscriber keeps taking frames while the

@@ -211,11 +211,17 @@ bool HpdsServer::onMapService(bool save, std_srvs::Trigger::Request &, std_srvs:
 void HpdsServer::onCloud(const ros::MessageEvent<const sensor_msgs::PointCloud2> &event) {
   const sensor_msgs::PointCloud2::ConstPtr &msg = event.getConstMessage();
   const double now = ros::WallTime::now().toSec();
+  // Read, not MessageEvent::getPublisherName(), whose operator[] may insert into the connection header roscpp shares.
+  std::string publisher;
+  if (const auto header = event.getConnectionHeaderPtr()) {
+    const auto it = header->find("callerid");
+    if (it != header->end()) publisher = it->second;
+  }
   std::uint64_t lost = 0, lost_total = 0, overload_total = 0;
   {
     std::lock_guard<std::mutex> lock(input_mutex_);
     ++received_;
-    lost = sequence_gaps_.observe(event.getPublisherName(), msg->header.seq);
+    lost = sequence_gaps_.observe(publisher, msg->header.seq);
     lost_upstream_ += lost;
     lost_total = lost_upstream_;
   }
@@ -225,7 +231,7 @@ void HpdsServer::onCloud(const ros::MessageEvent<const sensor_msgs::PointCloud2>
     overload_total = ++overload_;
   }
   if (lost > 0)
-    ROS_WARN_STREAM_THROTTLE_NAMED(5.0, "hpds", "hpds: " << lost << " frame(s) from " << event.getPublisherName()
+    ROS_WARN_STREAM_THROTTLE_NAMED(5.0, "hpds", "hpds: " << lost << " frame(s) from " << publisher
                                                          << " never arrived (header.seq jumped to " << msg->header.seq
                                                          << "): lost before hpds received them (" << lost_total
                                                          << " so far, counted as lost_upstream)");
