@@ -1,7 +1,9 @@
 // Performance against the tools users would pick instead, measured in one process on the same data:
 // hierarchy build vs PCL VoxelGrid / UniformSampling, normals vs PCL NormalEstimation(OMP), the per-frame path,
-// map mode over a long synthetic stream, and 1 vs 2 threads. Prints a table of medians and ratios and writes JSON.
-// Never fails on timing: ratios are reported, not asserted (the machines here are shared and noisy).
+// downsampling and the frame path with valid normals vs small_gicp on 1 and 2 threads (SmallGicpRows.cpp), the
+// shipped defaults against the sensor period, map mode over a long synthetic stream, and 1 vs 2 threads. Prints a
+// table of medians and ratios and writes JSON. Never fails on timing: ratios are reported, not asserted (the machines
+// here are shared and noisy).
 #include <pcl/PCLPointCloud2.h>
 #include <pcl/common/io.h>
 #include <pcl/conversions.h>
@@ -13,13 +15,10 @@
 #include <pcl/search/kdtree.h>
 
 #include <algorithm>
-#include <chrono>
 #include <cmath>
 #include <cstdlib>
 #include <cstdio>
 #include <filesystem>
-#include <fstream>
-#include <functional>
 #include <iostream>
 #include <sstream>
 #include <string>
@@ -27,6 +26,9 @@
 
 #include <unistd.h>
 
+#include "BenchTiming.hpp"
+#include "FramePath.hpp"
+#include "SmallGicpRows.hpp"
 #include "hpds/normals/NormalEstimator.hpp"
 #include "hpds/pipeline/Pipeline.hpp"
 #include "hpds/pipeline/ScanFrames.hpp"
@@ -36,8 +38,8 @@
 
 namespace {
 
-using Clock = std::chrono::steady_clock;
 using namespace hpds;
+using namespace bench;
 
 struct Options {
   std::string data_dir = "../shared/data/lidar";
@@ -47,55 +49,10 @@ struct Options {
   double cell_size = 4.0;    // level-0 edge, as the default config
   std::size_t stream_points = 5'000'000;
   std::string only;  // "frames" or "stream": one half of the table (e.g. the thread row on an otherwise idle machine)
+  std::string peers = "both";  // "pcl", "small_gicp" or "both": whose rows to run
+  std::vector<std::string> frames;  // real frames to run (file names); empty = every sensor's
+  [[nodiscard]] LevelSetting setting() const { return LevelSetting{level, cell_size}; }
 };
-
-double secondsOf(const std::function<void()> &fn) {
-  const auto t0 = Clock::now();
-  fn();
-  return std::chrono::duration<double>(Clock::now() - t0).count();
-}
-
-double median(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  const std::size_t m = v.size() / 2;
-  return v.size() % 2 ? v[m] : 0.5 * (v[m - 1] + v[m]);
-}
-
-/// Median wall time of `repeats` runs after one warm-up run.
-double medianSeconds(int repeats, const std::function<void()> &fn) {
-  fn();
-  std::vector<double> t;
-  for (int i = 0; i < repeats; ++i) t.push_back(secondsOf(fn));
-  return median(t);
-}
-
-struct Paired {
-  double hpds_s, peer_s, ratio;
-};
-
-/// hpds against its peer, timed in alternating rounds (hpds first in even rounds, the peer first in odd ones) after
-/// one warm-up of each. Both sides of a round see the same state of this shared machine, whose speed drifts by tens
-/// of percent within a minute, so each round's ratio compares like with like; the ratio reported is the median of
-/// those, not a ratio of two medians taken at different times.
-Paired pairedMedians(int repeats, const std::function<void()> &hpds, const std::function<void()> &peer) {
-  hpds();
-  peer();
-  std::vector<double> h, p, r;
-  for (int i = 0; i < repeats; ++i) {
-    double th, tp;
-    if (i % 2 == 0) {
-      th = secondsOf(hpds);
-      tp = secondsOf(peer);
-    } else {
-      tp = secondsOf(peer);
-      th = secondsOf(hpds);
-    }
-    h.push_back(th);
-    p.push_back(tp);
-    r.push_back(th / tp);
-  }
-  return Paired{median(h), median(p), median(r)};
-}
 
 pcl::PointCloud<pcl::PointXYZ>::Ptr toPcl(const PointBuffer &b) {
   pcl::PointCloud<pcl::PointXYZ>::Ptr c(new pcl::PointCloud<pcl::PointXYZ>);
@@ -126,28 +83,6 @@ bool voxelIndicesOverflow(const pcl::PCLPointCloud2::ConstPtr &message, double l
   return cells > 2147483647.0;
 }
 
-struct Row {
-  std::string data, what;
-  double hpds_s, peer_s, ratio;  // ratio: median of the paired rounds' ratios (0 without a peer)
-  std::string peer;
-  std::string note;
-};
-
-std::vector<Row> rows;
-
-void report(const std::string &data, const std::string &what, const Paired &t, const std::string &peer,
-            const std::string &note = "") {
-  rows.push_back({data, what, t.hpds_s, t.peer_s, t.ratio, peer, note});
-  std::printf("%-22s %-34s hpds %9.2f ms | %-26s %9.2f ms | ratio %6.2f %s\n", data.c_str(), what.c_str(), t.hpds_s * 1e3,
-              peer.c_str(), t.peer_s * 1e3, t.ratio, note.c_str());
-  std::fflush(stdout);
-}
-
-/// A row without a peer.
-void report(const std::string &data, const std::string &what, double hpds_s, const std::string &note) {
-  report(data, what, Paired{hpds_s, 0.0, 0.0}, "-", note);
-}
-
 HpdsConfig scanConfig(const Options &o, int threads) {
   HpdsConfig c;
   c.hierarchy.cell_size = o.cell_size;
@@ -158,24 +93,6 @@ HpdsConfig scanConfig(const Options &o, int threads) {
   c.normals.neighborhood_level_offset = 0;
   c.normals.max_growth = 1.0;
   return c;
-}
-
-struct NodePathRun {
-  std::size_t points = 0;
-  double insert_s = 0.0, normals_s = 0.0;
-};
-
-/// The node's per-frame work on a pipeline kept across frames: the message's bytes copied in, insertion, the output
-/// cloud (normals as configured), its bytes copied out.
-NodePathRun nodePath(Pipeline &pipeline, const Frame &frame) {
-  NodePathRun run;
-  Frame in;
-  in.points = frame.points;
-  run.insert_s = pipeline.addFrame(in).seconds_insert;
-  const PointBuffer out = pipeline.makeCloud(pipeline.outputSamples(), false, &run.normals_s);
-  const std::vector<std::uint8_t> msg_data(out.bytes());
-  run.points = msg_data.size() / std::max<std::size_t>(1, out.layout().point_step);
-  return run;
 }
 
 /// One frame: build, normals, threads.
@@ -302,19 +219,26 @@ void benchFrame(const Options &o, const std::string &name, const Frame &frame) {
   report(name, "frame path: msg->insert+normals->msg", t_path, "conv+VoxelGrid+NormalEst+conv",
          pcl_overflow ? "[VoxelGrid overflowed and passed the frame through: PCL's normals ran on every point]" : "");
 
-  // The same path with the shipped defaults (config/hpds.yaml: levels 0..8, refined normals) and normals on: what a
-  // user gets out of the box, to hold against the sensor period. No peer: VoxelGrid at 1.6 cm keeps nearly every
-  // point.
-  HpdsConfig shipped;
-  shipped.normals.enabled = true;
-  Pipeline shipped_pipeline(shipped);
+}
+
+/// The node's frame path with HpdsConfig's defaults (config/hpds.yaml, what a user gets out of the box), held against
+/// the 100 ms period of a 10 Hz sensor on one thread.
+void benchShippedDefaults(const Options &o, const std::string &name, const Frame &frame) {
+  const HpdsConfig shipped;
+  Pipeline pipeline(shipped);
   NodePathRun last;
-  const double t_shipped = medianSeconds(o.repeats, [&] { last = nodePath(shipped_pipeline, frame); });
+  const double t = medianSeconds(o.repeats, [&] { last = nodePath(pipeline, frame); });
+  last = nodePath(pipeline, frame, true);
   std::ostringstream note;
   note.precision(3);
-  note << last.points << " points out; last run: insert " << last.insert_s * 1e3 << " ms, normals " << last.normals_s * 1e3
-       << " ms";
-  report(name, "frame path, shipped defaults", t_shipped, note.str());
+  note << last.points << " points out (level " << pipeline.outputLevel() << ", r = " << pipeline.hierarchy().radius(pipeline.outputLevel())
+       << " m, built to level " << pipeline.buildDepth() << "), normals ";
+  if (shipped.normals.enabled)
+    note << "on, " << 100.0 * double(last.valid_normals) / double(std::max<std::size_t>(1, last.points)) << " % valid";
+  else
+    note << "off";
+  note << "; last run: insert " << last.insert_s * 1e3 << " ms, normals " << last.normals_s * 1e3 << " ms";
+  report(name, "shipped defaults, frame path, 1 thread", Paired{t, 0.1, t / 0.1}, "sensor period (10 Hz)", note.str());
 }
 
 void benchStream(const Options &o) {
@@ -332,6 +256,8 @@ void benchStream(const Options &o) {
   const std::string name = "synthetic " + std::to_string(total / 1000) + "k pts";
   std::vector<pcl::PointCloud<pcl::PointXYZ>::Ptr> clouds;
   for (const auto &f : frames) clouds.push_back(toPcl(f.points));
+  if (o.peers != "pcl" && smallGicpAvailable()) benchSmallGicp(o.setting(), o.repeats, name, frames);
+  if (o.peers == "small_gicp") return;
   const double leaf = cellEdge(o.cell_size, o.level);
   const int reps = o.repeats;
   const Paired t_build = pairedMedians(reps, [&] {
@@ -403,19 +329,6 @@ void benchStream(const Options &o) {
   report(name, "map mode + ~output selection", t_map_out, out_note.str());
 }
 
-void writeJson(const std::string &path) {
-  std::filesystem::create_directories(std::filesystem::path(path).parent_path());
-  std::ofstream j(path);
-  j << "{\n  \"rows\": [\n";
-  for (std::size_t i = 0; i < rows.size(); ++i) {
-    const Row &r = rows[i];
-    j << "    {\"data\": \"" << r.data << "\", \"what\": \"" << r.what << "\", \"hpds_s\": " << r.hpds_s << ", \"peer\": \""
-      << r.peer << "\", \"peer_s\": " << r.peer_s << ", \"ratio\": " << r.ratio
-      << ", \"note\": \"" << r.note << "\"}" << (i + 1 < rows.size() ? "," : "") << "\n";
-  }
-  j << "  ]\n}\n";
-}
-
 }  // namespace
 
 int main(int argc, char **argv) {
@@ -431,7 +344,7 @@ int main(int argc, char **argv) {
   Options o;
   const auto usage = [] {
     std::cerr << "usage: perf_benchmark [--data DIR] [--json FILE] [--repeats N>=1] [--level D, 0..21] "
-                 "[--stream-points N>=1] [--only frames|stream]\n";
+                 "[--stream-points N>=1] [--only frames|stream] [--peers pcl|small_gicp|both] [--frame FILE]...\n";
     return 2;
   };
   try {
@@ -444,6 +357,8 @@ int main(int argc, char **argv) {
       else if (k == "--level") o.level = std::stoi(v);
       else if (k == "--stream-points") o.stream_points = std::stoull(v);
       else if (k == "--only" && (v == "frames" || v == "stream")) o.only = v;
+      else if (k == "--peers" && (v == "pcl" || v == "small_gicp" || v == "both")) o.peers = v;
+      else if (k == "--frame") o.frames.push_back(v);
       else return usage();
     }
   } catch (const std::exception &) {  // a value that is not a number
@@ -460,14 +375,20 @@ int main(int argc, char **argv) {
                                "hesai_64.pcd", "hesai_ot128.pcd", "velodyne_vls128.pcd"}) {
         const auto path = std::filesystem::path(o.data_dir) / name;
         if (!std::filesystem::exists(path)) continue;
+        if (!o.frames.empty() && std::find(o.frames.begin(), o.frames.end(), name) == o.frames.end()) continue;
         Frame f;
         f.points = readPointCloud(path.string());
-        benchFrame(o, name, f);
+        if (o.peers != "small_gicp") benchFrame(o, name, f);
+        if (o.peers != "pcl" && smallGicpAvailable()) benchSmallGicp(o.setting(), o.repeats, name, {f});
+        benchShippedDefaults(o, name, f);
       }
     } else {
       std::printf("(%s absent: real frames skipped)\n", o.data_dir.c_str());
     }
   }
+  if (o.peers != "pcl" && !smallGicpAvailable())
+    std::printf("(small_gicp rows skipped: its headers were not found at configure time; put small_gicp's include/ "
+                "in ../shared/peers/small_gicp or set HPDS_SMALL_GICP_DIR, then re-run cmake)\n");
   if (o.only != "frames") benchStream(o);
   writeJson(o.json);
   std::printf("wrote %s\n", o.json.c_str());
