@@ -10,6 +10,8 @@
 //   uniform         PCL UniformSampling (point nearest each voxel centre), radius by bisection likewise
 //   random          PCL RandomSample of exactly hpds's count
 //   full_res        PCA at hpds's sample positions with neighbours from the full-resolution input
+//   hpds_scan       the node's scan mode: every frame sampled on its own, normals with hpds_refined's settings
+//                   (its count is the sum over the frames, not the merged count)
 // each get PCA normals with two neighbourhoods: the k nearest (k = 10) and a fixed radius (2.5 r_L), neighbours taken
 // from the method's own point set. The error of a normal is the unoriented angle to the true normal of the sample's
 // input point (for a voxel centroid, of the input point nearest to it). A normal that could not be estimated counts
@@ -18,8 +20,8 @@
 // ground column into two cells a noise width apart (real data has no such coincidence).
 //
 // Writes OUT/normal_accuracy.{md,csv,json}, OUT/normal_errors.csv (error quantiles, for the CDF plot) and pictures
-// under OUT/pictures/. Usage: normal_accuracy [--out DIR] [--level L] [--threads N] [--quick] [--level-offset O]
-// [--max-growth G] [--line-ratio R] [--plane-rms P]
+// under OUT/pictures/. Usage: normal_accuracy [--out DIR] [--level L] [--threads N] [--quick] [--scan-only]
+// [--level-offset O] [--max-growth G] [--line-ratio R] [--plane-rms P]
 #include <pcl/features/normal_3d_omp.h>
 #include <pcl/filters/random_sample.h>
 #include <pcl/filters/uniform_sampling.h>
@@ -46,12 +48,16 @@
 #include "hpds/eval/PointRender.hpp"
 #include "hpds/eval/SyntheticLidar.hpp"
 #include "hpds/eval/PngWriter.hpp"
+#include "GrowthAblation.hpp"
 #include "QualityBenchSupport.hpp"
+#include "ScanModeNormals.hpp"
 
 namespace {
 
 using namespace hpds;
 using bench::fmt;
+using bench::Growth;
+using bench::adaptiveNormals;
 namespace fs = std::filesystem;
 using Cloud = pcl::PointCloud<pcl::PointXYZ>;
 
@@ -65,6 +71,7 @@ struct Options {
   double radius_factor = 2.5;  // radius neighbourhood = factor * r_L, hpds's default
   int threads = 2;
   bool quick = false;
+  bool scan_only = false;  // only the hpds_scan rows: a quick check of the scan-mode estimator
   int level_offset = 2;     // hpds_refined: NormalParams::neighborhood_level_offset
   double max_growth = 8.0;  // hpds_refined: NormalParams::max_growth
   double line_ratio = 0.05;
@@ -292,54 +299,45 @@ void writePictures(const Options &o, const Scene &scene, const GroundTruth &gt, 
   writePng((dir / (scene.name + "_" + tag + "_normal_top.png")).string(), renderPoints(p, nrm, ro));
 }
 
-/// The growth rule of NormalParams::max_growth (RefinedNormals.cpp) applied to a plain cloud, for the ablation that
-/// gives the voxel grid the same estimator refinement as hpds: footprint from `coarse`, PCA over `fine`; a grown
-/// neighbourhood replaces the first only if it is flat and no longer line-like; growth stops at the first non-flat one.
-struct Growth {
-  double line_ratio = 0.05;
-  double max_growth = 8.0;
-  double max_plane_rms = 0.02;
-};
-
-std::vector<Eigen::Vector3d> adaptiveNormals(const Cloud::Ptr &query, const Cloud::Ptr &coarse, const Cloud::Ptr &fine,
-                                             bool knn, int k, double radius, const Growth &v) {
-  pcl::search::KdTree<pcl::PointXYZ> tc, tf;
-  tc.setInputCloud(coarse);
-  tf.setInputCloud(fine);
-  std::vector<Eigen::Vector3d> out(query->size(), Eigen::Vector3d::Constant(NAN));
-  std::vector<int> idx;
-  std::vector<float> d2;
-  for (std::size_t i = 0; i < query->size(); ++i) {
-    const pcl::PointXYZ qp = (*query)[i];
-    const double q[3] = {qp.x, qp.y, qp.z};
-    double rho = radius;
-    if (knn) {
-      tc.nearestKSearch(qp, k, idx, d2);
-      rho = std::sqrt(*std::max_element(d2.begin(), d2.end())) * 1.0001 + 1e-6;
-    }
-    const double rho0 = rho;
-    bool have = false;
-    for (;;) {
-      tf.radiusSearch(qp, rho, idx, d2);
-      PcaAccumulator acc(q);
-      for (int j : idx) {
-        const double p[3] = {(*fine)[j].x, (*fine)[j].y, (*fine)[j].z};
-        acc.add(p);
-      }
-      const LocalPca pca = acc.solve(/*accurate=*/false);
-      const bool enough = acc.count() >= 3 && pca.valid;
-      const bool flat = pca.l0 <= v.max_plane_rms * v.max_plane_rms * rho * rho;
-      const bool not_line = pca.l1 >= v.line_ratio * pca.l2;
-      if (enough && (!have || (flat && not_line))) {
-        out[i] = {pca.normal[0], pca.normal[1], pca.normal[2]};
-        have = true;
-        if (not_line) break;
-      }
-      if ((have && !flat) || rho * 2.0 > v.max_growth * rho0 * (1.0 + 1e-12)) break;
-      rho *= 2.0;
-    }
+/// The grid baselines at hpds's sample count `target`: VoxelGrid centroids and UniformSampling (cell by bisection),
+/// and a random subset of exactly that count.
+std::vector<SampleSet> gridBaselines(const GroundTruth &gt, const pcl::search::KdTree<pcl::PointXYZ> &input_tree,
+                                     std::size_t target, double r_level) {
+  std::vector<SampleSet> sets;
+  {
+    SampleSet v;
+    v.method = "voxel_grid";
+    v.cell = cellForCount([&](double l) { return voxelGrid(gt.cloud, l)->size(); }, target, 0.2 * r_level,
+                          20.0 * r_level, 40);
+    v.points = voxelGrid(gt.cloud, v.cell);
+    v.truth = nearestTruth(gt, input_tree, *v.points);
+    sets.push_back(std::move(v));
   }
-  return out;
+  {
+    SampleSet u;
+    u.method = "uniform";
+    u.cell = cellForCount([&](double r) { return uniformSampling(gt.cloud, r)->size(); }, target, 0.2 * r_level,
+                          20.0 * r_level, 40);
+    u.points = uniformSampling(gt.cloud, u.cell);
+    u.truth = nearestTruth(gt, input_tree, *u.points);
+    sets.push_back(std::move(u));
+  }
+  {
+    SampleSet r;
+    r.method = "random";
+    pcl::RandomSample<pcl::PointXYZ> rs;
+    rs.setInputCloud(gt.cloud);
+    rs.setSample(static_cast<unsigned>(target));
+    rs.setSeed(1);
+    pcl::Indices kept;
+    rs.filter(kept);
+    for (int i : kept) {
+      r.points->push_back((*gt.cloud)[static_cast<std::size_t>(i)]);
+      r.truth.push_back(static_cast<std::uint32_t>(i));
+    }
+    sets.push_back(std::move(r));
+  }
+  return sets;
 }
 
 }  // namespace
@@ -356,13 +354,14 @@ int main(int argc, char **argv) {
     else if (a == "--level") o.level = std::stoi(next());
     else if (a == "--threads") o.threads = std::stoi(next());
     else if (a == "--quick") o.quick = true;
+    else if (a == "--scan-only") o.scan_only = true;
     else if (a == "--level-offset") o.level_offset = std::stoi(next());
     else if (a == "--max-growth") o.max_growth = std::stod(next());
     else if (a == "--line-ratio") o.line_ratio = std::stod(next());
     else if (a == "--plane-rms") o.plane_rms = std::stod(next());
     else {
-      std::cerr << "usage: normal_accuracy [--out DIR] [--level L] [--threads N] [--quick] [--level-offset O] "
-                   "[--max-growth G]\n";
+      std::cerr << "usage: normal_accuracy [--out DIR] [--level L] [--threads N] [--quick] [--scan-only] "
+                   "[--level-offset O] [--max-growth G]\n";
       return 2;
     }
   }
@@ -400,39 +399,7 @@ int main(int argc, char **argv) {
     pcl::search::KdTree<pcl::PointXYZ> input_tree;
     input_tree.setInputCloud(gt.cloud);
     std::vector<SampleSet> sets;
-    {
-      SampleSet v;
-      v.method = "voxel_grid";
-      v.cell = cellForCount([&](double l) { return voxelGrid(gt.cloud, l)->size(); }, target, 0.2 * r_level,
-                            20.0 * r_level, 40);
-      v.points = voxelGrid(gt.cloud, v.cell);
-      v.truth = nearestTruth(gt, input_tree, *v.points);
-      sets.push_back(std::move(v));
-    }
-    {
-      SampleSet u;
-      u.method = "uniform";
-      u.cell = cellForCount([&](double r) { return uniformSampling(gt.cloud, r)->size(); }, target, 0.2 * r_level,
-                            20.0 * r_level, 40);
-      u.points = uniformSampling(gt.cloud, u.cell);
-      u.truth = nearestTruth(gt, input_tree, *u.points);
-      sets.push_back(std::move(u));
-    }
-    {
-      SampleSet r;
-      r.method = "random";
-      pcl::RandomSample<pcl::PointXYZ> rs;
-      rs.setInputCloud(gt.cloud);
-      rs.setSample(static_cast<unsigned>(target));
-      rs.setSeed(1);
-      pcl::Indices kept;
-      rs.filter(kept);
-      for (int i : kept) {
-        r.points->push_back((*gt.cloud)[static_cast<std::size_t>(i)]);
-        r.truth.push_back(static_cast<std::uint32_t>(i));
-      }
-      sets.push_back(std::move(r));
-    }
+    if (!o.scan_only) sets = gridBaselines(gt, input_tree, target, r_level);
 
     for (const bool knn : {true, false}) {
       const std::string nb = knn ? "knn" : "radius";
@@ -448,6 +415,7 @@ int main(int argc, char **argv) {
                                       {"ablation_hpds_finer_only", o.level_offset, 1.0},
                                       {"ablation_hpds_growth_only", 0, o.max_growth}};
       for (const HpdsVariant &v : variants) {
+        if (o.scan_only) break;
         NormalParams np = normalParamsFor(cfg, o.level);
         np.k = knn ? o.k : 0;
         np.radius = knn ? 0.0 : radius;
@@ -473,7 +441,28 @@ int main(int argc, char **argv) {
         if (knn && v.name == std::string("hpds_refined")) writePictures(o, scene, gt, hp, hpds_normals, "hpds_refined_knn");
       }
 
+      {
+        // The node's scan mode: each frame on its own, with the refined estimator's settings above.
+        HpdsConfig sc = cfg;
+        sc.normals.k = knn ? o.k : 0;
+        sc.normals.radius = knn ? 0.0 : radius;
+        sc.normals.min_neighbors = 3;
+        sc.normals.neighborhood_level_offset = o.level_offset;
+        sc.normals.max_growth = o.max_growth;
+        const auto tn = std::chrono::steady_clock::now();
+        const bench::ScanModeNormals r = bench::scanModeNormals(gt.frames, sc);
+        seconds["hpds_scan_" + nb] += std::chrono::duration<double>(std::chrono::steady_clock::now() - tn).count();
+        SampleSet ss;
+        ss.method = "hpds_scan";
+        for (const Eigen::Vector3d &p : r.positions) ss.points->push_back(pcl::PointXYZ(float(p.x()), float(p.y()), float(p.z())));
+        ss.truth = r.truth;
+        ErrorSet e = score(gt, ss, r.normals);
+        e.scene = scene.name, e.neighborhood = nb;
+        results.push_back(e);
+      }
+
       for (const SampleSet &s : sets) {
+        if (o.scan_only) break;
         const auto n = pclNormals(s.points, s.points, knn, o.k, radius, o.threads);
         ErrorSet es = score(gt, s, n);
         es.scene = scene.name, es.neighborhood = nb;
@@ -492,6 +481,7 @@ int main(int argc, char **argv) {
         }
       }
       // Full resolution: PCA at hpds's sample positions, neighbours from every input point.
+      if (o.scan_only) continue;
       SampleSet full = hp;
       full.method = "full_res";
       const auto fn = pclNormals(hp.points, gt.cloud, knn, o.k, radius, o.threads);
@@ -574,6 +564,7 @@ int main(int argc, char **argv) {
   for (const ErrorSet &e : results) {
     if (e.method != "hpds_refined") continue;
     const ErrorSet *v = find(e.scene, "voxel_grid", e.neighborhood), *u = find(e.scene, "uniform", e.neighborhood);
+    if (!v || !u) continue;
     const double bm = std::min(v->quantile(0.5), u->quantile(0.5)), bp = std::min(v->quantile(0.9), u->quantile(0.9));
     const bool met = e.quantile(0.5) <= bm && e.quantile(0.9) <= bp;
     md << "| " << e.scene << " | " << e.neighborhood << " | " << fmt(e.quantile(0.5)) << " / " << fmt(bm) << " | "
