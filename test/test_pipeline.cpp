@@ -63,11 +63,13 @@ double angleDeg(const Eigen::Vector3d &a, const Eigen::Vector3d &b) {
 
 TEST(Pipeline, SameSeedSameBytesAndThreadCountDoesNotMatter) {
   const SyntheticLidar lidar(smallLidar());
+  // Scan mode's normals average the frame's cell centroids, made beside the insertion when there are threads.
+  for (Mode mode : {Mode::Map, Mode::Scan})
   for (InsertionOrder order : {InsertionOrder::Random, InsertionOrder::Sphericity, InsertionOrder::SurfaceVariation}) {
     std::vector<std::uint8_t> reference;
     for (int threads : {1, 2, 3}) {
       HpdsConfig c;
-      c.mode = Mode::Map;
+      c.mode = mode;
       c.order.type = order;
       c.order.seed = 42;
       c.normals.enabled = true;
@@ -80,7 +82,8 @@ TEST(Pipeline, SameSeedSameBytesAndThreadCountDoesNotMatter) {
       if (reference.empty()) {
         reference = out.bytes();
       } else {
-        ASSERT_EQ(out.bytes(), reference) << toString(order) << " differs with " << threads << " threads";
+        ASSERT_EQ(out.bytes(), reference) << toString(mode) << ", " << toString(order) << " differs with " << threads
+                                          << " threads";
       }
     }
   }
@@ -218,10 +221,10 @@ TEST(Pipeline, ScanModeBuildsOnlyTheLevelsItsOutputsReadAndTheyComeOutTheSame) {
   c.output.level = 4;
   c.normals.enabled = false;
   EXPECT_EQ(Pipeline(c).buildDepth(), 4);
-  c.normals.enabled = true;  // neighborhood_level_offset 2: the normals read levels 5 and 6 too
-  EXPECT_EQ(Pipeline(c).buildDepth(), 6);
+  c.normals.enabled = true;  // neighborhood_level_offset 2: averaged from the frame's points, no level deeper
+  EXPECT_EQ(Pipeline(c).buildDepth(), 4);
   c.normals.neighborhood_level_offset = 7;
-  EXPECT_EQ(Pipeline(c).buildDepth(), 8);  // clamped to max_depth, as the normals clamp it
+  EXPECT_EQ(Pipeline(c).buildDepth(), 4);
   c.normals.neighborhood_level_offset = 2;
   c.map.keep_depth = 8;
   EXPECT_EQ(Pipeline(c).buildDepth(), 6) << "scan mode keeps nothing: map.keep_depth does not apply";
@@ -244,26 +247,28 @@ TEST(Pipeline, ScanModeBuildsOnlyTheLevelsItsOutputsReadAndTheyComeOutTheSame) {
     EXPECT_THROW(p.requireLevel(-1), std::invalid_argument);
   }
 
-  // The same frames through a pipeline built to level 6 and one built to max_depth: the same output samples with
-  // the same ids, fields and normals, byte for byte; the shallow one stores nothing deeper and counts as dropped
-  // exactly the points the deep one took at deeper levels or dropped.
+  // The same frames through a pipeline built to the output level 4 and one built to max_depth: the same output
+  // samples with the same ids, fields and normals (from the frame's points either way), byte for byte; the shallow
+  // one stores nothing deeper and counts as dropped exactly the points the deep one took at deeper levels or dropped.
   const SyntheticLidar lidar(smallLidar(SceneKind::Urban, 2));
   Pipeline shallow(c), deep(c);
   deep.requireLevel(8);
   for (int i = 0; i < 2; ++i) {
     const Frame f = lidar.frame(i).frame;
     const FrameResult a = shallow.addFrame(f), b = deep.addFrame(f);
-    for (int d = 0; d <= 6; ++d) EXPECT_EQ(a.counters.accepted_per_level[d], b.counters.accepted_per_level[d]) << d;
+    for (int d = 0; d <= 4; ++d) EXPECT_EQ(a.counters.accepted_per_level[d], b.counters.accepted_per_level[d]) << d;
     std::uint64_t deeper = 0;
-    for (int d = 7; d <= 8; ++d) {
+    for (int d = 5; d <= 8; ++d) {
       EXPECT_EQ(a.counters.accepted_per_level[d], 0u);
       deeper += b.counters.accepted_per_level[d];
     }
-    EXPECT_GT(deeper, 0u) << "levels 7 and 8 must hold samples for this comparison to mean something";
+    EXPECT_GT(deeper, 0u) << "levels 5 to 8 must hold samples for this comparison to mean something";
     EXPECT_EQ(a.counters.dropped_depth, b.counters.dropped_depth + deeper);
     const std::vector<SampleId> ids = shallow.outputSamples();
     ASSERT_EQ(ids, deep.outputSamples());
-    EXPECT_TRUE(shallow.makeCloud(ids, false).bytes() == deep.makeCloud(ids, false).bytes()) << "frame " << i;
+    const PointBuffer out = shallow.makeCloud(ids, false);
+    ASSERT_TRUE(out.layout().find("normal_x"));
+    EXPECT_TRUE(out.bytes() == deep.makeCloud(ids, false).bytes()) << "frame " << i;
     EXPECT_LT(shallow.hierarchy().sampleCount(), deep.hierarchy().sampleCount());
   }
 }
@@ -532,7 +537,7 @@ TEST(Normals, AccurateOnPlanarSceneAgainstGroundTruth) {
   Pipeline p(c);
   p.addFrame(f);
   const std::vector<SampleId> ids = p.outputSamples();
-  const auto normals = estimateNormals(p.hierarchy(), ids, normalParamsFor(c, 4));
+  const auto normals = p.normals(ids);  // scan mode: from the frame's cell centroids
   std::map<std::array<float, 3>, std::size_t> by_xyz;
   for (std::size_t i = 0; i < f.points.size(); ++i) {
     std::array<float, 3> k;

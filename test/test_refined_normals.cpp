@@ -8,8 +8,15 @@
 #include <random>
 #include <vector>
 
-#include "hpds/sampling/Hierarchy.hpp"
+#include <Eigen/Eigenvalues>
+#include <array>
+#include <cstring>
+#include <map>
+
 #include "hpds/normals/NormalEstimator.hpp"
+#include "hpds/pipeline/Pipeline.hpp"
+#include "hpds/sampling/Hierarchy.hpp"
+#include "normals/CellCentroids.hpp"
 
 namespace hpds {
 namespace {
@@ -172,6 +179,173 @@ TEST(RefinedNormals, IsolatedSamplesStayInvalidAndOffsetsBeyondMaxDepthAreClampe
     EXPECT_TRUE(std::isnan(n.normal[0]));
   }
   EXPECT_TRUE(estimateNormals(h, {}, p).empty());
+}
+
+// ---------------------------------------------------------------- scan mode: the frame's own cell centroids
+
+using CellIndex = std::array<double, 3>;  // floor(p / edge) per axis, exact integers
+
+/// Brute force: per cell floor(p * (1 / edge)), the sum of its points and their count, by increasing cell.
+std::map<CellIndex, std::array<double, 4>> bruteCentroids(const std::vector<double> &xyz,
+                                                         const std::vector<std::uint32_t> &indices, double edge) {
+  std::map<CellIndex, std::array<double, 4>> cells;
+  const double inv = 1.0 / edge;
+  for (std::uint32_t i : indices) {
+    const double *p = &xyz[3 * std::size_t(i)];
+    if (!std::isfinite(p[0]) || !std::isfinite(p[1]) || !std::isfinite(p[2])) continue;
+    auto &c = cells[{std::floor(p[0] * inv), std::floor(p[1] * inv), std::floor(p[2] * inv)}];
+    for (int a = 0; a < 3; ++a) c[a] += p[a];
+    c[3] += 1.0;
+  }
+  return cells;
+}
+
+void expectCentroidsMatch(const std::vector<double> &xyz, const std::vector<std::uint32_t> &indices, double edge) {
+  const std::vector<double> got = cellCentroids(xyz.data(), indices.data(), indices.size(), edge);
+  const auto want = bruteCentroids(xyz, indices, edge);
+  ASSERT_EQ(got.size(), 3 * want.size()) << "edge " << edge;
+  std::size_t k = 0;
+  for (const auto &[cell, sum] : want) {  // in cell order, x-major
+    for (int a = 0; a < 3; ++a)
+      ASSERT_NEAR(got[3 * k + a], sum[a] / sum[3], 1e-12 * (1.0 + std::fabs(sum[a] / sum[3]))) << "cell " << k;
+    ++k;
+  }
+}
+
+TEST(CellCentroids, MatchBruteForceInCellOrder) {
+  std::mt19937_64 rng(5);
+  std::uniform_real_distribution<double> u(-5.0, 5.0);
+  std::uniform_int_distribution<int> grid(-160, 160);
+  std::vector<double> xyz;
+  for (int i = 0; i < 20000; ++i) xyz.insert(xyz.end(), {u(rng), u(rng), 0.3 * u(rng)});
+  // On cell faces of every edge below (multiples of 1/32 m are exact), repeated points, a non-finite coordinate.
+  for (int i = 0; i < 2000; ++i) xyz.insert(xyz.end(), {grid(rng) / 32.0, grid(rng) / 32.0, grid(rng) / 32.0});
+  xyz.insert(xyz.end(), {1.0, 2.0, 3.0, 1.0, 2.0, 3.0, NAN, 0.0, 0.0, 0.5, INFINITY, 0.5});
+  std::vector<std::uint32_t> all(xyz.size() / 3), every_third;
+  std::iota(all.begin(), all.end(), 0u);
+  for (std::uint32_t i = 0; i < all.size(); i += 3) every_third.push_back(i);
+  for (const double edge : {1.0 / 32.0, 0.1, 1.0, 20.0}) {
+    expectCentroidsMatch(xyz, all, edge);
+    expectCentroidsMatch(xyz, every_third, edge);
+  }
+  // A far outlier (2^21 cells and more from the rest on an axis): the wide path, the same answer.
+  xyz.insert(xyz.end(), {-1e6, 3.0, 1.0});
+  all.push_back(static_cast<std::uint32_t>(all.size()));
+  expectCentroidsMatch(xyz, all, 1.0 / 32.0);
+  EXPECT_TRUE(cellCentroids(xyz.data(), all.data(), 0, 0.1).empty());
+  EXPECT_TRUE(cellCentroids(xyz.data(), all.data(), all.size(), 0.0).empty());
+}
+
+TEST(RefinedNormals, ScanModeNormalsArePcaOfTheFramesCellCentroids) {
+  // A noisy tilted plane and a wall, seen from the origin, in one scan-mode frame: with growth off, each output
+  // sample's normal is the PCA of the frame's cell centroids (cells of level output + offset) within the radius.
+  std::mt19937_64 rng(9);
+  std::uniform_real_distribution<double> u(0.0, 6.0);
+  std::normal_distribution<double> noise(0.0, 0.01);
+  PointLayout layout;
+  layout.append("x", FieldType::Float32);
+  layout.append("y", FieldType::Float32);
+  layout.append("z", FieldType::Float32);
+  Frame frame;
+  frame.points = PointBuffer(layout, 0);
+  std::vector<double> xyz;  // as the pipeline reads them (float32)
+  for (int i = 0; i < 30000; ++i) {
+    const double x = u(rng) - 3.0, y = u(rng) - 3.0;
+    const double p[3] = {i % 4 ? x : 3.5, i % 4 ? y : x, i % 4 ? -1.5 + 0.1 * x + noise(rng) : y + 1.0 + noise(rng)};
+    float f[3];
+    for (int a = 0; a < 3; ++a) f[a] = static_cast<float>(p[a]), xyz.push_back(f[a]);
+    std::uint8_t rec[12];
+    std::memcpy(rec, f, sizeof rec);
+    frame.points.pushBack(rec);
+  }
+  HpdsConfig c;
+  c.output.level = 4;
+  c.normals.enabled = true;
+  c.normals.neighborhood_level_offset = 2;
+  c.normals.max_growth = 1.0;
+  Pipeline pipeline(c);
+  pipeline.addFrame(frame);
+  const Hierarchy &h = pipeline.hierarchy();
+  for (int l = 5; l <= h.maxDepth(); ++l) EXPECT_EQ(h.countAtLevel(l), 0u) << "no level is built for the normals";
+  const std::vector<SampleId> ids = pipeline.outputSamples();
+  const PointBuffer out = pipeline.makeCloud(ids, false);
+  ASSERT_EQ(out.size(), ids.size());
+
+  std::vector<std::uint32_t> all(xyz.size() / 3);
+  std::iota(all.begin(), all.end(), 0u);
+  std::vector<Eigen::Vector3d> centroids;
+  for (const auto &[cell, sum] : bruteCentroids(xyz, all, cellEdge(c.hierarchy.cell_size, 6)))
+    centroids.emplace_back(sum[0] / sum[3], sum[1] / sum[3], sum[2] / sum[3]);
+  const double radius = 2.5 * h.radius(4);
+  const PointField *nf[3] = {out.layout().find("normal_x"), out.layout().find("normal_y"), out.layout().find("normal_z")};
+  const PointField *cf = out.layout().find("curvature");
+  std::size_t valid = 0;
+  for (std::size_t i = 0; i < ids.size(); ++i) {
+    const Eigen::Vector3d q(h.position(ids[i])[0], h.position(ids[i])[1], h.position(ids[i])[2]);
+    std::vector<Eigen::Vector3d> nb;
+    for (const Eigen::Vector3d &p : centroids)
+      if ((p - q).squaredNorm() < radius * radius) nb.push_back(p);
+    const Eigen::Vector3d n(readAsDouble(out.record(i), *nf[0]), readAsDouble(out.record(i), *nf[1]),
+                            readAsDouble(out.record(i), *nf[2]));
+    if (static_cast<int>(nb.size()) < c.normals.min_neighbors) {
+      EXPECT_TRUE(std::isnan(n.x())) << "too few centroids: the normal must be invalid";
+      continue;
+    }
+    Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+    for (const auto &p : nb) mean += p;
+    mean /= static_cast<double>(nb.size());
+    Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
+    for (const auto &p : nb) cov += (p - mean) * (p - mean).transpose();
+    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(cov / static_cast<double>(nb.size()));
+    ASSERT_TRUE(n.allFinite()) << "sample " << i << " has " << nb.size() << " centroids in reach";
+    ++valid;
+    const Eigen::Vector3d truth = es.eigenvectors().col(0);
+    EXPECT_LT(std::acos(std::min(1.0, std::abs(n.normalized().dot(truth)))), 1e-4) << "sample " << i;
+    EXPECT_NEAR(readAsDouble(out.record(i), *cf), es.eigenvalues()(0) / es.eigenvalues().sum(), 1e-5);
+    EXPECT_GE(n.dot(-q), -1e-6 * q.norm()) << "oriented toward the sensor at the origin";
+  }
+  EXPECT_GT(valid, ids.size() * 9 / 10);
+}
+
+TEST(RefinedNormals, ScanModeCentroidsAverageRangeNoiseAsTheFinerLevelsDid) {
+  // The noisy plane of FinerLevelsAverageRangeNoise as one scan-mode frame: the frame's centroids must beat the
+  // plain estimator as the finer levels do.
+  std::mt19937_64 rng(1);
+  std::uniform_real_distribution<double> u(0.0, 4.0);
+  std::normal_distribution<double> noise(0.0, 0.01);
+  PointLayout layout;
+  layout.append("x", FieldType::Float64);
+  layout.append("y", FieldType::Float64);
+  layout.append("z", FieldType::Float64);
+  Frame frame;
+  frame.points = PointBuffer(layout, 0);
+  for (int i = 0; i < 60000; ++i) {
+    const double p[3] = {u(rng), u(rng), 5.0 + noise(rng)};  // the sensor below, at the origin: normals face -z
+    frame.points.pushBack(reinterpret_cast<const std::uint8_t *>(p));
+  }
+  auto medianError = [&](int offset) {
+    HpdsConfig c;
+    c.hierarchy.cell_size = kCell;
+    c.hierarchy.max_depth = 7;
+    c.output.level = 4;
+    c.normals.enabled = true;
+    c.normals.k = 10;
+    c.normals.min_neighbors = 3;
+    c.normals.neighborhood_level_offset = offset;
+    c.normals.max_growth = 1.0;
+    Pipeline pipeline(c);
+    pipeline.addFrame(frame);
+    const PointBuffer out = pipeline.makeCloud(pipeline.outputSamples(), false);
+    const PointField *nz = out.layout().find("normal_z");
+    std::vector<double> e;
+    for (std::size_t i = 0; i < out.size(); ++i) {
+      const double z = readAsDouble(out.record(i), *nz);
+      e.push_back(std::isnan(z) ? NAN : std::acos(std::min(1.0, -z)) * 57.29577951308232);
+    }
+    return median(e);
+  };
+  const double plain = medianError(0), centroids = medianError(2);
+  EXPECT_LT(centroids, 0.6 * plain) << "plain " << plain << " deg, centroids " << centroids << " deg";
 }
 
 }  // namespace

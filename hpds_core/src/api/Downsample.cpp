@@ -3,7 +3,6 @@
 
 #include "hpds/config/ConfigYaml.hpp"
 #include "hpds/hpds.hpp"
-#include "hpds/normals/NormalEstimator.hpp"
 #include "hpds/pipeline/Pipeline.hpp"
 
 namespace hpds {
@@ -49,8 +48,7 @@ Samples downsample(const std::vector<Eigen::Vector3f> &points, const HpdsConfig 
     out.level[i] = static_cast<std::uint8_t>(hierarchy.level(ids[i]));
   }
   if (config.normals.enabled) {
-    const std::vector<SampleNormal> normals =
-        estimateNormals(hierarchy, ids, normalParamsFor(config, pipeline.outputLevel()));
+    const std::vector<SampleNormal> normals = pipeline.normals(ids);
     out.normal.resize(ids.size());
     out.curvature.resize(ids.size());
     for (std::size_t i = 0; i < ids.size(); ++i) {

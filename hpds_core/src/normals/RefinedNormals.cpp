@@ -19,7 +19,7 @@
 namespace hpds {
 
 std::vector<SampleNormal> estimateNormalsRefined(const Hierarchy &h, const std::vector<SampleId> &ids,
-                                                 const NormalParams &params) {
+                                                 const NormalParams &params, const std::vector<double> *centroids) {
   std::vector<SampleNormal> result(ids.size(), invalidNormal());
   if (ids.empty()) return result;
   const int level = std::min(params.level, h.maxDepth());
@@ -37,7 +37,7 @@ std::vector<SampleNormal> estimateNormalsRefined(const Hierarchy &h, const std::
       lo[a] = std::min(lo[a], h.position(id)[a] - margin);
       hi[a] = std::max(hi[a], h.position(id)[a] + margin);
     }
-  std::vector<SampleId> fine = h.samplesUpTo(finest), coarse;
+  std::vector<SampleId> fine = h.samplesUpTo(centroids ? level : finest), coarse;
   fine.erase(std::remove_if(fine.begin(), fine.end(),
                             [&](SampleId id) {
                               const double *p = h.position(id);
@@ -49,7 +49,9 @@ std::vector<SampleNormal> estimateNormalsRefined(const Hierarchy &h, const std::
     for (SampleId id : fine)
       if (h.level(id) <= level) coarse.push_back(id);
   const double *hbase = h.position(0);
-  const PointSet fine_set{hbase, fine.data(), fine.size()}, coarse_set{hbase, coarse.data(), coarse.size()};
+  const PointSet coarse_set{hbase, coarse.data(), coarse.size()};
+  const PointSet fine_set = centroids ? PointSet{centroids->data(), nullptr, centroids->size() / 3}
+                                      : PointSet{hbase, fine.data(), fine.size()};
 
   // Search radii: one per doubling of the base radius up to twice the level-0 cell edge. A footprint rho is searched
   // with the smallest of them >= rho, all queries of one radius at once (BallGrid), round after round: a query

@@ -4,13 +4,18 @@
 #include <chrono>
 #include <cmath>
 #include <cstring>
+#include <exception>
 #include <stdexcept>
 #include <string>
+#include <thread>
 
 #include "hpds/pipeline/FramePoints.hpp"
+#include "hpds/pipeline/OutputCloud.hpp"
 #include "hpds/sampling/FrameGridIndex.hpp"
 #include "hpds/sampling/InsertionOrderer.hpp"
-#include "hpds/pipeline/OutputCloud.hpp"
+#include "hpds/util/ParallelFor.hpp"
+#include "normals/CellCentroids.hpp"
+#include "normals/RefinedNormals.hpp"
 
 namespace hpds {
 
@@ -34,11 +39,21 @@ FrameCounters &FrameCounters::operator+=(const FrameCounters &o) {
 }
 
 namespace {
-/// The deepest level read: the output levels, the finer levels the normals average over, the levels a map keeps.
+/// The deepest level read: the output levels, in map mode the finer levels the normals average over (scan mode's
+/// normals average the frame's own points instead, see fineLevelFor), the levels a map keeps.
 int buildDepthFor(const HpdsConfig &config, int output_level) {
-  const int normals = config.normals.enabled ? output_level + std::max(0, config.normals.neighborhood_level_offset) : 0;
+  const bool map_normals = config.mode == Mode::Map && config.normals.enabled;
+  const int normals = map_normals ? output_level + std::max(0, config.normals.neighborhood_level_offset) : 0;
   const int kept = config.mode == Mode::Map ? config.map.keep_depth : -1;
   return std::min(config.hierarchy.max_depth, std::max({output_level, normals, kept}));
+}
+
+/// Scan mode with normals that average finer detail: the level whose cells they average the frame's points in (the
+/// output level + normals.neighborhood_level_offset, clamped to max_depth as the map's normals clamp it), or -1.
+int fineLevelFor(const HpdsConfig &config, int output_level) {
+  if (config.mode != Mode::Scan || !config.normals.enabled || config.normals.neighborhood_level_offset <= 0) return -1;
+  const int fine = std::min(config.hierarchy.max_depth, output_level + config.normals.neighborhood_level_offset);
+  return fine > output_level ? fine : -1;
 }
 }  // namespace
 
@@ -47,6 +62,7 @@ Pipeline::Pipeline(const HpdsConfig &config)
       config_(resolvedConfig(config)),
       output_level_(resolution_.level),
       build_depth_(buildDepthFor(config_, output_level_)),
+      fine_level_(fineLevelFor(config_, output_level_)),
       hierarchy_(config_.hierarchy.cell_size, config_.hierarchy.max_depth) {}
 
 void Pipeline::requireLevel(int level) {
@@ -110,7 +126,27 @@ FrameResult Pipeline::addFrame(const Frame &frame) {
                      config_.threads);
   result.seconds_order = secondsSince(t_order);
 
-  // 5. Breadth-first insertion into the hierarchy.
+  // 5. Scan-mode normals average the frame's points per cell of the fine level instead of that many more levels of
+  //    the hierarchy: those centroids only need the points, so with a second thread they are made during step 6.
+  std::thread fine_worker;
+  std::exception_ptr fine_error;
+  fine_points_.clear();
+  if (fine_level_ >= 0) {
+    auto centroids = [this, &fine_error] {
+      try {
+        fine_points_ = cellCentroids(xyz_.data(), candidates_.data(), candidates_.size(),
+                                     cellEdge(config_.hierarchy.cell_size, fine_level_));
+      } catch (...) {
+        fine_error = std::current_exception();
+      }
+    };
+    if (resolveThreads(config_.threads) > 1)
+      fine_worker = std::thread(centroids);
+    else
+      centroids();
+  }
+
+  // 6. Breadth-first insertion into the hierarchy.
   const auto t_insert = std::chrono::steady_clock::now();
   InsertBatch batch;
   batch.xyz = xyz_.data();
@@ -122,8 +158,16 @@ FrameResult Pipeline::addFrame(const Frame &frame) {
   for (int a = 0; a < 3; ++a) batch.viewpoint[a] = viewpoint[a];
   batch.frame_index = frames_;
   batch.max_level = buildDepth();
-  InsertResult inserted = hierarchy_.insert(batch);
+  InsertResult inserted;
+  try {
+    inserted = hierarchy_.insert(batch);
+  } catch (...) {
+    if (fine_worker.joinable()) fine_worker.join();
+    throw;
+  }
   result.seconds_insert = secondsSince(t_insert);
+  if (fine_worker.joinable()) fine_worker.join();
+  if (fine_error) std::rethrow_exception(fine_error);
 
   c.out_of_range = inserted.out_of_range;
   c.dropped_depth = inserted.dropped_depth;
@@ -188,10 +232,16 @@ std::vector<SampleId> Pipeline::samplesHitByLastFrame(int min_level, int max_lev
   return hit;
 }
 
+std::vector<SampleNormal> Pipeline::normals(const std::vector<SampleId> &ids) const {
+  const NormalParams params = normalParamsFor(config_, output_level_);
+  return fine_level_ >= 0 ? estimateNormalsRefined(hierarchy_, ids, params, &fine_points_)
+                          : estimateNormals(hierarchy_, ids, params);
+}
+
 PointBuffer Pipeline::makeCloud(const std::vector<SampleId> &ids, bool with_frame_field, double *seconds_normals) const {
   if (!config_.normals.enabled) return buildOutputCloud(hierarchy_, ids, nullptr, with_frame_field);
   const auto t0 = std::chrono::steady_clock::now();
-  const std::vector<SampleNormal> normals = estimateNormals(hierarchy_, ids, normalParamsFor(config_, output_level_));
+  const std::vector<SampleNormal> normals = this->normals(ids);
   if (seconds_normals) *seconds_normals = secondsSince(t0);
   return buildOutputCloud(hierarchy_, ids, &normals, with_frame_field);
 }

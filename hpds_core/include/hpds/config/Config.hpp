@@ -50,7 +50,8 @@ struct NormalConfig {
   int k = 0;               ///< k nearest neighbours (within `radius` when it is > 0); 0 = radius only
   int min_neighbors = 5;   ///< fewer neighbours (the sample included) -> invalid normal (NaN, counted)
   int neighborhood_level_offset = 2;  ///< also take samples of levels L+1..L+offset inside the footprint (noise
-                                      ///< averaging; clamped to max_depth); 0 = levels 0..L only
+                                      ///< averaging; clamped to max_depth; scan mode: the frame's point centroids
+                                      ///< per cell of level L+offset instead); 0 = levels 0..L only
   double max_growth = 8.0;  ///< grow a line-like (one scan line) or too small neighbourhood up to this factor; 1 = off
 };
 

@@ -4,11 +4,14 @@
 // - The config is resolved first (resolvedConfig: the level-0 cell derived from output.spacing when
 //   hierarchy.cell_size is 0); config() and the hierarchy use the resolved values, outputResolution() says why.
 // - Only levels 0..buildDepth() are built, in both modes: the output level, + normals.neighborhood_level_offset with
-//   normals on, a level asked for by requireLevel and, in map mode, map.keep_depth; never past max_depth. Points
+//   normals on in map mode, a level asked for by requireLevel and, in map mode, map.keep_depth; never past max_depth. Points
 //   rejected down to buildDepth() count as dropped_depth. In scan mode those levels are exactly what building to
 //   max_depth gives; in map mode finer samples of earlier frames also keep later candidates away, so a map built
 //   deeper (map.keep_depth) differs at its coarse levels too, equally valid.
-// - Scan mode: every frame is sampled on its own (the hierarchy is cleared first). Map mode: one persistent
+// - Scan mode: every frame is sampled on its own (the hierarchy is cleared first). The normals' finer detail
+//   (normals.neighborhood_level_offset) comes from the frame itself: the centroids of its points per cell of level
+//   output + offset (clamped to max_depth) stand in for the samples of those levels, which are not built for it
+//   (with threads > 1, beside the insertion). Map mode: one persistent
 //   hierarchy in the fixed frame; earlier samples never move or change level; samples farther than
 //   map.evict_distance from the latest sensor position are evicted before the frame is inserted, and the store is
 //   cut back to map.max_samples (farthest first), so memory is bounded by the cap plus one frame.
@@ -71,6 +74,10 @@ class Pipeline {
   /// (the points that passed the skip rules, in the fixed frame) lies strictly within `radius`. With radius 2 r_L
   /// every candidate has a hit sample (coverage), so this is the map as that sweep saw it. Increasing id order.
   [[nodiscard]] std::vector<SampleId> samplesHitByLastFrame(int min_level, int max_level, double radius) const;
+  /// Normals of `ids` (samples of the hierarchy) with the config's normal settings, as makeCloud estimates them: in
+  /// scan mode from the last frame's cell centroids (see contract), so a caller must not estimate them from
+  /// hierarchy() alone, which holds no level below buildDepth().
+  [[nodiscard]] std::vector<SampleNormal> normals(const std::vector<SampleId> &ids) const;
   /// Output cloud of `ids` (normals estimated when normals.enabled), layout of OutputCloud.hpp.
   [[nodiscard]] PointBuffer makeCloud(const std::vector<SampleId> &ids, bool with_frame_field,
                                       double *seconds_normals = nullptr) const;
@@ -105,6 +112,10 @@ class Pipeline {
   HpdsConfig config_;
   int output_level_;
   int build_depth_;
+  // Scan mode with normals.neighborhood_level_offset: the level whose cells the normals average the last frame's
+  // points in (-1: the normals read the hierarchy's own levels), and those cell centroids (3 doubles each).
+  int fine_level_;
+  std::vector<double> fine_points_;
   Hierarchy hierarchy_;
   FrameCounters totals_;
   std::uint32_t frames_ = 0;
