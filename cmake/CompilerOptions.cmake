@@ -4,6 +4,11 @@ function(hpds_set_options target)
   if(CMAKE_CXX_COMPILER_ID MATCHES "GNU|Clang")
     target_compile_options(${target} PRIVATE -Wall -Wextra -Wpedantic -Wshadow=local -Wno-unused-parameter)
   endif()
+  # The libraries are shared and built with -fPIC, so GCC assumes any exported function may be interposed at load
+  # time and neither inlines it nor calls it directly, even inside its own file. hpds never relies on interposition.
+  if(CMAKE_CXX_COMPILER_ID STREQUAL "GNU")
+    target_compile_options(${target} PRIVATE -fno-semantic-interposition)
+  endif()
 endfunction()
 
 # AddressSanitizer + UndefinedBehaviorSanitizer for every target of the build (`make test-sanitize`). Global rather
