@@ -249,10 +249,10 @@ TEST(ConfigYaml, InvalidDocumentsNameTheKey) {
       // size-like values beyond their bounds (each took 30-60 s per frame)
       {"normals: {k: 2000000000}", "normals.k", "must be in 0..1024"},
       {"normals: {min_neighbors: 5000}", "normals.min_neighbors", "must be in 3..1024"},
-      {"normals: {radius: 1e6}", "normals.radius", "(64 radii of level 8, the finest level the normals read)"},
+      {"normals: {radius: 1e6}", "normals.radius", "(64 radii of level 7, the finest level the normals read)"},
       {"output: {level: 3}\nnormals: {radius: 30.0, neighborhood_level_offset: 0}", "normals.radius",
        "64 radii of level 3"},
-      {"order: {feature_radius: 1e6}", "order.feature_radius", "(64 radii of level 8, the output level)"},
+      {"order: {feature_radius: 1e6}", "order.feature_radius", "(64 radii of level 5, the output level)"},
       // unknown keys
       {"bogus: 1", "bogus", "unknown key"},
       {"hierarchy: {max_dpeth: 3}", "hierarchy.max_dpeth", "did you mean 'hierarchy.max_depth'"},

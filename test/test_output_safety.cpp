@@ -108,10 +108,11 @@ TEST_F(OutputSafety, WriteKilledByTheFileSizeLimitLeavesThePreviousOutputsAndThe
   ASSERT_EQ(temporariesIn(dir_).size(), 1u) << "the killed run's temporary should be there";
   EXPECT_EQ(fs::file_size(temporariesIn(dir_)[0]), std::uintmax_t(1) << 20);
 
-  // 2. The map (about 8 MB) the same way, behind a small PLY (level 0).
-  status = waitStatus(
-      spawnHpds({"sample", in, "--mode", "map", "--level", "0", "-o", small, "--save-map", map}, dir_ / "log2.txt",
-                2 << 20));
+  // 2. The map (about 8 MB: every level kept, map.keep_depth 8) the same way, behind a small PLY (level 0).
+  writeText(dir_ / "keep.yaml", "map: {keep_depth: 8}\n");
+  status = waitStatus(spawnHpds({"sample", in, "--mode", "map", "--level", "0", "--config", (dir_ / "keep.yaml").string(),
+                                 "-o", small, "--save-map", map},
+                                dir_ / "log2.txt", 2 << 20));
   ASSERT_TRUE(WIFSIGNALED(status) && WTERMSIG(status) == SIGXFSZ) << test::readText(dir_ / "log2.txt");
   EXPECT_EQ(test::readText(dir_ / "m.hpdsmap"), previous_map) << "the previous map was destroyed";
   // That run's first write into the folder removed the first run's leftover: only its own is left.

@@ -227,7 +227,7 @@ TEST(Pipeline, ScanModeBuildsOnlyTheLevelsItsOutputsReadAndTheyComeOutTheSame) {
   EXPECT_EQ(Pipeline(c).buildDepth(), 4);
   c.normals.neighborhood_level_offset = 2;
   c.map.keep_depth = 8;
-  EXPECT_EQ(Pipeline(c).buildDepth(), 6) << "scan mode keeps nothing: map.keep_depth does not apply";
+  EXPECT_EQ(Pipeline(c).buildDepth(), 4) << "scan mode keeps nothing: map.keep_depth does not apply";
   c.mode = Mode::Map;
   c.map.keep_depth = -1;
   EXPECT_EQ(Pipeline(c).buildDepth(), 6) << "map mode too builds only the levels its outputs read";

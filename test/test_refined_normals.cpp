@@ -274,7 +274,7 @@ TEST(RefinedNormals, ScanModeNormalsArePcaOfTheFramesCellCentroids) {
   std::vector<std::uint32_t> all(xyz.size() / 3);
   std::iota(all.begin(), all.end(), 0u);
   std::vector<Eigen::Vector3d> centroids;
-  for (const auto &[cell, sum] : bruteCentroids(xyz, all, cellEdge(c.hierarchy.cell_size, 6)))
+  for (const auto &[cell, sum] : bruteCentroids(xyz, all, cellEdge(pipeline.config().hierarchy.cell_size, 6)))
     centroids.emplace_back(sum[0] / sum[3], sum[1] / sum[3], sum[2] / sum[3]);
   const double radius = 2.5 * h.radius(4);
   const PointField *nf[3] = {out.layout().find("normal_x"), out.layout().find("normal_y"), out.layout().find("normal_z")};

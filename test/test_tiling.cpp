@@ -4,6 +4,7 @@
 // Core only: runs in a build without PCL.
 #include <gtest/gtest.h>
 
+#include <cstdio>
 #include <fstream>
 #include <set>
 #include <stdexcept>
@@ -52,6 +53,21 @@ TEST(TileGrid, TileSizeMustBeAWholeMultipleOfTheCellSize) {
     } catch (const std::invalid_argument &e) {
       EXPECT_NE(std::string(e.what()).find("tile size"), std::string::npos) << e.what();
     }
+  }
+  // The shipped defaults derive the cell from output.spacing (3.69504 m for 0.1 m): the error names valid sizes,
+  // and each of them is accepted.
+  const HierarchyConfig derived = resolvedConfig(HpdsConfig{}).hierarchy;
+  try {
+    (void)TileGrid(derived, 8.0);
+    ADD_FAILURE() << "tile size 8 accepted with a " << derived.cell_size << " m cell";
+  } catch (const std::invalid_argument &e) {
+    const std::string what = e.what();
+    const auto at = what.find("(nearest: ");
+    ASSERT_NE(at, std::string::npos) << what;
+    double below = 0, above = 0;
+    ASSERT_EQ(std::sscanf(what.c_str() + at, "(nearest: %lf or %lf m)", &below, &above), 2) << what;
+    EXPECT_EQ(TileGrid(derived, below).cellsPerTile(), 2);
+    EXPECT_EQ(TileGrid(derived, above).cellsPerTile(), 3);
   }
 }
 

@@ -57,7 +57,9 @@ def resolve_config(a):
     """Defaults, then --config FILE, then the flags, validated by the core: the complete config as YAML text."""
     if a.mode is not None and a.mode != "map":
         raise ValueError("--mode: a tiled build is a map build (only 'map' is accepted), got '%s'" % a.mode)
-    overlay = {"mode": "map"}
+    # A tiled build keeps every sample of the map (each tile is built whole): the live node's memory bounds
+    # (map.evict_distance, map.max_samples, on by default) do not apply to it.
+    overlay = {"mode": "map", "map": {"evict_distance": 0.0, "max_samples": 0}}
 
     def put(section, key, value):
         if value is not None:

@@ -40,7 +40,7 @@ py::list levelList(const Array &per_level, int last) {
 HpdsConfig tiledConfig(const std::string &yaml) {
   const HpdsConfig config = loadConfigString(yaml);
   validateTiledConfig(config);
-  return config;
+  return resolvedConfig(config);  // the cell the tiles run with: derived from output.spacing when cell_size is 0
 }
 
 std::string tileFileName(const TileKey &key, const char *ext) {
@@ -71,7 +71,7 @@ void bindTiling(py::module_ &m) {
   m.def(
       "tile_neighbours",
       [](const std::string &yaml, double tile_size, std::int32_t i, std::int32_t j, int ring) {
-        const HpdsConfig config = loadConfigString(yaml);
+        const HpdsConfig config = resolvedConfig(loadConfigString(yaml));
         std::vector<std::pair<std::int32_t, std::int32_t>> out;
         for (const TileKey &k : TileGrid(config.hierarchy, tile_size).neighbours(TileKey{i, j}, ring))
           out.emplace_back(k.i, k.j);
@@ -82,7 +82,7 @@ void bindTiling(py::module_ &m) {
   m.def(
       "tile_bounds",
       [](const std::string &yaml, double tile_size, std::int32_t i, std::int32_t j) {
-        const HpdsConfig config = loadConfigString(yaml);
+        const HpdsConfig config = resolvedConfig(loadConfigString(yaml));
         const auto b = TileGrid(config.hierarchy, tile_size).bounds(TileKey{i, j});
         return std::vector<double>(b.begin(), b.end());
       },

@@ -87,9 +87,11 @@ class Arguments(support.ScratchCase):
         a = hpds.downsample(self.points)
         b = hpds.downsample(self.points, {})
         np.testing.assert_array_equal(a["index"], b["index"])
-        self.assertEqual(sorted(a), ["index", "level"])
-        # Every input point is in range and finite here, so at max_depth 8 with 4 m cells most are kept.
-        self.assertGreater(len(a["index"]), 1000)
+        # The shipped defaults: samples at least 0.1 m apart, with normals.
+        self.assertEqual(sorted(a), ["curvature", "index", "level", "normal"])
+        self.assertEqual(a["normal"].shape, (len(a["index"]), 3))
+        # 5000 points in a 16 m cube lie about 1 m apart: at 0.1 m nearly all are kept.
+        self.assertGreater(len(a["index"]), 4000)
         self.assertTrue((a["index"] < len(self.points)).all())
 
     def test_strided_and_float64_views_give_the_same_samples(self):

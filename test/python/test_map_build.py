@@ -11,6 +11,7 @@ import io
 import json
 import logging
 import os
+import re
 import shutil
 import signal
 import tempfile
@@ -96,7 +97,8 @@ class MapBuild(unittest.TestCase):
 
     @classmethod
     def dask(cls):
-        """A 2-worker LocalCluster, shared by the tests; a task whose workers die twice fails (KilledWorker)."""
+        """A 2-worker LocalCluster, shared by the tests; a task whose workers die twice fails (KilledWorker), and
+        the runner submits it again up to twice more."""
         if cls.client is None:
             import dask
             from distributed import Client, LocalCluster
@@ -106,6 +108,8 @@ class MapBuild(unittest.TestCase):
             cls.cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None,
                                        silence_logs=logging.CRITICAL)
             cls.client = Client(cls.cluster)
+        # A test that killed workers leaves their nannies restarting them: start from both workers up.
+        cls.client.wait_for_workers(2, timeout=120)
         return cls.client
 
     def out(self, name):
@@ -242,8 +246,20 @@ class MapBuild(unittest.TestCase):
                     self.assertEqual(map_build.main(base + args), 1)
                 self.assertIn(what, err.getvalue())
         with contextlib.redirect_stderr(io.StringIO()) as err:  # 2 inputs, 6 poses
-            self.assertEqual(map_build.main(base + ["-o", self.out("e5"), "--tile-size", "8"]), 1)
+            self.assertEqual(map_build.main(base + ["-o", self.out("e5"), "--tile-size", "8", "--cell-size", "2"]), 1)
         self.assertIn("poses", err.getvalue())
+
+    def test_the_shipped_defaults_build_with_a_tile_size_the_error_names(self):
+        # No sampling flag: the cell is derived from output.spacing (0.1 m), an odd size that 8 m does not divide.
+        base = self.frames + ["--poses", self.poses, "--workers", "0"]
+        with contextlib.redirect_stderr(io.StringIO()) as err:
+            self.assertEqual(map_build.main(base + ["-o", self.out("d1"), "--tile-size", "8"]), 1)
+        m = re.search(r"\(nearest: ([0-9.e+-]+) or ([0-9.e+-]+) m\)", err.getvalue())
+        self.assertIsNotNone(m, err.getvalue())
+        self.assertEqual(map_build.main(base + ["-o", self.out("d2"), "--tile-size", m.group(2)]), 0)
+        with open(os.path.join(self.out("d2"), "manifest.json")) as f:
+            manifest = json.load(f)
+        self.assertGreater(manifest["counts"]["samples_written"], 0)
 
 
 if __name__ == "__main__":

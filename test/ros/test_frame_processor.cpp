@@ -147,7 +147,9 @@ TEST(FrameProcessor, InputFieldsWithHpdsNamesAreReported) {
   hpds::PointBuffer cloud(layout, 50);
   for (std::size_t i = 0; i < cloud.size(); ++i)
     for (int a = 0; a < 3; ++a) hpds::writeFromDouble(cloud.record(i), layout.fields[a], 0.3 * double(i) + a);
-  FrameProcessor processor(NodeConfig{});
+  NodeConfig config;
+  config.hpds.normals.enabled = false;
+  FrameProcessor processor(config);
   const auto r = processor.process(toMsg(cloud, 1.0), Eigen::Isometry3d::Identity(), OutputRequest::all());
   ASSERT_TRUE(r.processed);
   EXPECT_EQ(r.fields_not_carried, (std::vector<std::string>{"curvature", "level"}));

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <stdexcept>
 #include <string>
 
@@ -22,10 +23,19 @@ TileGrid::TileGrid(const HierarchyConfig &hierarchy, double tile_size) : cell_si
     throw std::invalid_argument("hierarchy.max_depth: must be in 0..21");
   const double ratio = tile_size / cell_size_;
   const double k = std::round(ratio);
-  if (!std::isfinite(tile_size) || !(k >= 1.0) || k > double(1 << 20) || std::fabs(ratio - k) > 1e-9 * k)
-    throw std::invalid_argument("tile size: must be a whole multiple (>= 1, <= 2^20) of hierarchy.cell_size (" +
+  if (!std::isfinite(tile_size) || !(k >= 1.0) || k > double(1 << 20) || std::fabs(ratio - k) > 1e-9 * k) {
+    // A cell derived from output.spacing is an odd number (3.69504 m for 0.1 m): name the nearest valid sizes.
+    std::string nearest;
+    if (std::isfinite(ratio) && ratio > 0.0 && ratio < double(1 << 20)) {
+      const double below = std::max(1.0, std::floor(ratio)), above = std::max(1.0, std::ceil(ratio));
+      char buf[96];
+      std::snprintf(buf, sizeof buf, " (nearest: %.17g or %.17g m)", below * cell_size_, above * cell_size_);
+      nearest = buf;
+    }
+    throw std::invalid_argument("tile size: must be a whole multiple (>= 1, <= 2^20) of the level-0 cell (" +
                                 std::to_string(cell_size_) + " m), so that tiles hold whole cells; got " +
-                                std::to_string(tile_size) + " m");
+                                std::to_string(tile_size) + " m" + nearest);
+  }
   k_ = static_cast<int>(k);
   inv_cell_ = 1.0 / cell_size_;
   finest_inv_edge_ = 1.0 / std::ldexp(cell_size_, -hierarchy.max_depth);
