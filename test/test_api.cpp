@@ -78,6 +78,39 @@ TEST(Downsample, GivesThePipelinesSamplesInItsOrderWithItsNormals) {
   }
 }
 
+TEST(Downsample, CovariancesAreThePipelinesCovFields) {
+  const SyntheticFrame f = syntheticFrame();
+  const std::vector<Eigen::Vector3f> points = xyzOf(f.frame.points);
+  HpdsConfig config = withNormals();
+  config.normals.covariances = true;
+  Pipeline pipeline(config);
+  Frame frame = f.frame;
+  frame.sensor_to_fixed = Eigen::Isometry3d::Identity();
+  pipeline.addFrame(frame);
+  const PointBuffer cloud = pipeline.makeCloud(pipeline.outputSamples(), false);
+  const PointLayout &l = cloud.layout();
+  const Samples s = downsample(points, config);
+  ASSERT_EQ(s.covariance.size(), s.size());
+  ASSERT_EQ(cloud.size(), s.size());
+  const char *names[3][3] = {{"cov_xx", "cov_xy", "cov_xz"}, {"cov_xy", "cov_yy", "cov_yz"}, {"cov_xz", "cov_yz", "cov_zz"}};
+  std::size_t finite = 0;
+  for (std::size_t i = 0; i < s.size(); ++i) {
+    finite += s.covariance[i].allFinite() ? 1 : 0;
+    for (int r = 0; r < 3; ++r)
+      for (int c = 0; c < 3; ++c) {
+        const double expected = readAsDouble(cloud.record(i), *l.find(names[r][c]));
+        if (std::isnan(expected)) {
+          EXPECT_TRUE(std::isnan(s.covariance[i](r, c)));
+        } else {
+          EXPECT_EQ(s.covariance[i](r, c), static_cast<float>(expected));
+        }
+      }
+  }
+  EXPECT_GT(finite, s.size() / 2);
+  config.normals.covariances = false;
+  EXPECT_TRUE(downsample(points, config).covariance.empty());
+}
+
 TEST(Downsample, SamplesAreRealPointsSpacedAndCoveringByBruteForce) {
   std::vector<Eigen::Vector3f> points;
   std::uint64_t state = 7;

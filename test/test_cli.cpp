@@ -157,6 +157,37 @@ TEST(Cli, SyntheticStreamScanModeTagsFramesAndSeedsAreDeterministic) {
   EXPECT_EQ(runHpds("verify " + shellQuote(tmp / "m.ply") + " --spacing 0.1", &log), 0) << log;
 }
 
+TEST(Cli, CovariancesAreWrittenAsSixPlyPropertiesAfterTheNormals) {
+  const auto tmp = test::scratchDir("cli_cov");
+  std::string log;
+  ASSERT_EQ(runHpds("synth -o " + shellQuote(tmp / "s") + " --frames 1 --beams 16 --azimuth-steps 600", &log), 0) << log;
+  const std::string input = shellQuote(tmp / "s" / "frame_000000.pcd");
+  ASSERT_EQ(runHpds("sample " + input + " --spacing 0.2 --covariances -o " + shellQuote(tmp / "c.ply"), &log), 0) << log;
+  const std::string text = readText(tmp / "c.ply");
+  const std::string header = text.substr(0, text.find("end_header"));
+  EXPECT_NE(header.find("property float curvature\nproperty float cov_xx\nproperty float cov_xy\nproperty float cov_xz\n"
+                        "property float cov_yy\nproperty float cov_yz\nproperty float cov_zz\n"),
+            std::string::npos)
+      << header;
+  const PointBuffer c = readPointCloud((tmp / "c.ply").string());
+  const PointField *xx = c.layout().find("cov_xx"), *yy = c.layout().find("cov_yy"), *zz = c.layout().find("cov_zz");
+  ASSERT_TRUE(xx && yy && zz);
+  std::size_t valid = 0;
+  for (std::size_t i = 0; i < c.size(); ++i) {
+    const double trace = readAsDouble(c.record(i), *xx) + readAsDouble(c.record(i), *yy) + readAsDouble(c.record(i), *zz);
+    if (std::isnan(trace)) continue;
+    // Eigenvalues (0.001, 1, 1) at the default epsilon, or the identity for a neighbourhood on one scan line.
+    const bool plane = std::abs(trace - 2.001) < 1e-5, line = std::abs(trace - 3.0) < 1e-5;
+    EXPECT_TRUE(plane || line) << trace;
+    valid += plane ? 1 : 0;
+  }
+  EXPECT_GT(valid, c.size() / 2);
+  ASSERT_EQ(runHpds("verify " + shellQuote(tmp / "c.ply") + " --cell-size 4", &log), 0) << log;
+  // Without the flag the same run writes no covariances.
+  ASSERT_EQ(runHpds("sample " + input + " --spacing 0.2 --normals -o " + shellQuote(tmp / "n.ply"), &log), 0) << log;
+  EXPECT_EQ(readText(tmp / "n.ply").find("cov_xx"), std::string::npos);
+}
+
 TEST(Cli, ScanModeWithASpacingBuildsAndReportsOnlyTheLevelsItWrites) {
   // With 4 m cells, --spacing 0.2 writes levels 0..5; scan mode then builds no deeper (with --normals too: they
   // average the frame's own points instead of levels 6..7), and the summary and --stats say so instead of listing
@@ -231,6 +262,7 @@ TEST(Cli, BadInputGivesAClearErrorAndNonZeroExit) {
   { std::ofstream b(tmp / "odd.bin", std::ios::binary); b << "12345678901234567"; }
   { std::ofstream y(tmp / "bad.yaml"); y << "hierarchy:\n  cell_sise: 2\n"; }
   { std::ofstream y(tmp / "neg.yaml"); y << "hierarchy:\n  cell_size: -1\n"; }
+  { std::ofstream y(tmp / "cov.yaml"); y << "normals:\n  enabled: false\n  covariances: true\n"; }
   struct Case {
     std::string args;
     int code;
@@ -248,6 +280,7 @@ TEST(Cli, BadInputGivesAClearErrorAndNonZeroExit) {
       {shellQuote(tmp / "odd.bin") + out + " --max-depth 22", 1, "hierarchy.max_depth"},
       {shellQuote(tmp / "odd.bin") + out + " --cell-size nan", 1, "hierarchy.cell_size"},
       {shellQuote(tmp / "odd.bin") + out + " --order zigzag", 1, "zigzag"},
+      {shellQuote(tmp / "odd.bin") + out + " --config " + shellQuote(tmp / "cov.yaml"), 1, "normals.covariances"},
       {shellQuote(tmp / "odd.bin"), 2, "output"},
   };
   for (const Case &c : cases) {

@@ -30,7 +30,8 @@ std::size_t expectSameConfig(const HpdsConfig &a, const HpdsConfig &b) {
   [[maybe_unused]] const auto &[cell_size, max_depth] = a.hierarchy;
   [[maybe_unused]] const auto &[type, seed, feature_radius] = a.order;
   [[maybe_unused]] const auto &[level, spacing] = a.output;
-  [[maybe_unused]] const auto &[enabled, radius, k, min_neighbors, neighborhood_level_offset, max_growth] = a.normals;
+  [[maybe_unused]] const auto &[enabled, radius, k, min_neighbors, neighborhood_level_offset, max_growth, covariances,
+                                 covariance_epsilon, covariance_line_ratio] = a.normals;
   [[maybe_unused]] const auto &[evict_distance, max_samples, keep_depth] = a.map;
   [[maybe_unused]] const auto &[skip_zero_points, min_range, max_range] = a.input;
 
@@ -53,6 +54,9 @@ std::size_t expectSameConfig(const HpdsConfig &a, const HpdsConfig &b) {
   same("normals.min_neighbors", a.normals.min_neighbors, b.normals.min_neighbors);
   same("normals.neighborhood_level_offset", a.normals.neighborhood_level_offset, b.normals.neighborhood_level_offset);
   same("normals.max_growth", a.normals.max_growth, b.normals.max_growth);
+  same("normals.covariances", a.normals.covariances, b.normals.covariances);
+  same("normals.covariance_epsilon", a.normals.covariance_epsilon, b.normals.covariance_epsilon);
+  same("normals.covariance_line_ratio", a.normals.covariance_line_ratio, b.normals.covariance_line_ratio);
   same("map.evict_distance", a.map.evict_distance, b.map.evict_distance);
   same("map.max_samples", a.map.max_samples, b.map.max_samples);
   same("map.keep_depth", a.map.keep_depth, b.map.keep_depth);
@@ -98,6 +102,9 @@ HpdsConfig nonDefaultConfig() {
   c.normals.min_neighbors = 7;
   c.normals.neighborhood_level_offset = 3;
   c.normals.max_growth = 2.5;
+  c.normals.covariances = true;
+  c.normals.covariance_epsilon = 0.01;
+  c.normals.covariance_line_ratio = 0.05;
   c.map.evict_distance = 123.456;
   c.map.max_samples = 1000000;
   c.map.keep_depth = 9;
@@ -193,10 +200,13 @@ TEST(ConfigYaml, EmptyDocumentsGiveDefaults) {
 
 TEST(ConfigYaml, PartialOverlayKeepsAbsentKeys) {
   HpdsConfig config = nonDefaultConfig();
-  hpds::applyConfigYaml("hierarchy:\n  max_depth: 10\nnormals: {enabled: false}\nmode: scan\n", config);
+  // (covariances need normals: switching normals off alone would be rejected, see InvalidDocumentsNameTheKey)
+  hpds::applyConfigYaml("hierarchy:\n  max_depth: 10\nnormals: {enabled: false, covariances: false}\nmode: scan\n",
+                        config);
   HpdsConfig expected = nonDefaultConfig();
   expected.hierarchy.max_depth = 10;
   expected.normals.enabled = false;
+  expected.normals.covariances = false;
   expected.mode = hpds::Mode::Scan;
   expectSameConfig(config, expected);
 }
@@ -245,6 +255,12 @@ TEST(ConfigYaml, InvalidDocumentsNameTheKey) {
       {"normals: {neighborhood_level_offset: -1}", "normals.neighborhood_level_offset", "0..21"},
       {"normals: {max_growth: 0.5}", "normals.max_growth", "1..1024"},
       {"normals: {k: 4}", "normals.k", "min_neighbors"},
+      {"normals: {enabled: false, covariances: true}", "normals.covariances", "normals.enabled"},
+      {"normals: {covariance_epsilon: 0}", "normals.covariance_epsilon", "1e-4..1"},
+      {"normals: {covariance_epsilon: 1.5}", "normals.covariance_epsilon", "1e-4..1"},
+      {"normals: {covariance_epsilon: .nan}", "normals.covariance_epsilon", "finite"},
+      {"normals: {covariance_line_ratio: -0.1}", "normals.covariance_line_ratio", "0..1"},
+      {"normals: {covariance_line_ratio: 2}", "normals.covariance_line_ratio", "0..1"},
       {"threads: -1", "threads", "0..1024"},
       // size-like values beyond their bounds (each took 30-60 s per frame)
       {"normals: {k: 2000000000}", "normals.k", "must be in 0..1024"},

@@ -68,29 +68,35 @@ TEST(OutputCloud, LayoutIsAlignedForPackedInputs) {
     const PointLayout in = randomInputLayout(rng);
     ASSERT_NO_THROW(in.validate());
     for (const bool normals : {false, true})
-      for (const bool frame : {false, true}) {
-        SCOPED_TRACE("trial " + std::to_string(trial) + (normals ? " normals" : "") + (frame ? " frame" : ""));
-        const PointLayout out = outputLayout(in, normals, frame);
-        ASSERT_NO_THROW(out.validate());
-        expectAligned(out);
-        // Every field is there with its type and count: ours, and each input field not replaced by one of ours.
-        std::set<std::string> expected = {"x", "y", "z", "level"};
-        if (normals) expected.insert({"normal_x", "normal_y", "normal_z", "curvature"});
-        if (frame) expected.insert("frame");
-        const std::set<std::string> own = {"x", "y", "z", "level", "normal_x", "normal_y", "normal_z", "curvature", "frame"};
-        for (const PointField &f : in.fields) {
-          if (own.count(f.name)) continue;
-          expected.insert(f.name);
-          const PointField *g = out.find(f.name);
-          ASSERT_NE(g, nullptr) << f.name;
-          EXPECT_EQ(g->type, f.type);
-          EXPECT_EQ(g->count, f.count);
+      for (const bool frame : {false, true})
+        for (const bool covariances : {false, true}) {
+          if (covariances && !normals) continue;  // covariances come with normals
+          SCOPED_TRACE("trial " + std::to_string(trial) + (normals ? " normals" : "") + (frame ? " frame" : "") +
+                       (covariances ? " covariances" : ""));
+          const PointLayout out = outputLayout(in, normals, frame, covariances);
+          ASSERT_NO_THROW(out.validate());
+          expectAligned(out);
+          // Every field is there with its type and count: ours, and each input field not replaced by one of ours.
+          std::set<std::string> expected = {"x", "y", "z", "level"};
+          if (normals) expected.insert({"normal_x", "normal_y", "normal_z", "curvature"});
+          if (covariances) expected.insert({"cov_xx", "cov_xy", "cov_xz", "cov_yy", "cov_yz", "cov_zz"});
+          if (frame) expected.insert("frame");
+          const std::set<std::string> own = {"x",      "y",      "z",      "level",  "normal_x", "normal_y",
+                                             "normal_z", "curvature", "frame", "cov_xx", "cov_xy", "cov_xz",
+                                             "cov_yy", "cov_yz", "cov_zz"};
+          for (const PointField &f : in.fields) {
+            if (own.count(f.name)) continue;
+            expected.insert(f.name);
+            const PointField *g = out.find(f.name);
+            ASSERT_NE(g, nullptr) << f.name;
+            EXPECT_EQ(g->type, f.type);
+            EXPECT_EQ(g->count, f.count);
+          }
+          std::set<std::string> names;
+          for (const PointField &f : out.fields) names.insert(f.name);
+          EXPECT_EQ(names, expected);
+          EXPECT_EQ(out.find("level")->type, FieldType::UInt8);
         }
-        std::set<std::string> names;
-        for (const PointField &f : out.fields) names.insert(f.name);
-        EXPECT_EQ(names, expected);
-        EXPECT_EQ(out.find("level")->type, FieldType::UInt8);
-      }
   }
 }
 

@@ -99,6 +99,31 @@ TEST(PclDownsample, NormalsOnlyWhenAskedForAndTheSamplesDoNotDependOnIt) {
   EXPECT_GT(valid, with->size() / 2);
 }
 
+TEST(PclDownsample, CovariancesOnlyWhenAskedForInGicpsType) {
+  const pcl::PointCloud<pcl::PointXYZI> cloud = syntheticCloud();
+  HpdsConfig asked = config();
+  asked.normals.covariances = true;
+  const Samples s = downsample(xyzOf(cloud), asked);
+  // Asked for by the pointer alone: neither normals nor covariances need to be on in the config.
+  HpdsConfig off = config();
+  off.normals.enabled = false;
+  SampleCovariances covariances;
+  const auto out = downsample(cloud, off, nullptr, &covariances);
+  ASSERT_EQ(out->size(), s.size());
+  ASSERT_EQ(covariances.size(), s.size());
+  for (std::size_t i = 0; i < s.size(); ++i)
+    for (int k = 0; k < 9; ++k) {
+      const float expected = s.covariance[i](k / 3, k % 3);
+      if (std::isnan(expected)) {
+        EXPECT_TRUE(std::isnan(covariances[i](k / 3, k % 3)));
+      } else {
+        EXPECT_EQ(covariances[i](k / 3, k % 3), static_cast<double>(expected));
+      }
+    }
+  // A config asking for covariances is fine without the pointer (nothing is computed for them).
+  EXPECT_EQ(downsample(cloud, asked)->size(), s.size());
+}
+
 // Both one-call APIs promise the samples `hpds sample` writes: run the tool on the same points and config.
 TEST(PclDownsample, TheSamplesAreThoseHpdsSampleWrites) {
   const pcl::PointCloud<pcl::PointXYZI> cloud = syntheticCloud();

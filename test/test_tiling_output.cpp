@@ -124,5 +124,36 @@ TEST(TiledOutput, NormalsWithoutTheNeighboursSamplesDiffer) {
   EXPECT_GT(differ, 50u);
 }
 
+TEST(TiledOutput, CovariancesAreWrittenWhenAsked) {
+  HpdsConfig config = normalsConfig();
+  config.normals.covariances = true;
+  const TileGrid grid(config.hierarchy, 1.0);
+  const test::TiledRun run = test::runTiled(config, grid, test::denseFrames(3, 6000, 31), test::scratchDir("tiled_cov"));
+  std::size_t planes = 0;
+  for (const TileKey &key : run.tiles) {
+    const PointBuffer cloud = readPointCloud(run.plys.at(key).string());
+    const PointLayout &l = cloud.layout();
+    const char *names[6] = {"cov_xx", "cov_xy", "cov_xz", "cov_yy", "cov_yz", "cov_zz"};
+    for (const char *name : names) ASSERT_NE(l.find(name), nullptr) << name;
+    for (std::size_t i = 0; i < cloud.size(); ++i) {
+      double c[6];
+      for (int k = 0; k < 6; ++k) c[k] = readAsDouble(cloud.record(i), *l.find(names[k]));
+      const Eigen::Vector3d n(readAsDouble(cloud.record(i), *l.find("normal_x")),
+                              readAsDouble(cloud.record(i), *l.find("normal_y")),
+                              readAsDouble(cloud.record(i), *l.find("normal_z")));
+      Eigen::Matrix3d m;
+      m << c[0], c[1], c[2], c[1], c[3], c[4], c[2], c[4], c[5];
+      if (!n.allFinite()) {
+        EXPECT_TRUE(m.array().isNaN().all());
+        continue;
+      }
+      if (m.isApprox(Eigen::Matrix3d::Identity())) continue;  // a line-like neighbourhood
+      EXPECT_LT((m * n - config.normals.covariance_epsilon * n).norm(), 1e-5);  // the written normal, small axis
+      ++planes;
+    }
+  }
+  EXPECT_GT(planes, 100u);
+}
+
 }  // namespace
 }  // namespace hpds

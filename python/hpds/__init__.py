@@ -42,7 +42,8 @@ def downsample(points, config=None):
         of a YAML file in that layout.
     Returns a dict of NumPy arrays, one entry per sample: "index" (uint32, position in `points`), "level" (uint8,
         0..D of the output level D) and, with normals.enabled, "normal" ((n, 3) float32, facing the sensor; NaN where
-        no normal could be estimated) and "curvature" (float32).
+        no normal could be estimated) and "curvature" (float32); with normals.covariances also "covariance"
+        ((n, 3, 3) float32: the sample's covariance for generalized ICP, NaN where the normal is).
     Raises ValueError naming the key for an invalid config, TypeError for a points array of another type.
     """
     text, path = _config_source(config)

@@ -67,11 +67,18 @@ void bindDownsample(py::module_ &m) {
           out["normal"] = normal;
           out["curvature"] = arrayOf(s.curvature);
         }
+        if (config.normals.covariances) {
+          // Symmetric: Eigen's column-major storage reads the same as NumPy's row-major (n, 3, 3).
+          static_assert(sizeof(Eigen::Matrix3f) == 9 * sizeof(float), "Matrix3f is nine packed floats");
+          py::array_t<float> cov({static_cast<py::ssize_t>(s.size()), py::ssize_t(3), py::ssize_t(3)});
+          if (s.size()) std::memcpy(cov.mutable_data(), s.covariance.data(), s.size() * sizeof(Eigen::Matrix3f));
+          out["covariance"] = cov;
+        }
         return out;
       },
       py::arg("points"), py::arg("config_yaml"), py::arg("config_path"),
       "Samples of `points` ((N, 3) float32/float64) with the config (file `config_path` if not empty, else "
-      "`config_yaml`): dict of index, level and, with normals, normal and curvature.");
+      "`config_yaml`): dict of index, level and, with normals, normal and curvature, with covariances covariance.");
 }
 
 }  // namespace hpds::python

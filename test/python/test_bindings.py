@@ -66,6 +66,26 @@ class MatchesTheCppApi(support.ScratchCase):
         self.check_file(frame, NORMALS)
         self.check_file(frame, {"order": {"type": "sphericity"}, "output": {"level": 3}})
 
+    def test_covariances_have_the_normal_as_small_axis(self):
+        support.run([support.CLI, "synth", "-o", self.path("synth"), "--frames", "1", "--beams", "16",
+                     "--azimuth-steps", "720", "--format", "pcd"])
+        points = hpds.read_points(self.path("synth/frame_000000.pcd"))
+        config = {"output": {"spacing": 0.2}, "normals": {"enabled": True, "covariances": True}}
+        s = hpds.downsample(points, config)
+        n = len(s["index"])
+        self.assertEqual(s["covariance"].shape, (n, 3, 3))
+        self.assertEqual(s["covariance"].dtype, np.float32)
+        self.assertNotIn("covariance", hpds.downsample(points, NORMALS))
+        valid = np.isfinite(s["normal"]).all(axis=1)
+        self.assertTrue(np.isnan(s["covariance"][~valid]).all())
+        cov, normal = s["covariance"][valid].astype(np.float64), s["normal"][valid].astype(np.float64)
+        np.testing.assert_allclose(cov, np.transpose(cov, (0, 2, 1)))
+        identity = np.all(np.isclose(cov, np.eye(3)), axis=(1, 2))  # a neighbourhood on one scan line
+        planes = ~identity
+        self.assertGreater(planes.sum(), n // 2)
+        along = np.einsum("nij,nj->ni", cov[planes], normal[planes])
+        np.testing.assert_allclose(along, 0.001 * normal[planes], atol=1e-5)
+
     def test_synthetic_planes_from_numpy(self):
         rng = np.random.default_rng(7)
         n = 20000

@@ -5,6 +5,7 @@
 #include <unistd.h>
 
 #include <cmath>
+#include <algorithm>
 #include <cstring>
 #include <filesystem>
 #include <functional>
@@ -75,6 +76,43 @@ TEST(FrameProcessor, ScanOutputEqualsTheCorePipeline) {
   hpds::PointBuffer level2;
   ASSERT_EQ(hpds_node::fromRosCloud(r.levels[0].second, level2), hpds_node::CloudError::None);
   EXPECT_EQ(level2.size(), pipeline.hierarchy().countAtLevel(2));
+}
+
+TEST(FrameProcessor, CovariancesArePointCloud2Fields) {
+  const hpds::SyntheticLidar lidar(smallLidar());
+  NodeConfig config;
+  config.hpds.output.level = 4;
+  config.hpds.normals.enabled = true;
+  config.hpds.normals.covariances = true;
+  FrameProcessor processor(config);
+  const PointCloud2 msg = toMsg(lidar.frame(1).frame.points, 1.0);
+  const auto r = processor.process(msg, Eigen::Isometry3d::Identity(), OutputRequest::all());
+  ASSERT_TRUE(r.has_output);
+  // Found by name (the layout orders fields by size, OutputCloud.hpp): float32, one each.
+  for (const char *name : {"normal_x", "normal_y", "normal_z", "curvature", "cov_xx", "cov_xy", "cov_xz", "cov_yy",
+                           "cov_yz", "cov_zz"}) {
+    const auto f = std::find_if(r.output.fields.begin(), r.output.fields.end(),
+                                [&](const sensor_msgs::PointField &p) { return p.name == name; });
+    ASSERT_NE(f, r.output.fields.end()) << name;
+    EXPECT_EQ(f->datatype, sensor_msgs::PointField::FLOAT32) << name;
+    EXPECT_EQ(f->count, 1u) << name;
+  }
+  // Each plane covariance has the published normal as its small axis (epsilon 0.001 along it, 1 across).
+  const hpds::PointBuffer out = hpds_test::toBuffer(r.output);
+  const hpds::PointLayout &l = out.layout();
+  std::size_t valid = 0;
+  for (std::size_t i = 0; i < out.size(); ++i) {
+    auto at = [&](const char *name) { return hpds::readAsDouble(out.record(i), *l.find(name)); };
+    const Eigen::Vector3d n(at("normal_x"), at("normal_y"), at("normal_z"));
+    if (!n.allFinite()) continue;
+    Eigen::Matrix3d c;
+    c << at("cov_xx"), at("cov_xy"), at("cov_xz"), at("cov_xy"), at("cov_yy"), at("cov_yz"), at("cov_xz"),
+        at("cov_yz"), at("cov_zz");
+    if (c.isApprox(Eigen::Matrix3d::Identity())) continue;  // a neighbourhood on one scan line
+    EXPECT_LT((c * n - 0.001 * n).norm(), 1e-5) << "point " << i;
+    ++valid;
+  }
+  EXPECT_GT(valid, 100u);
 }
 
 TEST(FrameProcessor, ScanModeBuildsThePublishedLevelsBelowTheOutputLevel) {

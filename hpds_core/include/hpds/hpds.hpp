@@ -31,6 +31,10 @@ struct Samples {
   /// NaN where a normal could not be estimated (too few neighbours, degenerate neighbourhood), as in PCL.
   std::vector<Eigen::Vector3f> normal;
   std::vector<float> curvature;
+  /// With config.normals.covariances (else empty): the sample's covariance for generalized ICP
+  /// (hpds/normals/SampleCovariance.hpp: dimensionless, the normal its small axis, the identity on one scan line),
+  /// NaN where the normal is.
+  std::vector<Eigen::Matrix3f> covariance;
 
   [[nodiscard]] std::size_t size() const { return index.size(); }
 };

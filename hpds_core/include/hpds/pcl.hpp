@@ -8,25 +8,34 @@
 //   unorganised (height 1) and dense.
 // - `normals` (optional): resized and filled in the same order (normal_x/y/z and curvature; NaN where not
 //   estimable). Normals are estimated only when it is given, whatever config.normals.enabled says.
+// - `covariances` (optional): likewise, the samples' covariances for generalized ICP (Samples::covariance), in the
+//   type pcl::GeneralizedIterativeClosestPoint's setSourceCovariances/setTargetCovariances take; computed only when
+//   given, whatever config.normals.covariances says.
 // - Throws std::invalid_argument as hpds::downsample does.
 #pragma once
 
 #include <pcl/point_cloud.h>
 #include <pcl/point_types.h>
 
+#include <Eigen/Core>
 #include <vector>
 
 #include "hpds/hpds.hpp"
 
 namespace hpds {
 
+/// One covariance per sample, as PCL's GICP takes them.
+using SampleCovariances = std::vector<Eigen::Matrix3d, Eigen::aligned_allocator<Eigen::Matrix3d>>;
+
 template <typename PointT>
 typename pcl::PointCloud<PointT>::Ptr downsample(const pcl::PointCloud<PointT> &cloud, const HpdsConfig &config,
-                                                 pcl::PointCloud<pcl::Normal> *normals = nullptr) {
+                                                 pcl::PointCloud<pcl::Normal> *normals = nullptr,
+                                                 SampleCovariances *covariances = nullptr) {
   std::vector<Eigen::Vector3f> xyz(cloud.size());
   for (std::size_t i = 0; i < cloud.size(); ++i) xyz[i] = Eigen::Vector3f(cloud[i].x, cloud[i].y, cloud[i].z);
   HpdsConfig run = config;
-  run.normals.enabled = normals != nullptr;
+  run.normals.enabled = normals != nullptr || covariances != nullptr;
+  run.normals.covariances = covariances != nullptr;
   const Samples samples = downsample(xyz, run);
 
   typename pcl::PointCloud<PointT>::Ptr out(new pcl::PointCloud<PointT>);
@@ -51,6 +60,10 @@ typename pcl::PointCloud<PointT>::Ptr downsample(const pcl::PointCloud<PointT> &
     normals->width = static_cast<std::uint32_t>(samples.size());
     normals->height = 1;
     normals->is_dense = false;
+  }
+  if (covariances) {
+    covariances->resize(samples.size());
+    for (std::size_t i = 0; i < samples.size(); ++i) (*covariances)[i] = samples.covariance[i].cast<double>();
   }
   return out;
 }

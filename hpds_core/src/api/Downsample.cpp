@@ -3,6 +3,7 @@
 
 #include "hpds/config/ConfigYaml.hpp"
 #include "hpds/hpds.hpp"
+#include "hpds/normals/SampleCovariance.hpp"
 #include "hpds/pipeline/Pipeline.hpp"
 
 namespace hpds {
@@ -48,7 +49,17 @@ Samples downsample(const std::vector<Eigen::Vector3f> &points, const HpdsConfig 
     out.level[i] = static_cast<std::uint8_t>(hierarchy.level(ids[i]));
   }
   if (config.normals.enabled) {
-    const std::vector<SampleNormal> normals = pipeline.normals(ids);
+    std::vector<LocalPca> neighbourhoods;
+    const std::vector<SampleNormal> normals =
+        pipeline.normals(ids, config.normals.covariances ? &neighbourhoods : nullptr);
+    if (config.normals.covariances) {
+      const std::vector<SampleCovariance> covs = sampleCovariances(normals, neighbourhoods, config.normals);
+      out.covariance.resize(ids.size());
+      for (std::size_t i = 0; i < ids.size(); ++i) {
+        const float *c = covs[i].cov;
+        out.covariance[i] << c[0], c[1], c[2], c[1], c[3], c[4], c[2], c[4], c[5];
+      }
+    }
     out.normal.resize(ids.size());
     out.curvature.resize(ids.size());
     for (std::size_t i = 0; i < ids.size(); ++i) {

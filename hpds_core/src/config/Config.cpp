@@ -134,6 +134,17 @@ void validateConfig(const HpdsConfig &c) {
   requireFinite("normals.max_growth", c.normals.max_growth);
   if (c.normals.max_growth < 1.0 || c.normals.max_growth > 1024.0)
     fail("normals.max_growth", "must be in 1..1024 (1 = off), got " + std::to_string(c.normals.max_growth));
+  if (c.normals.covariances && !c.normals.enabled)
+    fail("normals.covariances", "needs normals.enabled (a covariance is built from the sample's normal)");
+  requireFinite("normals.covariance_epsilon", c.normals.covariance_epsilon);
+  // Below 1e-4 the float32 output would not resolve the normal's variance against the in-plane 1.
+  if (c.normals.covariance_epsilon < 1e-4 || c.normals.covariance_epsilon > 1.0)
+    fail("normals.covariance_epsilon",
+         "must be in 1e-4..1, got " + std::to_string(c.normals.covariance_epsilon));
+  requireFinite("normals.covariance_line_ratio", c.normals.covariance_line_ratio);
+  if (c.normals.covariance_line_ratio < 0.0 || c.normals.covariance_line_ratio > 1.0)
+    fail("normals.covariance_line_ratio",
+         "must be in 0..1 (0 = every neighbourhood a plane), got " + std::to_string(c.normals.covariance_line_ratio));
   requireNonNegative("map.evict_distance", c.map.evict_distance);
   if (c.map.keep_depth < -1 || c.map.keep_depth > c.hierarchy.max_depth)
     fail("map.keep_depth", "must be -1 or in 0..hierarchy.max_depth (" + std::to_string(c.hierarchy.max_depth) +

@@ -79,14 +79,20 @@ void gather(const Hierarchy &h, const double *q, double radius, int level,
 }  // namespace
 
 std::vector<SampleNormal> estimateNormals(const Hierarchy &h, const std::vector<SampleId> &ids,
-                                          const NormalParams &params) {
-  if (params.neighborhood_level_offset > 0 || params.max_growth > 1.0) return estimateNormalsRefined(h, ids, params);
+                                          const NormalParams &params, std::vector<LocalPca> *neighbourhoods) {
+  if (neighbourhoods) neighbourhoods->assign(ids.size(), LocalPca{});
+  if (params.neighborhood_level_offset > 0 || params.max_growth > 1.0)
+    return estimateNormalsRefined(h, ids, params, nullptr, neighbourhoods);
   std::vector<SampleNormal> result(ids.size(), invalidNormal());
   if (ids.empty()) return result;
   const int level = std::min(params.level, h.maxDepth());
 
   // Normals are stored unoriented and turned toward the viewpoints at the end (orientTowardViewpoints).
-  auto store = [&](std::size_t i, const PcaAccumulator &acc) { result[i] = unorientedNormal(acc.solveNormal()); };
+  auto store = [&](std::size_t i, const PcaAccumulator &acc) {
+    const LocalPca pca = acc.solveNormal();
+    result[i] = unorientedNormal(pca);
+    if (neighbourhoods) (*neighbourhoods)[i] = pca;
+  };
 
   if (params.radius > 0.0) {
     // Fixed radius: the union samples of levels 0..level near the queried ids and the queries, both sorted by cell

@@ -19,7 +19,8 @@
 namespace hpds {
 
 std::vector<SampleNormal> estimateNormalsRefined(const Hierarchy &h, const std::vector<SampleId> &ids,
-                                                 const NormalParams &params, const std::vector<double> *centroids) {
+                                                 const NormalParams &params, const std::vector<double> *centroids,
+                                                 std::vector<LocalPca> *neighbourhoods) {
   std::vector<SampleNormal> result(ids.size(), invalidNormal());
   if (ids.empty()) return result;
   const int level = std::min(params.level, h.maxDepth());
@@ -163,6 +164,9 @@ std::vector<SampleNormal> estimateNormalsRefined(const Hierarchy &h, const std::
   }
   for (std::size_t i = 0; i < ids.size(); ++i)
     if (have[i]) result[i] = unorientedNormal(chosen[i]);
+  if (neighbourhoods)
+    for (std::size_t i = 0; i < ids.size(); ++i)
+      if (have[i]) (*neighbourhoods)[i] = chosen[i];
   orientTowardViewpoints(h, ids, result, params.threads);
   return result;
 }

@@ -12,10 +12,12 @@ namespace hpds {
 /// `centroids`: when given, the averaging points of neighborhood_level_offset (3 doubles each, fixed frame: the
 /// centroids of the points of the frame the samples came from per cell of level level + offset, see
 /// CellCentroids.hpp) in place of the samples of levels level+1..level+offset, which then need not exist.
+/// `neighbourhoods`: when given (sized as ids), each entry is set to the PCA of the neighbourhood the normal came from.
 [[nodiscard]] std::vector<SampleNormal> estimateNormalsRefined(const Hierarchy &hierarchy,
                                                                const std::vector<SampleId> &ids,
                                                                const NormalParams &params,
-                                                               const std::vector<double> *centroids = nullptr);
+                                                               const std::vector<double> *centroids = nullptr,
+                                                               std::vector<LocalPca> *neighbourhoods = nullptr);
 
 /// NaN normal and curvature, valid = false.
 [[nodiscard]] SampleNormal invalidNormal();

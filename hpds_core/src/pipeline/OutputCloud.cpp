@@ -7,7 +7,11 @@
 namespace hpds {
 
 namespace {
+constexpr const char *kCovarianceNames[6] = {"cov_xx", "cov_xy", "cov_xz", "cov_yy", "cov_yz", "cov_zz"};
+
 bool isOwnName(const std::string &n) {
+  for (const char *c : kCovarianceNames)
+    if (n == c) return true;
   return n == "x" || n == "y" || n == "z" || n == "level" || n == "normal_x" || n == "normal_y" || n == "normal_z" ||
          n == "curvature" || n == "frame";
 }
@@ -20,7 +24,7 @@ std::vector<std::string> fieldsNotCarried(const PointLayout &input) {
   return names;
 }
 
-PointLayout outputLayout(const PointLayout &input, bool with_normals, bool with_frame) {
+PointLayout outputLayout(const PointLayout &input, bool with_normals, bool with_frame, bool with_covariances) {
   // x y z first, then the other fields by decreasing element size (stable: listed order within a size), each at the
   // next offset that is a multiple of its element size: readers may then load any field as an aligned value, and
   // the size order leaves at most one gap (before the first 8-byte field).
@@ -31,6 +35,8 @@ PointLayout outputLayout(const PointLayout &input, bool with_normals, bool with_
   if (with_normals) {
     for (const char *name : {"normal_x", "normal_y", "normal_z", "curvature"}) want(name, FieldType::Float32);
   }
+  if (with_covariances)
+    for (const char *name : kCovarianceNames) want(name, FieldType::Float32);
   if (with_frame) want("frame", FieldType::UInt32);
   want("level", FieldType::UInt8);
   for (const auto &f : input.fields)
@@ -54,10 +60,13 @@ PointLayout outputLayout(const PointLayout &input, bool with_normals, bool with_
 }
 
 PointBuffer buildOutputCloud(const Hierarchy &h, const std::vector<SampleId> &ids,
-                             const std::vector<SampleNormal> *normals, bool with_frame) {
+                             const std::vector<SampleNormal> *normals, bool with_frame,
+                             const std::vector<SampleCovariance> *covariances) {
   if (normals && normals->size() != ids.size()) throw std::invalid_argument("buildOutputCloud: one normal per id");
+  if (covariances && covariances->size() != ids.size())
+    throw std::invalid_argument("buildOutputCloud: one covariance per id");
   const PointLayout &in = h.recordLayout();
-  PointBuffer cloud(outputLayout(in, normals != nullptr, with_frame), ids.size());
+  PointBuffer cloud(outputLayout(in, normals != nullptr, with_frame, covariances != nullptr), ids.size());
   const PointLayout &out = cloud.layout();
   // Field pairs resolved once, so the per-sample loop only copies bytes.
   std::vector<std::pair<const PointField *, const PointField *>> carried;
@@ -66,6 +75,8 @@ PointBuffer buildOutputCloud(const Hierarchy &h, const std::vector<SampleId> &id
   const PointField *fx = out.find("x"), *fy = out.find("y"), *fz = out.find("z"), *fl = out.find("level");
   const PointField *fnx = out.find("normal_x"), *fny = out.find("normal_y"), *fnz = out.find("normal_z"),
                    *fc = out.find("curvature"), *ff = out.find("frame");
+  const PointField *fcov[6] = {};
+  for (int c = 0; c < 6; ++c) fcov[c] = out.find(kCovarianceNames[c]);
   for (std::size_t i = 0; i < ids.size(); ++i) {
     std::uint8_t *rec = cloud.record(i);
     const SampleId id = ids[i];
@@ -82,6 +93,8 @@ PointBuffer buildOutputCloud(const Hierarchy &h, const std::vector<SampleId> &id
       std::memcpy(rec + fnz->offset, &n.normal[2], 4);
       std::memcpy(rec + fc->offset, &n.curvature, 4);
     }
+    if (covariances)
+      for (int c = 0; c < 6; ++c) std::memcpy(rec + fcov[c]->offset, &(*covariances)[i].cov[c], 4);
     if (ff) {
       const std::uint32_t frame = h.frameIndex(id);
       std::memcpy(rec + ff->offset, &frame, 4);

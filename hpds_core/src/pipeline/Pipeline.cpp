@@ -232,18 +232,25 @@ std::vector<SampleId> Pipeline::samplesHitByLastFrame(int min_level, int max_lev
   return hit;
 }
 
-std::vector<SampleNormal> Pipeline::normals(const std::vector<SampleId> &ids) const {
+std::vector<SampleNormal> Pipeline::normals(const std::vector<SampleId> &ids,
+                                             std::vector<LocalPca> *neighbourhoods) const {
   const NormalParams params = normalParamsFor(config_, output_level_);
-  return fine_level_ >= 0 ? estimateNormalsRefined(hierarchy_, ids, params, &fine_points_)
-                          : estimateNormals(hierarchy_, ids, params);
+  if (fine_level_ < 0) return estimateNormals(hierarchy_, ids, params, neighbourhoods);
+  if (neighbourhoods) neighbourhoods->assign(ids.size(), LocalPca{});
+  return estimateNormalsRefined(hierarchy_, ids, params, &fine_points_, neighbourhoods);
 }
 
 PointBuffer Pipeline::makeCloud(const std::vector<SampleId> &ids, bool with_frame_field, double *seconds_normals) const {
   if (!config_.normals.enabled) return buildOutputCloud(hierarchy_, ids, nullptr, with_frame_field);
   const auto t0 = std::chrono::steady_clock::now();
-  const std::vector<SampleNormal> normals = this->normals(ids);
+  const bool with_covariances = config_.normals.covariances;
+  std::vector<LocalPca> neighbourhoods;
+  const std::vector<SampleNormal> normals = this->normals(ids, with_covariances ? &neighbourhoods : nullptr);
+  std::vector<SampleCovariance> covariances;
+  if (with_covariances)
+    covariances = sampleCovariances(normals, neighbourhoods, config_.normals);
   if (seconds_normals) *seconds_normals = secondsSince(t0);
-  return buildOutputCloud(hierarchy_, ids, &normals, with_frame_field);
+  return buildOutputCloud(hierarchy_, ids, &normals, with_frame_field, with_covariances ? &covariances : nullptr);
 }
 
 }  // namespace hpds

@@ -7,6 +7,7 @@
 #include "hpds/io/HierarchyFile.hpp"
 #include "hpds/io/PlyWriter.hpp"
 #include "hpds/normals/NormalEstimator.hpp"
+#include "hpds/normals/SampleCovariance.hpp"
 #include "hpds/pipeline/OutputCloud.hpp"
 #include "hpds/tiling/TileBucket.hpp"
 
@@ -168,11 +169,16 @@ TileFinishStats finishTile(const HpdsConfig &given, const TileGrid &grid, const 
   for (SampleId id = 0; id < own; ++id)
     if (h.level(id) <= level) ids.push_back(id);
   std::vector<SampleNormal> normals;
+  std::vector<SampleCovariance> covariances;
   if (config.normals.enabled) {
-    normals = estimateNormals(h, ids, normalParamsFor(config, level));
+    std::vector<LocalPca> neighbourhoods;
+    normals = estimateNormals(h, ids, normalParamsFor(config, level),
+                              config.normals.covariances ? &neighbourhoods : nullptr);
     for (const SampleNormal &n : normals) stats.invalid_normals += n.valid ? 0 : 1;
+    if (config.normals.covariances) covariances = sampleCovariances(normals, neighbourhoods, config.normals);
   }
-  const PointBuffer cloud = buildOutputCloud(h, ids, config.normals.enabled ? &normals : nullptr, false);
+  const PointBuffer cloud = buildOutputCloud(h, ids, config.normals.enabled ? &normals : nullptr, false,
+                                             config.normals.covariances ? &covariances : nullptr);
 
   const double nan = std::numeric_limits<double>::quiet_NaN();
   stats.bounds = {nan, nan, nan, nan, nan, nan};

@@ -53,6 +53,9 @@ struct NormalConfig {
                                       ///< averaging; clamped to max_depth; scan mode: the frame's point centroids
                                       ///< per cell of level L+offset instead); 0 = levels 0..L only
   double max_growth = 8.0;  ///< grow a line-like (one scan line) or too small neighbourhood up to this factor; 1 = off
+  bool covariances = false;  ///< also output a GICP covariance per sample (cov_xx..cov_zz) from its normal; needs enabled
+  double covariance_epsilon = 0.001;  ///< covariance's variance along the normal, the in-plane one being 1; 1e-4..1
+  double covariance_line_ratio = 0.2;  ///< l1 / l2 of the normal's neighbourhood below this -> identity covariance
 };
 
 struct MapConfig {

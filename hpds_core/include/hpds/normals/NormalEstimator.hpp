@@ -27,6 +27,7 @@
 #include <vector>
 
 #include "hpds/config/Config.hpp"
+#include "hpds/normals/LocalPca.hpp"
 #include "hpds/sampling/Hierarchy.hpp"
 
 namespace hpds {
@@ -59,8 +60,11 @@ struct SampleNormal {
 /// edge (refined), k-NN searches doubling up to that cap.
 [[nodiscard]] double neighborhoodReach(const NormalParams &params, double cell_size, double level_radius);
 
-/// One result per id in `ids` (same order).
+/// One result per id in `ids` (same order). `neighbourhoods`: when given, resized to ids.size() and set to the PCA of
+/// the neighbourhood each normal came from (eigenvalues, unoriented normal; a default LocalPca where none was
+/// solved), e.g. for covariances (SampleCovariance.hpp).
 [[nodiscard]] std::vector<SampleNormal> estimateNormals(const Hierarchy &hierarchy, const std::vector<SampleId> &ids,
-                                                        const NormalParams &params);
+                                                        const NormalParams &params,
+                                                        std::vector<LocalPca> *neighbourhoods = nullptr);
 
 }  // namespace hpds

@@ -1,7 +1,7 @@
 // OutputCloud: hierarchy samples as a point cloud with the layout every consumer (PLY, PointCloud2) shares.
 //
 // Layout (outputLayout): float32 x y z at offsets 0, 4, 8; then [float32 normal_x normal_y normal_z curvature],
-// [uint32 frame], uint8 level and every input field except x/y/z and the names taken above (same name, type, count
+// [float32 cov_xx cov_xy cov_xz cov_yy cov_yz cov_zz (SampleCovariance.hpp)], [uint32 frame], uint8 level and every input field except x/y/z and the names taken above (same name, type, count
 // and bytes), ordered by decreasing element size. Every field sits at an offset that is a multiple of its element
 // size and point_step is a multiple of 4 and of the largest element size, so records can be read as aligned structs
 // (as PCL's padded point types are); the padding bytes are zero. Consumers find fields by name, not position.
@@ -12,6 +12,7 @@
 
 #include "hpds/sampling/Hierarchy.hpp"
 #include "hpds/normals/NormalEstimator.hpp"
+#include "hpds/normals/SampleCovariance.hpp"
 #include "hpds/points/PointBuffer.hpp"
 
 namespace hpds {
@@ -21,10 +22,13 @@ namespace hpds {
 /// silently. Rename such a field to keep it.
 [[nodiscard]] std::vector<std::string> fieldsNotCarried(const PointLayout &input);
 
-[[nodiscard]] PointLayout outputLayout(const PointLayout &input, bool with_normals, bool with_frame);
+[[nodiscard]] PointLayout outputLayout(const PointLayout &input, bool with_normals, bool with_frame,
+                                       bool with_covariances = false);
 
-/// `normals`: null, or one entry per id. Samples are written in the order of `ids`.
+/// `normals`, `covariances`: null, or one entry per id (std::invalid_argument otherwise). Samples are written in the
+/// order of `ids`.
 [[nodiscard]] PointBuffer buildOutputCloud(const Hierarchy &hierarchy, const std::vector<SampleId> &ids,
-                                           const std::vector<SampleNormal> *normals, bool with_frame);
+                                           const std::vector<SampleNormal> *normals, bool with_frame,
+                                           const std::vector<SampleCovariance> *covariances = nullptr);
 
 }  // namespace hpds

@@ -76,9 +76,12 @@ class Pipeline {
   [[nodiscard]] std::vector<SampleId> samplesHitByLastFrame(int min_level, int max_level, double radius) const;
   /// Normals of `ids` (samples of the hierarchy) with the config's normal settings, as makeCloud estimates them: in
   /// scan mode from the last frame's cell centroids (see contract), so a caller must not estimate them from
-  /// hierarchy() alone, which holds no level below buildDepth().
-  [[nodiscard]] std::vector<SampleNormal> normals(const std::vector<SampleId> &ids) const;
-  /// Output cloud of `ids` (normals estimated when normals.enabled), layout of OutputCloud.hpp.
+  /// hierarchy() alone, which holds no level below buildDepth(). `neighbourhoods`: when given, resized to ids.size()
+  /// and set to the PCA each normal came from (for covariances).
+  [[nodiscard]] std::vector<SampleNormal> normals(const std::vector<SampleId> &ids,
+                                                  std::vector<LocalPca> *neighbourhoods = nullptr) const;
+  /// Output cloud of `ids` (normals estimated when normals.enabled, with covariances when normals.covariances),
+  /// layout of OutputCloud.hpp. `seconds_normals` gets the time of both.
   [[nodiscard]] PointBuffer makeCloud(const std::vector<SampleId> &ids, bool with_frame_field,
                                       double *seconds_normals = nullptr) const;
 

@@ -1,0 +1,52 @@
+// Per-sample covariances for generalized ICP (GICP), from the normal estimator's neighbourhoods.
+//
+// Contract
+// - GICP (Segal, Haehnel and Thrun 2009) models every point as drawn from a locally planar surface and regularises
+//   the PCA of its neighbourhood to eigenvalues (epsilon, 1, 1), the smallest along the normal: the "plane"
+//   regularisation PCL's GeneralizedIterativeClosestPoint applies to its own k-NN covariances. Eigenvalues
+//   (epsilon, 1, 1) keep only the neighbourhood's smallest-eigenvalue axis, so the covariance is the normal's:
+//   C = I - (1 - epsilon) n n^T. What sets it apart from a k-NN covariance is the neighbourhood the normal came from
+//   (NormalEstimator.hpp: finer levels inside the footprint, grown past single scan lines).
+// - Dimensionless (unit variance in the plane), as GICP expects; the scale of all covariances of a registration
+//   drops out of its minimiser. Symmetric, positive definite for epsilon in (0, 1], eigenvalues (epsilon, 1, 1) with
+//   the unit normal as the eigenvector of epsilon; the normal's sign plays no role.
+// - A neighbourhood that is line-like (l1 < line_ratio * l2: one scan line that growth could not widen, or a strip
+//   narrow against its range noise) does not pin a normal: across a line any direction fits, and the plane through
+//   one scan line and its range noise contains the ray, so it can stand anywhere up to 90 degrees off the surface.
+//   Such a sample gets the identity (unit variance in every direction: a weak point-to-point term next to the
+//   planes' 1 / epsilon) instead of a confident plane in a wrong direction, which traps GICP in false minima
+//   (docs/quality.md, Registration).
+// - An invalid normal (not estimated) gives NaN in all six entries, as PCL marks a missing normal.
+// - Stored as the six upper-triangle entries xx xy xz yy yz zz (the output fields cov_xx ... cov_zz).
+#pragma once
+
+#include <vector>
+
+#include "hpds/normals/LocalPca.hpp"
+#include "hpds/normals/NormalEstimator.hpp"
+
+namespace hpds {
+
+struct SampleCovariance {
+  float cov[6];  ///< xx xy xz yy yz zz, dimensionless
+  bool valid;
+};
+
+/// The plane-regularised covariance of a sample with this normal (see contract); epsilon in (0, 1].
+[[nodiscard]] SampleCovariance planeCovariance(const SampleNormal &normal, double epsilon);
+
+/// planeCovariance of every normal, same order.
+[[nodiscard]] std::vector<SampleCovariance> planeCovariances(const std::vector<SampleNormal> &normals, double epsilon);
+
+/// The covariance of every sample from its normal and the neighbourhood it came from (estimateNormals'
+/// `neighbourhoods`, same order): the identity where that neighbourhood is line-like, else planeCovariance.
+/// std::invalid_argument when the sizes differ.
+[[nodiscard]] std::vector<SampleCovariance> sampleCovariances(const std::vector<SampleNormal> &normals,
+                                                              const std::vector<LocalPca> &neighbourhoods,
+                                                              double epsilon, double line_ratio);
+/// The same with the config's normals.covariance_epsilon and normals.covariance_line_ratio.
+[[nodiscard]] std::vector<SampleCovariance> sampleCovariances(const std::vector<SampleNormal> &normals,
+                                                              const std::vector<LocalPca> &neighbourhoods,
+                                                              const NormalConfig &config);
+
+}  // namespace hpds
