@@ -1,0 +1,240 @@
+// Hostile input to the core Pipeline, row by row of docs/reliability.md: every numeric xyz type, broken layouts,
+// NaN/Inf in every field and pose, degenerate and 1e7 m coordinates, a 10-million-point frame, stamps, invalid
+// configs. Complements test_pipeline_frames (skip counters); the CLI's side is test_hostile_cli.
+#include <gtest/gtest.h>
+
+#include <array>
+#include <chrono>
+#include <cmath>
+#include <cstdint>
+#include <cstring>
+#include <random>
+#include <set>
+#include <string>
+#include <vector>
+
+#include "HostileTestSupport.hpp"
+#include "hpds/eval/SamplingVerifier.hpp"
+#include "hpds/eval/SyntheticLidar.hpp"
+#include "hpds/pipeline/Pipeline.hpp"
+
+namespace hpds {
+namespace {
+
+using test::frameOf;
+using test::gridPoints;
+using test::typedCloud;
+
+TEST(HostilePipeline, EveryNumericXyzTypeIsReadByValue) {
+  const auto pts = gridPoints(6, 1.0, 1.0);
+  for (FieldType t : {FieldType::UInt8, FieldType::Int8, FieldType::UInt16, FieldType::Int16, FieldType::Int32,
+                      FieldType::UInt32, FieldType::Float32, FieldType::Float64}) {
+    SCOPED_TRACE(fieldTypeName(t));
+    HpdsConfig c;
+    c.hierarchy.cell_size = 1.0;
+    c.hierarchy.max_depth = 2;
+    c.output.level = 2;
+    Pipeline p(c);
+    const FrameResult r = p.addFrame(frameOf(typedCloud(t, pts)));
+    EXPECT_EQ(r.counters.accepted, pts.size());  // unit grid at 1 m cells: every point its own level-0 sample
+    std::set<std::array<double, 3>> got;
+    for (SampleId id : r.new_samples) got.insert({p.hierarchy().position(id)[0], p.hierarchy().position(id)[1],
+                                                  p.hierarchy().position(id)[2]});
+    const std::set<std::array<double, 3>> expected(pts.begin(), pts.end());
+    EXPECT_EQ(got, expected);
+  }
+}
+
+TEST(HostilePipeline, BrokenLayoutsThrowBeforeAnythingChanges) {
+  HpdsConfig c;
+  c.mode = Mode::Map;
+  Pipeline p(c);
+  p.addFrame(frameOf(typedCloud(FieldType::Float32, gridPoints(4, 1.0))));
+  const std::size_t before = p.hierarchy().sampleCount();
+  const std::uint32_t frames = p.framesProcessed();
+  PointLayout beyond;
+  beyond.append("x", FieldType::Float32);
+  beyond.append("y", FieldType::Float32);
+  beyond.append("z", FieldType::Float32);
+  beyond.fields[2].offset = 10;  // z reaches past point_step 12
+  PointLayout dup = beyond;
+  dup.fields[2].offset = 8;
+  dup.fields[1].name = "x";
+  PointLayout bad_type = dup;
+  bad_type.fields[1].name = "y";
+  bad_type.fields[1].type = static_cast<FieldType>(11);
+  PointLayout vector_x;
+  vector_x.append("x", FieldType::Float32, 2);
+  vector_x.append("y", FieldType::Float32);
+  vector_x.append("z", FieldType::Float32);
+  for (const PointLayout &l : {beyond, dup, bad_type, vector_x}) {
+    Frame f;
+    f.points = PointBuffer(l, 0);
+    f.points.bytes().assign(3 * l.point_step, 0);
+    EXPECT_THROW(p.addFrame(f), std::invalid_argument);
+  }
+  EXPECT_EQ(p.hierarchy().sampleCount(), before);
+  EXPECT_EQ(p.framesProcessed(), frames);
+}
+
+TEST(HostilePipeline, NanInfInEveryFieldAndPose) {
+  PointBuffer b = typedCloud(FieldType::Float64, gridPoints(6, 1.0));
+  for (std::size_t i = 0; i < b.size(); ++i)
+    for (const auto &f : b.layout().fields)
+      writeFromDouble(b.record(i), f, (i % 2) ? NAN : -INFINITY);
+  HpdsConfig c;
+  c.normals.enabled = true;
+  c.order.type = InsertionOrder::Sphericity;  // the feature orders see no invalid point either
+  Pipeline p(c);
+  const FrameResult r = p.addFrame(frameOf(b));
+  EXPECT_EQ(r.counters.skipped_invalid, b.size());
+  EXPECT_EQ(p.makeCloud(p.outputSamples(), false).size(), 0u);
+  // A finite pose that sends finite points to infinity: skipped as invalid, not inserted at inf.
+  Frame huge = frameOf(typedCloud(FieldType::Float64, {{1e300, 0, 0}, {1, 1, 1}}));
+  huge.sensor_to_fixed.linear() *= 1e10;
+  HpdsConfig m;
+  m.mode = Mode::Map;
+  Pipeline pm(m);
+  const FrameResult rh = pm.addFrame(huge);
+  EXPECT_EQ(rh.counters.skipped_invalid, 1u);  // 1e310 overflows to inf
+  EXPECT_EQ(rh.counters.out_of_range, 1u);     // 1e10 m is beyond the exact keys of 1.6 cm cells
+  EXPECT_EQ(rh.counters.accepted, 0u);
+  for (SampleId id : pm.outputSamples()) EXPECT_TRUE(std::isfinite(pm.hierarchy().position(id)[0]));
+}
+
+TEST(HostilePipeline, AllPointsAtOneSpotAndAtTheOrigin) {
+  for (bool skip_zero : {true, false}) {
+    HpdsConfig c;
+    c.input.skip_zero_points = skip_zero;
+    c.normals.enabled = true;
+    c.order.type = InsertionOrder::SurfaceVariation;
+    Pipeline p(c);
+    const FrameResult r = p.addFrame(frameOf(typedCloud(FieldType::Float32, std::vector<std::array<double, 3>>(5000, {0, 0, 0}))));
+    EXPECT_EQ(r.counters.accepted, skip_zero ? 0u : 1u);
+    EXPECT_EQ(r.counters.skipped_zero, skip_zero ? 5000u : 0u);
+    EXPECT_EQ(r.counters.dropped_depth, skip_zero ? 0u : 4999u);
+    // Normals of a degenerate neighbourhood are invalid (NaN), not garbage.
+    const PointBuffer out = p.makeCloud(p.outputSamples(), false);
+    for (std::size_t i = 0; i < out.size(); ++i) EXPECT_TRUE(std::isnan(readAsDouble(out.record(i), *out.layout().find("normal_x"))));
+  }
+  Pipeline p(HpdsConfig{});
+  const FrameResult r = p.addFrame(frameOf(typedCloud(FieldType::Float32, std::vector<std::array<double, 3>>(5000, {3, -2, 1}))));
+  EXPECT_EQ(r.counters.accepted, 1u);
+  EXPECT_EQ(r.counters.dropped_depth, 4999u);
+}
+
+TEST(HostilePipeline, CoordinatesAt1e7MetresAreExactOrCounted) {
+  // 4 m cells, every level down to 8 built: 1e7 m is well inside the exact key range; with 2^-21 m cells it is not.
+  const std::vector<std::array<double, 3>> far = {{1e7, 0, 0}, {-1e7, 1e7, 5}, {1e7 + 2.0, 0, 0}, {0, 0, -1e7}};
+  HpdsConfig depth8;
+  depth8.hierarchy.cell_size = 4.0;
+  depth8.hierarchy.max_depth = 8;
+  depth8.output.level = 8;
+  for (FieldType t : {FieldType::Float32, FieldType::Float64}) {
+    Pipeline p(depth8);
+    const FrameResult r = p.addFrame(frameOf(typedCloud(t, far)));
+    EXPECT_EQ(r.counters.accepted, 4u) << fieldTypeName(t);
+    EXPECT_EQ(r.counters.out_of_range, 0u);
+    const PointBuffer out = p.makeCloud(p.outputSamples(), false);
+    EXPECT_EQ(verifySampling(out, 4.0, nullptr).total_violations(), 0u);
+  }
+  HpdsConfig fine;
+  fine.hierarchy.cell_size = 1.0;
+  fine.hierarchy.max_depth = 21;
+  fine.output.level = 21;
+  Pipeline p(fine);
+  const FrameResult r = p.addFrame(frameOf(typedCloud(FieldType::Float64, far)));
+  EXPECT_EQ(r.counters.out_of_range, 4u);
+  EXPECT_EQ(r.counters.accepted, 0u);
+  // Beyond any hierarchy: 1e30 m is counted as out of range even at the coarsest settings.
+  HpdsConfig coarse;
+  coarse.hierarchy.cell_size = 1e6;
+  coarse.hierarchy.max_depth = 0;
+  coarse.output.level = 0;
+  Pipeline pc(coarse);
+  EXPECT_EQ(pc.addFrame(frameOf(typedCloud(FieldType::Float64, {{1e30, 0, 0}}))).counters.out_of_range, 1u);
+}
+
+TEST(HostilePipeline, TenMillionPointFrameInBoundedTimeAndMemory) {
+  // 10 M records of 16 bytes (160 MB) plus the pipeline's per-point scratch; max_depth 2 keeps the hierarchy tiny.
+  constexpr std::size_t kPoints = 10'000'000;
+  PointLayout l;
+  for (const char *a : {"x", "y", "z", "intensity"}) l.append(a, FieldType::Float32);
+  Frame f;
+  f.points = PointBuffer(l, kPoints);
+  std::mt19937 rng(1);
+  std::uniform_real_distribution<float> u(-50.0f, 50.0f);
+  for (std::size_t i = 0; i < kPoints; ++i) {
+    float rec[4] = {u(rng), u(rng), u(rng) * 0.1f, float(i % 100)};
+    std::memcpy(f.points.record(i), rec, 16);
+  }
+  HpdsConfig c;
+  c.hierarchy.cell_size = 4.0;
+  c.hierarchy.max_depth = 2;
+  c.output.level = 2;
+  c.normals.enabled = false;
+  const auto t0 = std::chrono::steady_clock::now();
+  Pipeline p(c);
+  const FrameResult r = p.addFrame(f);
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  EXPECT_EQ(r.counters.input, kPoints);
+  EXPECT_EQ(r.counters.accepted + r.counters.dropped_depth, kPoints);
+  // 100 x 100 x 10 m at 1 m finest cells: about 10^5 cells, far fewer samples than points.
+  EXPECT_LT(r.counters.accepted, 150000u);
+  EXPECT_EQ(p.hierarchy().sampleCount(), r.counters.accepted);
+  EXPECT_LT(seconds, 240.0);
+  const PointBuffer out = p.makeCloud(p.outputSamples(), false);
+  EXPECT_EQ(verifySampling(out, c.hierarchy.cell_size, nullptr).total_violations(), 0u);
+}
+
+TEST(HostilePipeline, StampsAreCarriedNotInterpreted) {
+  const SyntheticLidar lidar([] {
+    SyntheticLidarConfig c;
+    c.beams = 8;
+    c.azimuth_steps = 300;
+    c.frames = 3;
+    return c;
+  }());
+  const std::vector<std::vector<double>> stamp_sets = {
+      {0.0, 0.1, 0.2}, {5.0, 5.0, 5.0}, {3.0, -1.0, 2.0}, {NAN, INFINITY, -0.0}, {1e300, 0.0, 1e300}};
+  std::vector<std::uint8_t> reference;
+  for (const auto &stamps : stamp_sets) {
+    HpdsConfig c;
+    c.mode = Mode::Map;
+    c.order.seed = 9;
+    Pipeline p(c);
+    for (int i = 0; i < 3; ++i) {
+      Frame f = lidar.frame(i).frame;
+      f.stamp = stamps[i];
+      p.addFrame(f);
+    }
+    const std::vector<std::uint8_t> bytes = p.makeCloud(p.outputSamples(), false).bytes();
+    if (reference.empty()) reference = bytes;
+    EXPECT_EQ(bytes, reference);
+  }
+}
+
+TEST(HostilePipeline, InvalidConfigsAreRefusedByTheConstructor) {
+  auto refused = [](auto &&edit, const std::string &key) {
+    HpdsConfig c;
+    edit(c);
+    try {
+      Pipeline p(c);
+      ADD_FAILURE() << key << " accepted";
+    } catch (const std::invalid_argument &e) {
+      EXPECT_EQ(std::string(e.what()).rfind(key, 0), 0u) << e.what();
+    }
+  };
+  refused([](HpdsConfig &c) { c.hierarchy.cell_size = NAN; }, "hierarchy.cell_size");
+  refused([](HpdsConfig &c) { c.hierarchy.cell_size = -INFINITY; }, "hierarchy.cell_size");
+  refused([](HpdsConfig &c) { c.hierarchy.max_depth = 99; }, "hierarchy.max_depth");
+  refused([](HpdsConfig &c) { c.output.spacing = NAN; }, "output.spacing");
+  refused([](HpdsConfig &c) { c.order.feature_radius = INFINITY; }, "order.feature_radius");
+  refused([](HpdsConfig &c) { c.normals.radius = -1.0; }, "normals.radius");
+  refused([](HpdsConfig &c) { c.map.evict_distance = NAN; }, "map.evict_distance");
+  refused([](HpdsConfig &c) { c.input.min_range = INFINITY; }, "input.min_range");
+  refused([](HpdsConfig &c) { c.threads = 100000; }, "threads");
+}
+
+}  // namespace
+}  // namespace hpds

@@ -1,0 +1,151 @@
+// KITTI files: velodyne .bin clouds (any field types converted, intensity defaulted) and pose files (bit-exact
+// round trips, KITTI's 7-digit precision made orthonormal), and malformed pose files.
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <filesystem>
+#include <limits>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "IoTestSupport.hpp"
+#include "hpds/io/KittiBin.hpp"
+#include "hpds/io/PoseFile.hpp"
+#include "hpds/pcl/PointCloudFile.hpp"
+#include "hpds/points/PointBuffer.hpp"
+
+namespace fs = std::filesystem;
+using namespace hpds;
+using hpds::test::ScratchDir;
+using hpds::test::expectError;
+using hpds::test::expectSameValues;
+using hpds::test::sameBits;
+using hpds::test::writeBytes;
+using hpds::test::xyzLayout;
+
+// ---------------------------------------------------------------------------------------------------------------------
+// Round trips
+
+TEST(KittiBin, RoundTripConvertsAnyTypesAndDefaultsIntensity) {
+  const ScratchDir scratch("io_kitti");
+  const fs::path &dir = scratch.path;
+  PointLayout layout;
+  layout.append("intensity", FieldType::UInt16);
+  layout.append("z", FieldType::Float64);
+  layout.append("x", FieldType::Int32);
+  layout.append("y", FieldType::Float32);
+  PointBuffer src(layout, 100);
+  for (std::size_t i = 0; i < 100; ++i) {
+    writeFromDouble(src.record(i), *layout.find("x"), double(i) - 50);
+    writeFromDouble(src.record(i), *layout.find("y"), 0.5 * double(i));
+    writeFromDouble(src.record(i), *layout.find("z"), 1.25 * double(i));
+    writeFromDouble(src.record(i), *layout.find("intensity"), double(i * 3));
+  }
+  src.setOrganization(10, 10);
+  const std::string path = (dir / "scan.bin").string();
+  writeKittiBin(path, src);
+  EXPECT_EQ(fs::file_size(path), 100u * 16u);
+  const PointBuffer back = readPointCloud(path);
+  ASSERT_EQ(back.size(), 100u);
+  EXPECT_EQ(back.layout().point_step, 16u);
+  for (const char *name : {"x", "y", "z", "intensity"}) {
+    const PointField *g = back.layout().find(name);
+    ASSERT_NE(g, nullptr);
+    EXPECT_EQ(g->type, FieldType::Float32);
+    expectSameValues(src, *src.layout().find(name), back, *g);
+  }
+
+  PointLayout xyz = xyzLayout();
+  PointBuffer plain(xyz, 2);
+  writeFromDouble(plain.record(1), xyz.fields[0], 4.0);
+  const std::string plain_path = (dir / "plain.BIN").string();
+  writeKittiBin(plain_path, plain);
+  const PointBuffer plain_back = readKittiBin(plain_path);
+  EXPECT_EQ(readAsDouble(plain_back.record(1), *plain_back.layout().find("x")), 4.0);
+  EXPECT_EQ(readAsDouble(plain_back.record(1), *plain_back.layout().find("intensity")), 0.0);
+
+  PointLayout no_xyz;
+  no_xyz.append("x", FieldType::Float32);
+  expectError([&] { writeKittiBin((dir / "bad.bin").string(), PointBuffer(no_xyz, 1)); }, "bad.bin", {"x/y/z"});
+}
+
+TEST(Poses, RoundTripIsBitExact) {
+  const ScratchDir scratch("io_poses");
+  const fs::path &dir = scratch.path;
+  std::mt19937_64 rng(42);
+  std::normal_distribution<double> g(0.0, 1.0);
+  std::vector<Eigen::Isometry3d> poses;
+  poses.push_back(Eigen::Isometry3d::Identity());
+  for (int i = 0; i < 200; ++i) {
+    Eigen::Isometry3d p = Eigen::Isometry3d::Identity();
+    p.linear() = Eigen::Quaterniond(g(rng), g(rng), g(rng), g(rng)).normalized().toRotationMatrix();
+    p.translation() = Eigen::Vector3d(g(rng) * 1e3, g(rng) * 1e-9, std::ldexp(g(rng), 40));
+    poses.push_back(p);
+  }
+  const std::string path = (dir / "poses.txt").string();
+  writeKittiPoses(path, poses);
+  const auto back = readKittiPoses(path);
+  ASSERT_EQ(back.size(), poses.size());
+  for (std::size_t i = 0; i < poses.size(); ++i)
+    for (int r = 0; r < 4; ++r)
+      for (int c = 0; c < 4; ++c)
+        ASSERT_TRUE(sameBits(back[i].matrix()(r, c), poses[i].matrix()(r, c)))
+            << "pose " << i << " (" << r << "," << c << ")";
+}
+
+TEST(Poses, KittiPrecisionIsAcceptedAndMadeExactlyOrthonormal) {
+  const ScratchDir scratch("io_poses_kitti");
+  const fs::path &dir = scratch.path;
+  const std::string path = (dir / "00.txt").string();
+  // Two lines in the style of KITTI odometry poses (7 significant digits), a blank line between them.
+  writeBytes(path,
+             "1.000000e+00 9.043680e-12 2.326809e-11 5.551115e-17 9.043683e-12 1.000000e+00 2.392370e-10 "
+             "3.330669e-16 2.326810e-11 2.392370e-10 9.999999e-01 -4.440892e-16\n"
+             "  \n"
+             "9.999978e-01 5.272628e-04 -2.066935e-03 -4.690294e-02 -5.296506e-04 9.999992e-01 -1.154865e-03 "
+             "-2.839928e-02 2.066324e-03 1.155958e-03 9.999971e-01 8.586941e-01\r\n");
+  const auto poses = readKittiPoses(path);
+  ASSERT_EQ(poses.size(), 2u);
+  for (const auto &p : poses) {
+    const Eigen::Matrix3d r = p.linear();
+    EXPECT_LT((r.transpose() * r - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff(), 1e-14);
+    EXPECT_NEAR(r.determinant(), 1.0, 1e-14);
+  }
+  EXPECT_DOUBLE_EQ(poses[1].translation().z(), 8.586941e-01);
+  EXPECT_NEAR(poses[1].linear()(0, 1), 5.272628e-04, 1e-6);
+}
+
+// ---------------------------------------------------------------------------------------------------------------------
+// Malformed input: always std::runtime_error naming the path, never a crash, hang or huge allocation
+
+TEST(BadInput, PoseFiles) {
+  const ScratchDir scratch("io_bad_poses");
+  const fs::path &dir = scratch.path;
+  const std::string good = "1 0 0 0 0 1 0 0 0 0 1 0\n";
+  auto check = [&](const std::string &name, const std::string &content, std::vector<std::string> parts) {
+    writeBytes(dir / name, content);
+    expectError([&] { (void)readKittiPoses((dir / name).string()); }, name, parts);
+  };
+  check("eleven.txt", good + "1 0 0 0 0 1 0 0 0 0 1\n", {":2:", "expected 12 numbers, found 11"});
+  check("thirteen.txt", good + good + "1 0 0 0 0 1 0 0 0 0 1 0 5\n", {":3:", "found 13"});
+  check("abc.txt", good + "\n1 0 0 0 0 1 0 abc 0 0 1 0\n", {":3:", "'abc' is not a number"});
+  check("comma.txt", "1,0 0 0 0 1 0 0 0 0 1 0\n", {":1:", "'1,0'"});
+  check("nan.txt", "1 0 0 nan 0 1 0 0 0 0 1 0\n", {":1:", "non-finite"});
+  check("inf.txt", "1 0 0 0 0 1 0 -inf 0 0 1 0\n", {":1:", "non-finite"});
+  check("huge.txt", "1 0 0 1e999 0 1 0 0 0 0 1 0\n", {":1:", "out of range"});
+  check("scaled.txt", "2 0 0 0 0 2 0 0 0 0 2 0\n", {":1:", "not a rotation"});
+  check("reflection.txt", "-1 0 0 0 0 1 0 0 0 0 1 0\n", {":1:", "not a rotation", "det = -1"});
+  check("sheared.txt", "1 0.01 0 0 0 1 0 0 0 0 1 0\n", {":1:", "not a rotation"});
+  expectError([&] { (void)readKittiPoses((dir / "missing.txt").string()); }, "missing.txt", {"file not found"});
+
+  writeBytes(dir / "empty.txt", "");
+  EXPECT_TRUE(readKittiPoses((dir / "empty.txt").string()).empty());
+
+  Eigen::Isometry3d bad = Eigen::Isometry3d::Identity();
+  bad.translation().x() = std::numeric_limits<double>::quiet_NaN();
+  expectError([&] { writeKittiPoses((dir / "out.txt").string(), {bad}); }, "out.txt", {"non-finite"});
+  expectError([&] { writeKittiPoses((dir / "no_dir" / "out.txt").string(), {}); }, "out.txt",
+              {"cannot create a temporary file beside it"});
+}

@@ -1,0 +1,239 @@
+// The per-frame pipeline on synthetic frames: determinism (seed, thread count), input points carried with every
+// field, NaN/Inf/no-return/out-of-range points skipped and counted, bad frames refused before any change, exact
+// large coordinates, and the levels each mode builds.
+#include <gtest/gtest.h>
+
+#include <array>
+#include <cmath>
+#include <cstdint>
+#include <cstring>
+#include <map>
+#include <set>
+#include <vector>
+
+#include "PipelineTestSupport.hpp"
+#include "hpds/eval/SyntheticLidar.hpp"
+#include "hpds/pipeline/Pipeline.hpp"
+
+namespace hpds {
+namespace {
+
+using test::makeFrame;
+using test::smallLidar;
+
+// ---------------------------------------------------------------- determinism
+
+TEST(Pipeline, SameSeedSameBytesAndThreadCountDoesNotMatter) {
+  const SyntheticLidar lidar(smallLidar());
+  // Scan mode's normals average the frame's cell centroids, made beside the insertion when there are threads.
+  for (Mode mode : {Mode::Map, Mode::Scan})
+  for (InsertionOrder order : {InsertionOrder::Random, InsertionOrder::Sphericity, InsertionOrder::SurfaceVariation}) {
+    std::vector<std::uint8_t> reference;
+    for (int threads : {1, 2, 3}) {
+      HpdsConfig c;
+      c.mode = mode;
+      c.order.type = order;
+      c.order.seed = 42;
+      c.normals.enabled = true;
+      c.output.level = 5;
+      c.threads = threads;
+      Pipeline p(c);
+      for (int i = 0; i < 3; ++i) p.addFrame(lidar.frame(i).frame);
+      const PointBuffer out = p.makeCloud(p.outputSamples(), false);
+      ASSERT_GT(out.size(), 1000u);
+      if (reference.empty()) {
+        reference = out.bytes();
+      } else {
+        ASSERT_EQ(out.bytes(), reference) << toString(mode) << ", " << toString(order) << " differs with " << threads
+                                          << " threads";
+      }
+    }
+  }
+}
+
+TEST(Pipeline, DifferentSeedDifferentSampling) {
+  const SyntheticLidar lidar(smallLidar());
+  const Frame f = lidar.frame(0).frame;
+  HpdsConfig c;
+  c.order.seed = 1;
+  Pipeline a(c);
+  a.addFrame(f);
+  c.order.seed = 2;
+  Pipeline b(c);
+  b.addFrame(f);
+  EXPECT_NE(a.makeCloud(a.outputSamples(), false).bytes(), b.makeCloud(b.outputSamples(), false).bytes());
+}
+
+// ---------------------------------------------------------------- fields and skipped points
+
+TEST(Pipeline, SamplesAreRealInputPointsWithEveryFieldUnchanged) {
+  const SyntheticLidar lidar(smallLidar());
+  const SyntheticFrame sf = lidar.frame(1);
+  Frame f = sf.frame;
+  f.sensor_to_fixed.setIdentity();  // compare in the sensor frame
+  HpdsConfig c;
+  Pipeline p(c);
+  p.addFrame(f);
+  const PointBuffer out = p.makeCloud(p.outputSamples(), false);
+  const PointLayout &in = f.points.layout();
+  std::map<std::array<float, 3>, std::size_t> by_xyz;
+  for (std::size_t i = 0; i < f.points.size(); ++i) {
+    std::array<float, 3> k;
+    std::memcpy(k.data(), f.points.record(i), 12);
+    by_xyz.emplace(k, i);
+  }
+  ASSERT_GT(out.size(), 0u);
+  for (const char *name : {"intensity", "ring", "time"}) ASSERT_NE(out.layout().find(name), nullptr) << name;
+  for (std::size_t s = 0; s < out.size(); ++s) {
+    std::array<float, 3> k;
+    for (int a = 0; a < 3; ++a) k[a] = static_cast<float>(readAsDouble(out.record(s), out.layout().fields[a]));
+    const auto it = by_xyz.find(k);
+    ASSERT_NE(it, by_xyz.end()) << "sample " << s << " is not an input point";
+    for (const char *name : {"intensity", "ring", "time"}) {
+      const PointField &fi = *in.find(name), &fo = *out.layout().find(name);
+      ASSERT_EQ(fi.type, fo.type);
+      ASSERT_EQ(std::memcmp(f.points.record(it->second) + fi.offset, out.record(s) + fo.offset, fi.byteSize()), 0)
+          << name;
+    }
+  }
+}
+
+TEST(Pipeline, NanInfAndNoReturnPointsAreSkippedAndCounted) {
+  std::vector<std::array<double, 3>> pts = {{1, 2, 3},          {NAN, 0, 0},          {0, INFINITY, 0},
+                                            {0, 0, 0},          {0, 0, -INFINITY},    {5, 5, 5},
+                                            {0, 0, 0},          {0.5, 0.5, NAN},      {100, 0, 0}};
+  for (FieldType t : {FieldType::Float32, FieldType::Float64}) {
+    HpdsConfig c;
+    c.input.max_range = 50.0;
+    Pipeline p(c);
+    const FrameResult r = p.addFrame(makeFrame(pts, t));
+    EXPECT_EQ(r.counters.input, 9u);
+    EXPECT_EQ(r.counters.skipped_invalid, 4u);
+    EXPECT_EQ(r.counters.skipped_zero, 2u);
+    EXPECT_EQ(r.counters.skipped_range, 1u);
+    EXPECT_EQ(r.counters.accepted, 2u);
+    for (SampleId id : p.outputSamples()) EXPECT_TRUE(std::isfinite(p.hierarchy().position(id)[0]));
+  }
+  HpdsConfig keep;
+  keep.input.skip_zero_points = false;
+  Pipeline p(keep);
+  EXPECT_EQ(p.addFrame(makeFrame({{0, 0, 0}, {0, 0, 0}})).counters.accepted, 1u);
+}
+
+TEST(Pipeline, EmptyAndAllInvalidFramesAreHarmless) {
+  Pipeline p(HpdsConfig{});
+  EXPECT_EQ(p.addFrame(makeFrame({})).counters.accepted, 0u);
+  EXPECT_EQ(p.addFrame(makeFrame({{NAN, NAN, NAN}, {0, 0, 0}})).counters.accepted, 0u);
+  EXPECT_EQ(p.makeCloud(p.outputSamples(), false).size(), 0u);
+  HpdsConfig n;
+  n.normals.enabled = true;
+  Pipeline q(n);
+  q.addFrame(makeFrame({}));
+  EXPECT_EQ(q.makeCloud(q.outputSamples(), false).size(), 0u);
+}
+
+TEST(Pipeline, BadFramesThrowBeforeChangingTheMap) {
+  HpdsConfig c;
+  c.mode = Mode::Map;
+  Pipeline p(c);
+  PointLayout no_z;
+  no_z.append("x", FieldType::Float32);
+  no_z.append("y", FieldType::Float32);
+  Frame bad;
+  bad.points = PointBuffer(no_z, 3);
+  EXPECT_THROW(p.addFrame(bad), std::invalid_argument);
+  p.addFrame(makeFrame({{1, 1, 1}, {2, 2, 2}}));
+  const std::size_t before = p.hierarchy().sampleCount();
+  EXPECT_THROW(p.addFrame(makeFrame({{3, 3, 3}}, FieldType::Float64)), std::invalid_argument);  // other layout
+  Frame nan_pose = makeFrame({{3, 3, 3}});
+  nan_pose.sensor_to_fixed.translation().x() = NAN;
+  EXPECT_THROW(p.addFrame(nan_pose), std::invalid_argument);
+  EXPECT_EQ(p.hierarchy().sampleCount(), before);
+}
+
+TEST(Pipeline, LargeCoordinatesThroughThePoseAreExact) {
+  HpdsConfig c;
+  c.mode = Mode::Map;
+  c.hierarchy.cell_size = 1.0;
+  c.hierarchy.max_depth = 10;  // ~1 mm cells at 1e6 m
+  Pipeline p(c);
+  Frame f = makeFrame({{0.25, 0.5, 1.0}, {0.75, 0.5, 1.0}, {3.0, 1.0, 0.125}}, FieldType::Float64);
+  f.sensor_to_fixed = Eigen::Translation3d(1e6, -1e6, 250.0) * Eigen::Isometry3d::Identity();
+  const FrameResult r = p.addFrame(f);
+  EXPECT_EQ(r.counters.out_of_range, 0u);
+  ASSERT_EQ(r.counters.accepted, 3u);
+  std::set<std::array<double, 3>> got;
+  for (SampleId id : r.new_samples) {
+    const double *q = p.hierarchy().position(id);
+    got.insert({q[0], q[1], q[2]});
+  }
+  EXPECT_TRUE(got.count({1e6 + 0.25, -1e6 + 0.5, 251.0}));
+  EXPECT_TRUE(got.count({1e6 + 3.0, -1e6 + 1.0, 250.125}));
+
+  HpdsConfig fine = c;
+  fine.hierarchy.max_depth = 21;
+  Pipeline q(fine);
+  EXPECT_EQ(q.addFrame(f).counters.out_of_range, 3u);  // 1e6 m at 2^-21 m cells: refused, counted
+}
+
+TEST(Pipeline, ScanModeBuildsOnlyTheLevelsItsOutputsReadAndTheyComeOutTheSame) {
+  HpdsConfig c;
+  c.hierarchy.cell_size = 4.0;
+  c.hierarchy.max_depth = 8;
+  c.output.level = 4;
+  c.normals.enabled = false;
+  EXPECT_EQ(Pipeline(c).buildDepth(), 4);
+  c.normals.enabled = true;  // neighborhood_level_offset 2: averaged from the frame's points, no level deeper
+  EXPECT_EQ(Pipeline(c).buildDepth(), 4);
+  c.normals.neighborhood_level_offset = 7;
+  EXPECT_EQ(Pipeline(c).buildDepth(), 4);
+  c.normals.neighborhood_level_offset = 2;
+  c.map.keep_depth = 8;
+  EXPECT_EQ(Pipeline(c).buildDepth(), 4) << "scan mode keeps nothing: map.keep_depth does not apply";
+  c.mode = Mode::Map;
+  c.map.keep_depth = -1;
+  EXPECT_EQ(Pipeline(c).buildDepth(), 6) << "map mode too builds only the levels its outputs read";
+  c.map.keep_depth = 8;
+  EXPECT_EQ(Pipeline(c).buildDepth(), 8) << "map.keep_depth keeps finer levels for later reads";
+  c.map.keep_depth = 3;
+  EXPECT_EQ(Pipeline(c).buildDepth(), 6) << "never shallower than what the outputs read";
+  c.map.keep_depth = -1;
+  c.mode = Mode::Scan;
+  {
+    Pipeline p(c);
+    p.requireLevel(7);
+    EXPECT_EQ(p.buildDepth(), 7);
+    p.requireLevel(3);
+    EXPECT_EQ(p.buildDepth(), 7) << "a level already built stays built";
+    EXPECT_THROW(p.requireLevel(9), std::invalid_argument);
+    EXPECT_THROW(p.requireLevel(-1), std::invalid_argument);
+  }
+
+  // The same frames through a pipeline built to the output level 4 and one built to max_depth: the same output
+  // samples with the same ids, fields and normals (from the frame's points either way), byte for byte; the shallow
+  // one stores nothing deeper and counts as dropped exactly the points the deep one took at deeper levels or dropped.
+  const SyntheticLidar lidar(smallLidar(SceneKind::Urban, 2));
+  Pipeline shallow(c), deep(c);
+  deep.requireLevel(8);
+  for (int i = 0; i < 2; ++i) {
+    const Frame f = lidar.frame(i).frame;
+    const FrameResult a = shallow.addFrame(f), b = deep.addFrame(f);
+    for (int d = 0; d <= 4; ++d) EXPECT_EQ(a.counters.accepted_per_level[d], b.counters.accepted_per_level[d]) << d;
+    std::uint64_t deeper = 0;
+    for (int d = 5; d <= 8; ++d) {
+      EXPECT_EQ(a.counters.accepted_per_level[d], 0u);
+      deeper += b.counters.accepted_per_level[d];
+    }
+    EXPECT_GT(deeper, 0u) << "levels 5 to 8 must hold samples for this comparison to mean something";
+    EXPECT_EQ(a.counters.dropped_depth, b.counters.dropped_depth + deeper);
+    const std::vector<SampleId> ids = shallow.outputSamples();
+    ASSERT_EQ(ids, deep.outputSamples());
+    const PointBuffer out = shallow.makeCloud(ids, false);
+    ASSERT_TRUE(out.layout().find("normal_x"));
+    EXPECT_TRUE(out.bytes() == deep.makeCloud(ids, false).bytes()) << "frame " << i;
+    EXPECT_LT(shallow.hierarchy().sampleCount(), deep.hierarchy().sampleCount());
+  }
+}
+
+}  // namespace
+}  // namespace hpds

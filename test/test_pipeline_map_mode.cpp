@@ -1,0 +1,224 @@
+// The pipeline in map mode: earlier samples never move or change level, the samples hit by the last frame against
+// brute force, the levels it stores, eviction bounding memory on a long drive, and scratch memory given back after
+// one huge frame.
+#include <gtest/gtest.h>
+
+#include <Eigen/Geometry>
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstdint>
+#include <iterator>
+#include <map>
+#include <random>
+#include <set>
+#include <utility>
+#include <vector>
+
+#include "PipelineTestSupport.hpp"
+#include "hpds/eval/SyntheticLidar.hpp"
+#include "hpds/pipeline/Pipeline.hpp"
+
+namespace hpds {
+namespace {
+
+using test::makeFrame;
+using test::smallLidar;
+
+TEST(Pipeline, MapModeNeverMovesOrRelevelsEarlierSamples) {
+  const SyntheticLidar lidar(smallLidar(SceneKind::Urban, 4));
+  HpdsConfig c;
+  c.mode = Mode::Map;
+  Pipeline p(c);
+  std::map<SampleId, std::pair<std::array<double, 3>, int>> seen;
+  std::size_t first_coarse = 0;
+  for (int i = 0; i < 4; ++i) {
+    const FrameResult r = p.addFrame(lidar.frame(i).frame);
+    for (const auto &[id, v] : seen) {
+      ASSERT_TRUE(p.hierarchy().isLive(id));
+      const double *q = p.hierarchy().position(id);
+      ASSERT_EQ((std::array<double, 3>{q[0], q[1], q[2]}), v.first);
+      ASSERT_EQ(p.hierarchy().level(id), v.second);
+    }
+    ASSERT_EQ(seen.size() + r.new_samples.size(), p.hierarchy().sampleCount());
+    for (SampleId id : r.new_samples) {
+      ASSERT_EQ(p.hierarchy().frameIndex(id), static_cast<std::uint32_t>(i));
+      const double *q = p.hierarchy().position(id);
+      ASSERT_TRUE(seen.emplace(id, std::make_pair(std::array<double, 3>{q[0], q[1], q[2]}, p.hierarchy().level(id))).second);
+    }
+    std::size_t coarse_new = 0;
+    for (SampleId id : r.new_samples) coarse_new += p.hierarchy().level(id) <= 4 ? 1 : 0;
+    if (i == 0) first_coarse = coarse_new;
+    // Frames 1 m apart see the same street: at 0.2 m spacing most of it is already sampled.
+    if (i > 0) {
+      EXPECT_LT(coarse_new, first_coarse / 2) << "frame " << i;
+    }
+  }
+}
+
+TEST(Pipeline, SamplesHitByTheLastFrameMatchBruteForce) {
+  SyntheticLidarConfig lc = smallLidar(SceneKind::Urban, 3);
+  lc.beams = 8;
+  lc.azimuth_steps = 360;
+  const SyntheticLidar lidar(lc);
+  HpdsConfig c;
+  c.mode = Mode::Map;
+  c.output.level = 4;
+  Pipeline p(c);
+  p.addFrame(lidar.frame(0).frame);
+  p.addFrame(lidar.frame(1).frame);
+  const Frame last = lidar.frame(2).frame;
+  p.addFrame(last);
+  const Hierarchy &h = p.hierarchy();
+  const double radius = 2.0 * h.radius(4);
+  // The frame's valid points in the map frame, by the pipeline's own rules (no NaN here; zeros are no-returns).
+  std::vector<Eigen::Vector3d> pts;
+  const PointLayout &l = last.points.layout();
+  for (std::size_t i = 0; i < last.points.size(); ++i) {
+    const Eigen::Vector3d v(readAsDouble(last.points.record(i), *l.find("x")), readAsDouble(last.points.record(i), *l.find("y")),
+                            readAsDouble(last.points.record(i), *l.find("z")));
+    if (v.isZero(0.0)) continue;
+    pts.push_back(last.sensor_to_fixed.linear() * v + last.sensor_to_fixed.translation());
+  }
+  const std::vector<SampleId> hit = p.samplesHitByLastFrame(1, 4, radius);
+  std::vector<SampleId> want;
+  for (SampleId id : h.samplesUpTo(4)) {
+    if (h.level(id) < 1) continue;
+    const Eigen::Vector3d s(h.position(id)[0], h.position(id)[1], h.position(id)[2]);
+    for (const auto &q : pts)
+      if ((q - s).squaredNorm() < radius * radius) {
+        want.push_back(id);
+        break;
+      }
+  }
+  std::vector<SampleId> only_hit, only_want;
+  std::set_difference(hit.begin(), hit.end(), want.begin(), want.end(), std::back_inserter(only_hit));
+  std::set_difference(want.begin(), want.end(), hit.begin(), hit.end(), std::back_inserter(only_want));
+  for (SampleId id : only_hit) ADD_FAILURE() << "extra " << id << " level " << h.level(id);
+  for (SampleId id : only_want) ADD_FAILURE() << "missing " << id << " level " << h.level(id);
+  EXPECT_EQ(hit, want);
+  // Coverage: with radius 2 r_L every point of the sweep has a hit sample of levels 0..L.
+  const std::vector<SampleId> all = p.samplesHitByLastFrame(0, 4, radius * (1 + 1e-9));
+  for (std::size_t i = 0; i < pts.size(); i += 13) {
+    bool covered = false;
+    for (SampleId id : all)
+      covered = covered || (pts[i] - Eigen::Vector3d(h.position(id)[0], h.position(id)[1], h.position(id)[2])).norm() <= radius * (1 + 1e-9);
+    ASSERT_TRUE(covered) << "point " << i;
+  }
+}
+
+TEST(Pipeline, MapModeStoresOnlyTheLevelsItReadsUnlessAskedToKeepMore) {
+  HpdsConfig c;
+  c.mode = Mode::Map;
+  // The shipped defaults in map mode: output level 5 (r = 0.1 m) and the normals' levels 6..7, nothing finer.
+  EXPECT_EQ(Pipeline(c).buildDepth(), 7);
+  // Spacing 0.4 m without normals: output level 3, built alone unless map.keep_depth asks for levels 4..5 too.
+  c.output.spacing = 0.4;
+  c.normals.enabled = false;
+  const SyntheticLidar lidar(smallLidar(SceneKind::Urban, 2));
+  Pipeline lean(c);
+  c.map.keep_depth = 5;
+  Pipeline kept(c);
+  ASSERT_EQ(lean.outputLevel(), 3);
+  ASSERT_EQ(lean.buildDepth(), 3);
+  ASSERT_EQ(kept.buildDepth(), 5);
+  for (int i = 0; i < 2; ++i) {
+    const Frame f = lidar.frame(i).frame;
+    const FrameResult a = lean.addFrame(f), b = kept.addFrame(f);
+    EXPECT_EQ(a.counters.accepted_per_level[4] + a.counters.accepted_per_level[5], 0u);
+    EXPECT_GT(b.counters.accepted_per_level[4], 0u);
+    EXPECT_GT(b.counters.accepted_per_level[5], 0u);
+    EXPECT_GT(a.counters.dropped_depth, b.counters.dropped_depth);
+  }
+  EXPECT_EQ(lean.hierarchy().countAtLevel(4) + lean.hierarchy().countAtLevel(5), 0u);
+  EXPECT_GT(kept.hierarchy().countAtLevel(5), 0u);
+  EXPECT_LT(lean.hierarchy().memUsage(), kept.hierarchy().memUsage());
+  // Both maps keep the Poisson property of their output (levels 0..3 at r_3 = 0.4 m), by brute force.
+  for (const Pipeline *p : {&lean, &kept}) {
+    const std::vector<SampleId> ids = p->outputSamples();
+    ASSERT_GT(ids.size(), 100u);
+    double min_d2 = INFINITY;
+    for (std::size_t i = 0; i < ids.size(); ++i)
+      for (std::size_t j = i + 1; j < ids.size(); ++j) {
+        const double *u = p->hierarchy().position(ids[i]), *v = p->hierarchy().position(ids[j]);
+        min_d2 = std::min(min_d2, (u[0] - v[0]) * (u[0] - v[0]) + (u[1] - v[1]) * (u[1] - v[1]) + (u[2] - v[2]) * (u[2] - v[2]));
+      }
+    EXPECT_GE(std::sqrt(min_d2), 0.4);
+  }
+}
+
+TEST(Pipeline, EvictionBoundsMemoryOnALongDrive) {
+  SyntheticLidarConfig lc = smallLidar(SceneKind::Urban, 40);
+  lc.speed = 4.0;
+  lc.yaw_rate = 0.0;
+  const SyntheticLidar lidar(lc);
+  HpdsConfig c;
+  c.mode = Mode::Map;
+  c.map.evict_distance = 30.0;
+  c.map.max_samples = 0;
+  c.hierarchy.cell_size = 4.0;
+  c.hierarchy.max_depth = 6;
+  c.output.level = 6;
+  c.normals.enabled = false;
+  Pipeline p(c);
+  std::size_t peak_after_warmup = 0, peak_bytes_late = 0, bytes_at_20 = 0;
+  for (int i = 0; i < 40; ++i) {
+    const Frame f = lidar.frame(i).frame;
+    const FrameResult r = p.addFrame(f);
+    const Eigen::Vector3d s = f.sensor_to_fixed.translation();
+    for (SampleId id = 0; id < p.hierarchy().idBound(); ++id)
+      if (p.hierarchy().isLive(id) && std::find(r.new_samples.begin(), r.new_samples.end(), id) == r.new_samples.end()) {
+        const double *q = p.hierarchy().position(id);
+        ASSERT_LE((Eigen::Vector3d(q[0], q[1], q[2]) - s).norm(), 30.0 + 1e-9);
+      }
+    if (i >= 10) peak_after_warmup = std::max(peak_after_warmup, p.hierarchy().sampleCount());
+    if (i == 20) bytes_at_20 = p.hierarchy().memUsage();
+    if (i > 20) peak_bytes_late = std::max(peak_bytes_late, p.hierarchy().memUsage());
+  }
+  EXPECT_GT(p.totals().evicted, 0u);
+  // 160 m driven, the map keeps ~60 m of street: storage must not keep growing with distance.
+  EXPECT_LE(peak_bytes_late, bytes_at_20 * 3 / 2);
+  EXPECT_LT(peak_after_warmup, p.totals().accepted / 2);
+
+  HpdsConfig capped = c;
+  capped.map.evict_distance = 0.0;
+  capped.map.max_samples = 5000;
+  Pipeline q(capped);
+  for (int i = 0; i < 10; ++i) {
+    const FrameResult r = q.addFrame(lidar.frame(i).frame);
+    EXPECT_LE(q.hierarchy().sampleCount(), 5000u + r.counters.accepted);
+  }
+}
+
+TEST(Pipeline, ScratchFromOneHugeFrameIsGivenBackOnceFramesAreSmallAgain) {
+  // One frame of 600 k points (a 10 M point frame behaves the same, slower), then small frames: in both modes the
+  // memory sized for the huge frame must not stay for the life of the pipeline.
+  std::mt19937_64 rng(11);
+  std::uniform_real_distribution<double> u(-40.0, 40.0);
+  std::vector<std::array<double, 3>> big(600000), small(2000);
+  for (auto &p : big) p = {u(rng), u(rng), 0.05 * u(rng)};
+  for (auto &p : small) p = {0.2 * u(rng), 0.2 * u(rng), 0.01 * u(rng)};
+  const Frame huge = makeFrame(big), little = makeFrame(small);
+  for (const Mode mode : {Mode::Scan, Mode::Map}) {
+    HpdsConfig c;
+    c.mode = mode;
+    c.hierarchy.max_depth = 5;
+    Pipeline p(c);
+    p.addFrame(little);
+    const std::size_t before = p.memUsage();
+    p.addFrame(huge);
+    const std::size_t peak = p.memUsage();
+    ASSERT_GT(peak, 20 * before) << "the huge frame must actually need more memory";
+    for (int i = 0; i < 40; ++i) p.addFrame(little);
+    const std::size_t after = p.memUsage();
+    // Scan mode keeps nothing of the huge frame; map mode keeps its samples (no eviction here) but not the
+    // per-point scratch (40 B per input point).
+    if (mode == Mode::Scan)
+      EXPECT_LT(after, 4 * before + (1u << 20)) << "scan mode: " << before << " -> " << peak << " -> " << after;
+    else
+      EXPECT_LT(after + 30 * big.size(), peak) << "map mode: " << before << " -> " << peak << " -> " << after;
+  }
+}
+
+}  // namespace
+}  // namespace hpds
