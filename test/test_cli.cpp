@@ -182,7 +182,7 @@ TEST(Cli, CovariancesAreWrittenAsSixPlyPropertiesAfterTheNormals) {
     valid += plane ? 1 : 0;
   }
   EXPECT_GT(valid, c.size() / 2);
-  ASSERT_EQ(runHpds("verify " + shellQuote(tmp / "c.ply") + " --cell-size 4", &log), 0) << log;
+  ASSERT_EQ(runHpds("verify " + shellQuote(tmp / "c.ply") + " --spacing 0.2", &log), 0) << log;
   // Without the flag the same run writes no covariances.
   ASSERT_EQ(runHpds("sample " + input + " --spacing 0.2 --normals -o " + shellQuote(tmp / "n.ply"), &log), 0) << log;
   EXPECT_EQ(readText(tmp / "n.ply").find("cov_xx"), std::string::npos);

@@ -115,6 +115,13 @@ HpdsConfig nonDefaultConfig() {
   return c;
 }
 
+// nonDefaultConfig() as a valid config: normals.covariances needs normals on, the default, so this one key keeps it.
+HpdsConfig validNonDefaultConfig() {
+  HpdsConfig c = nonDefaultConfig();
+  c.normals.enabled = true;
+  return c;
+}
+
 std::vector<std::string> lines(const std::string &text) {
   std::vector<std::string> out;
   std::istringstream in(text);
@@ -176,7 +183,7 @@ TEST(ConfigYaml, NonDefaultTouchesEveryKey) {
 }
 
 TEST(ConfigYaml, DumpLoadRoundTrip) {
-  const HpdsConfig original = nonDefaultConfig();
+  const HpdsConfig original = validNonDefaultConfig();
   const std::string dumped = hpds::dumpConfigYaml(original);
   const HpdsConfig loaded = hpds::loadConfigString(dumped);
   expectSameConfig(loaded, original);
@@ -199,11 +206,11 @@ TEST(ConfigYaml, EmptyDocumentsGiveDefaults) {
 }
 
 TEST(ConfigYaml, PartialOverlayKeepsAbsentKeys) {
-  HpdsConfig config = nonDefaultConfig();
+  HpdsConfig config = validNonDefaultConfig();
   // (covariances need normals: switching normals off alone would be rejected, see InvalidDocumentsNameTheKey)
   hpds::applyConfigYaml("hierarchy:\n  max_depth: 10\nnormals: {enabled: false, covariances: false}\nmode: scan\n",
                         config);
-  HpdsConfig expected = nonDefaultConfig();
+  HpdsConfig expected = validNonDefaultConfig();
   expected.hierarchy.max_depth = 10;
   expected.normals.enabled = false;
   expected.normals.covariances = false;
@@ -226,11 +233,11 @@ TEST(ConfigYaml, AcceptedScalarSpellings) {
 }
 
 TEST(ConfigYaml, FailedOverlayLeavesConfigUnchanged) {
-  HpdsConfig config = nonDefaultConfig();
+  HpdsConfig config = validNonDefaultConfig();
   // The first key is valid and would be applied before the second fails.
   EXPECT_THROW(hpds::applyConfigYaml("threads: 2\nhierarchy: {max_depth: 30}\n", config), std::invalid_argument);
   EXPECT_THROW(hpds::applyConfigYaml("threads: 2\nnormals: {min_neighbors: 2}\n", config), std::invalid_argument);
-  expectSameConfig(config, nonDefaultConfig());
+  expectSameConfig(config, validNonDefaultConfig());
 }
 
 struct InvalidCase {
