@@ -4,7 +4,6 @@
 #include <cmath>
 
 #include "hpds/eval/GridSubsampling.hpp"
-#include "hpds/normals/NormalEstimator.hpp"
 #include "hpds/normals/SampleCovariance.hpp"
 
 namespace hpds::bench {
@@ -22,9 +21,9 @@ std::vector<Eigen::Vector3d> framePoints(const PointBuffer &points) {
 }
 
 namespace {
-HpdsConfig scanConfig(HpdsConfig c, int deepest) {
+HpdsConfig scanConfig(HpdsConfig c, int output_level) {
   c.mode = Mode::Scan;
-  c.output.level = deepest;
+  c.output.level = output_level;
   c.output.spacing = 0.0;
   c.normals.enabled = true;
   c.normals.covariances = true;
@@ -33,21 +32,24 @@ HpdsConfig scanConfig(HpdsConfig c, int deepest) {
 }
 }  // namespace
 
-HpdsFrame::HpdsFrame(const PointBuffer &points, HpdsConfig config, int deepest)
-    : config_(scanConfig(std::move(config), deepest)), pipeline_(config_) {
+HpdsFrame::HpdsFrame(const PointBuffer &points, const HpdsConfig &config, int coarsest, int deepest) {
   Frame frame;
   frame.points = points;
-  (void)pipeline_.addFrame(frame);
+  for (int d = coarsest; d <= deepest; ++d) {
+    auto pipeline = std::make_unique<Pipeline>(scanConfig(config, d));
+    (void)pipeline->addFrame(frame);
+    pipelines_[d] = std::move(pipeline);
+  }
 }
 
 SampledCloud HpdsFrame::levels(int d, double *seconds) const {
-  const Hierarchy &h = pipeline_.hierarchy();
-  const std::vector<SampleId> ids = h.samplesUpTo(d);
+  const Pipeline &pipeline = *pipelines_.at(d);
+  const Hierarchy &h = pipeline.hierarchy();
+  const std::vector<SampleId> ids = pipeline.outputSamples();
   const auto t0 = std::chrono::steady_clock::now();
-  const NormalParams params = normalParamsFor(config_, d);
   std::vector<LocalPca> neighbourhoods;
-  const std::vector<SampleNormal> normals = estimateNormals(h, ids, params, &neighbourhoods);
-  const std::vector<SampleCovariance> covs = sampleCovariances(normals, neighbourhoods, config_.normals);
+  const std::vector<SampleNormal> normals = pipeline.normals(ids, &neighbourhoods);
+  const std::vector<SampleCovariance> covs = sampleCovariances(normals, neighbourhoods, pipeline.config().normals);
   if (seconds) *seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   SampledCloud out;
   out.xyz.reserve(ids.size());

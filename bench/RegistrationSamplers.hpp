@@ -3,10 +3,12 @@
 //
 // Contract
 // - Frames are in their sensor frame; exact (0,0,0) no-returns and non-finite points are left out for every method.
-// - HpdsFrame builds one scan-mode hierarchy per frame (the config's cell size; levels down to the deepest level
-//   asked for plus the normals' level offset) and serves every level from it: levels(d) are the samples of levels
-//   0..d with normals and covariances estimated for output level d (NormalEstimator.hpp, SampleCovariance.hpp).
-//   Samples whose normal could not be estimated keep NaN normals and an invalid covariance.
+// - HpdsFrame samples the frame in scan mode once per output level d asked for (the config's cell size), so that
+//   levels(d) is what `hpds sample --level d --covariances` and the node output: the samples of levels 0..d (the
+//   same samples in every run: levels 0..d do not depend on how deep a hierarchy is built) with the normals and
+//   covariances the pipeline gives for output level d (Pipeline::normals: scan mode averages the frame's own points
+//   per cell of level d + offset; SampleCovariance.hpp). Samples whose normal could not be estimated keep NaN
+//   normals and an invalid covariance.
 // - voxelCentroidsAtCount / randomPerVoxelAtCount bisect the cell edge until the count is within `tolerance` of
 //   the target (EqualCount.hpp); the grid is anchored at the origin as PCL's VoxelGrid (same cells, same centroids,
 //   without VoxelGrid's 32-bit index limit that small leaves on 100 m frames exceed).
@@ -14,6 +16,8 @@
 
 #include <Eigen/Core>
 #include <cstdint>
+#include <map>
+#include <memory>
 #include <vector>
 
 #include "hpds/config/Config.hpp"
@@ -39,16 +43,17 @@ struct SampledCloud {
 
 class HpdsFrame {
  public:
-  /// Samples `points` (sensor frame) with `config` (scan mode, normals and covariances switched on here) down to
-  /// level `deepest` (+ the normals' offset).
-  HpdsFrame(const PointBuffer &points, HpdsConfig config, int deepest);
+  /// Samples `points` (sensor frame) with `config` (scan mode, normals and covariances switched on here) once for
+  /// every output level in `coarsest`..`deepest`.
+  HpdsFrame(const PointBuffer &points, const HpdsConfig &config, int coarsest, int deepest);
   /// Levels 0..d with normals and covariances for output level d; seconds of that estimate in `seconds`.
   [[nodiscard]] SampledCloud levels(int d, double *seconds = nullptr) const;
-  [[nodiscard]] std::size_t count(int d) const { return pipeline_.hierarchy().samplesUpTo(d).size(); }
+  [[nodiscard]] std::size_t count(int d) const { return pipelines_.at(d)->outputSamples().size(); }
+  /// The level-0 cell [m] the sampling ran with (the resolved one: hierarchy.cell_size 0 means derived).
+  [[nodiscard]] double cellSize() const { return pipelines_.begin()->second->config().hierarchy.cell_size; }
 
  private:
-  HpdsConfig config_;
-  Pipeline pipeline_;
+  std::map<int, std::unique_ptr<Pipeline>> pipelines_;  ///< by output level
 };
 
 [[nodiscard]] SampledCloud voxelCentroidsAtCount(const std::vector<Eigen::Vector3d> &points, std::size_t target,

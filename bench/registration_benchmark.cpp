@@ -171,12 +171,14 @@ struct Prepared {
   std::map<int, SampledCloud> hpds, voxel, random;
   std::map<int, SampledCloud> hpds_planes;  // ablation: a plane covariance for every sample with a normal
   std::map<int, double> hpds_seconds;  // normals + covariances per level
+  double cell_size = 0.0;              // [m] the level-0 cell hpds sampled with (the stages' radii follow it)
 };
 
 Prepared prepare(const PointBuffer &frame, std::uint64_t seed) {
   Prepared p;
   const std::vector<Eigen::Vector3d> points = framePoints(frame);
-  const HpdsFrame h(frame, HpdsConfig{}, kFinest);
+  const HpdsFrame h(frame, HpdsConfig{}, kCoarsest, kFinest);
+  p.cell_size = h.cellSize();
   for (int d = kCoarsest; d <= kFinest; ++d) {
     p.hpds[d] = h.levels(d, &p.hpds_seconds[d]);
     p.hpds_planes[d] = p.hpds[d];
@@ -211,12 +213,12 @@ std::vector<Start> startsFor(const Pair &pair, int perturbed, std::uint64_t seed
 
 /// GICP over the stages' clouds, each warm-started from the last, correspondence distance 4 r_d at stage d.
 RegistrationResult coarseToFine(const std::map<int, SampledCloud> &source, const std::map<int, SampledCloud> &target,
-                                CovarianceSource cov, const RegistrationSettings &base) {
+                                double cell_size, CovarianceSource cov, const RegistrationSettings &base) {
   RegistrationResult total;
   Eigen::Isometry3d at = Eigen::Isometry3d::Identity();
   for (int d = kCoarsest; d <= kFinest; ++d) {
     RegistrationSettings s = base;
-    s.max_correspondence = kStageDistancePerRadius * poissonRadius(HpdsConfig{}.hierarchy.cell_size, d);
+    s.max_correspondence = kStageDistancePerRadius * poissonRadius(cell_size, d);
     const RegistrationResult r = registerGicp(source.at(d), target.at(d), at, cov, s);
     at = r.transform;
     total.seconds += r.seconds;
@@ -307,17 +309,17 @@ int main(int argc, char **argv) {
     // correspondence distance (the same capture range) and with the common 1 m.
     const Eigen::Isometry3d id = Eigen::Isometry3d::Identity();
     RegistrationSettings wide = settings;
-    wide.max_correspondence = kStageDistancePerRadius * poissonRadius(HpdsConfig{}.hierarchy.cell_size, kCoarsest);
+    wide.max_correspondence = kStageDistancePerRadius * poissonRadius(src.cell_size, kCoarsest);
     const SampledCloud &hs = src.hpds.at(kFinest), &ht = tgt.hpds.at(kFinest);
     const SampledCloud &vs = src.voxel.at(kFinest), &vt = tgt.voxel.at(kFinest);
     record(staged, "GICP", "hpds coarse to fine + hierarchy cov", "identity", kFinest, hs, ht,
-           [&] { return coarseToFine(src.hpds, tgt.hpds, CovarianceSource::Given, settings); });
+           [&] { return coarseToFine(src.hpds, tgt.hpds, src.cell_size, CovarianceSource::Given, settings); });
     record(staged, "GICP", "hpds single level + hierarchy cov (wide)", "identity", kFinest, hs, ht,
            [&] { return registerGicp(hs, ht, id, CovarianceSource::Given, wide); });
     record(staged, "GICP", "hpds single level + hierarchy cov (1 m)", "identity", kFinest, hs, ht,
            [&] { return registerGicp(hs, ht, id, CovarianceSource::Given, settings); });
     record(staged, "GICP", "voxel pyramid + k-NN cov", "identity", kFinest, vs, vt,
-           [&] { return coarseToFine(src.voxel, tgt.voxel, CovarianceSource::Knn, settings); });
+           [&] { return coarseToFine(src.voxel, tgt.voxel, src.cell_size, CovarianceSource::Knn, settings); });
     record(staged, "GICP", "voxel single level + k-NN cov (wide)", "identity", kFinest, vs, vt,
            [&] { return registerGicp(vs, vt, id, CovarianceSource::Knn, wide); });
     record(staged, "GICP", "voxel single level + k-NN cov (1 m)", "identity", kFinest, vs, vt,
