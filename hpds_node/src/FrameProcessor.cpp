@@ -105,6 +105,11 @@ std::string FrameProcessor::targetFrame() const {
   return config_.hpds.mode == hpds::Mode::Map ? config_.ros.fixed_frame : config_.ros.output_frame;
 }
 
+std::string FrameProcessor::samplingSummary() const {
+  return std::string(hpds::toString(config_.hpds.mode)) + " mode, " + pipeline_.outputResolution().reason + "; levels 0.." +
+         std::to_string(pipeline_.buildDepth()) + " built" + (config_.hpds.normals.enabled ? ", normals on" : ", normals off");
+}
+
 CloudError FrameProcessor::check(const sensor_msgs::PointCloud2 &msg, std::string *why) {
   ++stats_.received;
   const CloudError e = validateCloud(msg, why);

@@ -196,6 +196,22 @@ TEST(FrameProcessor, InputFieldsWithHpdsNamesAreReported) {
   EXPECT_EQ(out.layout().find("curvature"), nullptr) << "normals are off: no curvature field at all";
 }
 
+// The start-up log line: with the shipped config the spacing asked is the radius got, and the line says why.
+TEST(FrameProcessor, SamplingSummarySaysHowTheOutputWasChosen) {
+  const std::string shipped = FrameProcessor(NodeConfig{}).samplingSummary();
+  EXPECT_NE(shipped.find("scan mode, output level 5, r_5 = 0.1 m"), std::string::npos) << shipped;
+  EXPECT_NE(shipped.find("the spacing asked (output.spacing 0.1 m)"), std::string::npos) << shipped;
+  EXPECT_NE(shipped.find("levels 0..5 built, normals on"), std::string::npos) << shipped;
+  NodeConfig fixed;
+  fixed.hpds.mode = hpds::Mode::Map;
+  fixed.hpds.hierarchy.cell_size = 4.0;
+  fixed.hpds.output.spacing = 0.2;
+  const std::string map = FrameProcessor(fixed).samplingSummary();
+  EXPECT_NE(map.find("map mode, output level 5, r_5 = 0.108253 m"), std::string::npos) << map;
+  EXPECT_NE(map.find("at the fixed hierarchy.cell_size 4 m"), std::string::npos) << map;
+  EXPECT_NE(map.find("levels 0..7 built, normals on"), std::string::npos) << map;
+}
+
 TEST(FrameProcessor, OutputIsAlignedForPackedInputFields) {
   // 1-byte fields first, so x y z (float32) sit at odd offsets, then an int16, a count-3 uint16 and a float64, all
   // packed: the output must still be aligned, and every input field must keep its bytes.

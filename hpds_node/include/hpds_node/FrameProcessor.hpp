@@ -99,6 +99,9 @@ class FrameProcessor {
   explicit FrameProcessor(const NodeConfig &config);
 
   [[nodiscard]] std::string targetFrame() const;
+  /// What the start-up log says about the sampling: mode, how the output level, radius and cell were chosen (and
+  /// why), the levels built and whether normals are on.
+  [[nodiscard]] std::string samplingSummary() const;
 
   /// Counts a received message and validates it; a refused message is counted as malformed.
   [[nodiscard]] CloudError check(const sensor_msgs::PointCloud2 &msg, std::string *why = nullptr);

@@ -97,10 +97,8 @@ HpdsServer::HpdsServer(ros::NodeHandle nh, ros::NodeHandle private_nh, const std
   service_spinner_ = std::make_unique<ros::AsyncSpinner>(1, &service_queue_);
   service_spinner_->start();
 
-  const int output_level = processors_.front()->pipeline().outputLevel();
   std::ostringstream summary;
-  summary << "hpds: " << hpds::toString(config_.hpds.mode) << " mode, output levels 0.." << output_level
-          << " (spacing " << hpds::poissonRadius(config_.hpds.hierarchy.cell_size, output_level) << " m)";
+  summary << "hpds: " << processors_.front()->samplingSummary();
   if (!target_frame_.empty()) summary << ", outputs in frame '" << target_frame_ << "'";
   if (processors_.size() > 1) summary << ", " << processors_.size() << " frames in parallel";
   ROS_INFO_STREAM_NAMED("hpds", summary.str() << "; input " << sub_.getTopic() << ", output "
