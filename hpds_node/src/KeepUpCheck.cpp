@@ -77,7 +77,9 @@ std::string KeepUpCheck::warning(bool on_drop) const {
           format("%.3g m", out.radius) + ")";
   if (config_.normals.enabled)
     text += ", normals.neighborhood_level_offset 0 (now " + std::to_string(config_.normals.neighborhood_level_offset) +
-            ": levels built below the output for the normals) or normals.enabled false";
+            (config_.mode == hpds::Mode::Map ? ": levels built below the output for the normals)"
+                                             : ": finer detail the normals average)") +
+            " or normals.enabled false";
   if (!(config_.input.max_range > 0.0)) text += ", an input.max_range (now 0: every point)";
   text += config_.mode == hpds::Mode::Scan
               ? "; or process frames in parallel: threads (now " + std::to_string(config_.threads) + ")"
