@@ -2,11 +2,13 @@
 # The installed package as its users get it: `cmake --install` the build into a fresh prefix, check what lands there,
 # then build examples/ against it as a separate project (find_package(hpds)) and run it on a real frame (a
 # synthetic one when ../shared is absent).
-# Usage: install_and_use.sh BUILD_DIR SOURCE_DIR NODE_BUILT(ON|OFF)
+# Usage: install_and_use.sh BUILD_DIR SOURCE_DIR NODE_BUILT(ON|OFF) [SANITIZED(ON|OFF)]
+# A sanitized build installs instrumented libraries: a program using them must be built with the same sanitizers
+# (the runtime has to come first), as a user of such a build would.
 # The prefix is made under the system's temporary folder, outside the source tree: roslaunch looks for launch files
 # anywhere below the package's source folder and would find the installed copies too. Removed when the test passes.
 set -euo pipefail
-build=$1 src=$(realpath "$2") node=$3
+build=$1 src=$(realpath "$2") node=$3 sanitized=${4:-OFF}
 work=$(mktemp -d "${TMPDIR:-/tmp}/hpds-install-test.XXXXXX")
 prefix=$work/prefix
 fail() { echo "install_and_use: $* (files kept in $work)" >&2; exit 1; }
@@ -56,8 +58,12 @@ if [ "$node" = ON ]; then
 fi
 
 # A separate project against the prefix.
+example_flags=()
+if [ "$sanitized" = ON ]; then
+  example_flags=(-DCMAKE_CXX_FLAGS=-fsanitize=address,undefined -DCMAKE_EXE_LINKER_FLAGS=-fsanitize=address,undefined)
+fi
 cmake -S "$src/examples" -B "$work/example" -DCMAKE_PREFIX_PATH="$prefix" -DCMAKE_BUILD_TYPE=Release \
-  > "$work/example-configure.log" 2>&1 || { cat "$work/example-configure.log"; fail "examples/ does not configure"; }
+  "${example_flags[@]}" > "$work/example-configure.log" 2>&1 || { cat "$work/example-configure.log"; fail "examples/ does not configure"; }
 cmake --build "$work/example" -j2 > "$work/example-build.log" 2>&1 || { cat "$work/example-build.log"; fail "examples/ does not build"; }
 
 frame=$src/../shared/data/lidar/hdl32_a.pcd
