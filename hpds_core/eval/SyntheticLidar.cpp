@@ -22,7 +22,6 @@ using synthetic::shapeDistance;
 
 constexpr double kPi = 3.14159265358979323846;
 constexpr double kTwoPi = 2.0 * kPi;
-constexpr double kInf = std::numeric_limits<double>::infinity();
 
 constexpr double kBlockLength = 20.0;       // [m] of street per procedural block
 constexpr double kMinCurvatureRadius = 25.0;  // [m] below it the inner buildings would reach the path
