@@ -18,4 +18,11 @@ option(HPDS_SANITIZE "Build with -fsanitize=address,undefined (own build directo
 if(HPDS_SANITIZE)
   add_compile_options(-fsanitize=address,undefined -fno-sanitize-recover=all -fno-omit-frame-pointer)
   add_link_options(-fsanitize=address,undefined)
+  # For tests whose host program is uninstrumented (Debian's nodelet manager, python3) but loads our instrumented
+  # code: the runtimes must come first, and the host's own allocations, never freed at exit, are not our leaks.
+  execute_process(COMMAND ${CMAKE_CXX_COMPILER} -print-file-name=libasan.so OUTPUT_VARIABLE HPDS_LIBASAN
+                  OUTPUT_STRIP_TRAILING_WHITESPACE)
+  execute_process(COMMAND ${CMAKE_CXX_COMPILER} -print-file-name=libubsan.so OUTPUT_VARIABLE HPDS_LIBUBSAN
+                  OUTPUT_STRIP_TRAILING_WHITESPACE)
+  set(HPDS_SANITIZER_PRELOAD_ENV "LD_PRELOAD=${HPDS_LIBASAN}:${HPDS_LIBUBSAN};ASAN_OPTIONS=detect_leaks=0")
 endif()
