@@ -86,31 +86,28 @@ class MapBuild(unittest.TestCase):
             cls.manifest = json.load(f)
         a = map_build.parse_args(cls.frames + ["--poses", cls.poses, "-o", "x", "--tile-size", str(TILE)] + SAMPLING)
         cls.config_yaml = map_build.resolve_config(a)
-        cls.cluster = cls.client = None
 
     @classmethod
     def tearDownClass(cls):
-        if cls.client is not None:
-            cls.client.close()
-            cls.cluster.close()
         shutil.rmtree(cls.root, ignore_errors=True)
 
-    @classmethod
-    def dask(cls):
-        """A 2-worker LocalCluster, shared by the tests; a task whose workers die twice fails (KilledWorker), and
-        the runner submits it again up to twice more."""
-        if cls.client is None:
-            import dask
-            from distributed import Client, LocalCluster
+    def dask(self):
+        """A fresh 2-worker LocalCluster for this test, closed when it ends. Not shared: a test that kills workers
+        leaves the cluster to its nannies, and Dask itself (Debian's distributed) can lose a restarted worker for
+        good (an assertion in the worker's own close path), which must not fail the next test. A task whose
+        workers die twice fails (KilledWorker), and the runner submits it again up to twice more."""
+        import dask
+        from distributed import Client, LocalCluster
 
-            dask.config.set({"distributed.scheduler.allowed-failures": 1})
-            logging.getLogger("distributed").setLevel(logging.CRITICAL)
-            cls.cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None,
-                                       silence_logs=logging.CRITICAL)
-            cls.client = Client(cls.cluster)
-        # A test that killed workers leaves their nannies restarting them: start from both workers up.
-        cls.client.wait_for_workers(2, timeout=120)
-        return cls.client
+        dask.config.set({"distributed.scheduler.allowed-failures": 1})
+        logging.getLogger("distributed").setLevel(logging.CRITICAL)
+        cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None,
+                               silence_logs=logging.CRITICAL)
+        self.addCleanup(cluster.close)
+        client = Client(cluster)
+        self.addCleanup(client.close)
+        client.wait_for_workers(2, timeout=120)
+        return client
 
     def out(self, name):
         return os.path.join(self.root, name)

@@ -242,22 +242,31 @@ TEST(NodePersistenceRefused, ScanModeAndNoMapFile) {
 // Issue 24 item 5: one segfault was seen during a ~save_map call on a node without ros/map_file. Under TSan only
 // roscpp's own service path races (the response written by the service thread while the poll thread closes the
 // connection); nothing in hpds. A storm of calls from two clients, answered one by one, must leave the nodes
-// alive and answering.
+// alive and answering. roscpp opens a connection per call, and under load (sanitizer builds, 2 cores) one of 200
+// can fail in transport: such a call is made again, and the retries are bounded so a dying node still fails here
+// (the nodes are not respawned: a dead one answers nothing afterwards).
 TEST(NodePersistenceRefused, AStormOfCallsIsAnsweredAndTheNodesSurvive) {
   ros::NodeHandle pnh("~");
   const std::string nofile = pnh.param<std::string>("nofile_target", "/hpds_persist_nofile");
   const std::string scan = pnh.param<std::string>("scan_target", "/hpds_persist_scan");
-  std::atomic<int> answered{0};
+  std::atomic<int> answered{0}, transport_failures{0};
   auto caller = [&](const std::string &target) {
     for (int i = 0; i < 100; ++i) {
-      std_srvs::Trigger srv;
-      if (ros::service::call(target + (i % 2 ? "/load_map" : "/save_map"), srv) && !srv.response.success) ++answered;
+      for (int attempt = 0; attempt < 3; ++attempt) {
+        std_srvs::Trigger srv;
+        if (ros::service::call(target + (i % 2 ? "/load_map" : "/save_map"), srv)) {
+          if (!srv.response.success && !srv.response.message.empty()) ++answered;
+          break;
+        }
+        ++transport_failures;
+      }
     }
   };
   std::thread a(caller, nofile), b(caller, scan);
   a.join();
   b.join();
   EXPECT_EQ(answered.load(), 200);
+  EXPECT_LE(transport_failures.load(), 10) << "calls failed in transport";
   for (const std::string &target : {nofile, scan}) {
     const auto r = call(target + "/save_map");
     EXPECT_FALSE(r.success);
