@@ -15,6 +15,7 @@
 
 #include "hpds/normals/NormalEstimator.hpp"
 #include "hpds/pipeline/Pipeline.hpp"
+#include "HierarchyTestSupport.hpp"
 #include "hpds/sampling/Hierarchy.hpp"
 #include "normals/CellCentroids.hpp"
 
@@ -24,18 +25,7 @@ namespace {
 constexpr double kCell = 1.0;
 
 Hierarchy build(const std::vector<double> &xyz, int max_depth, unsigned seed) {
-  Hierarchy h(kCell, max_depth);
-  std::vector<std::uint32_t> order(xyz.size() / 3);
-  std::iota(order.begin(), order.end(), 0u);
-  std::shuffle(order.begin(), order.end(), std::mt19937(seed));
-  InsertBatch b;
-  b.xyz = xyz.data();
-  b.size = xyz.size() / 3;
-  b.order = order.data();
-  b.order_size = order.size();
-  b.viewpoint[0] = 0.3, b.viewpoint[1] = 0.2, b.viewpoint[2] = 5.0;  // above the plane z = 0
-  (void)h.insert(b);
-  return h;
+  return test::buildShuffled(xyz, kCell, max_depth, seed, {0.3, 0.2, 5.0});  // above the plane z = 0
 }
 
 /// Angles in degrees between the estimated normals and +z (NaN for invalid ones).

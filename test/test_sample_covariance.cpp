@@ -15,6 +15,7 @@
 #include "hpds/normals/NormalEstimator.hpp"
 #include "hpds/normals/SampleCovariance.hpp"
 #include "hpds/pipeline/Pipeline.hpp"
+#include "HierarchyTestSupport.hpp"
 #include "hpds/sampling/Hierarchy.hpp"
 
 namespace hpds {
@@ -79,18 +80,7 @@ TEST(SampleCovariance, InvalidOrNonFiniteNormalsGiveNaN) {
 // ------------------------------------------------------------------------------------------------ brute force
 
 Hierarchy build(const std::vector<double> &xyz, int max_depth, unsigned seed) {
-  Hierarchy h(1.0, max_depth);
-  std::vector<std::uint32_t> order(xyz.size() / 3);
-  std::iota(order.begin(), order.end(), 0u);
-  std::shuffle(order.begin(), order.end(), std::mt19937(seed));
-  InsertBatch b;
-  b.xyz = xyz.data();
-  b.size = xyz.size() / 3;
-  b.order = order.data();
-  b.order_size = order.size();
-  b.viewpoint[2] = 5.0;
-  (void)h.insert(b);
-  return h;
+  return test::buildShuffled(xyz, 1.0, max_depth, seed, {0.0, 0.0, 5.0});
 }
 
 struct BrutePca {

@@ -5,6 +5,7 @@ A task is idempotent: it reads files that are final before it starts and publish
 so running it twice (Dask reruns the tasks of a worker that died) publishes the same bytes.
 """
 import collections
+import itertools
 import time
 import uuid
 
@@ -64,7 +65,7 @@ class DaskRunner:
             for d in t.deps:
                 dependents[d].append(t.key)
         current, task_of, attempts, results = {}, {}, collections.Counter(), {}
-        serial = iter(range(1 << 62))  # every submission its own key: Dask would hand back an erred future
+        serial = itertools.count()  # every submission its own key: Dask would hand back an erred future
 
         def submit(t):
             fn = self.wrap(t) if self.wrap else t.fn
