@@ -106,8 +106,9 @@ std::string FrameProcessor::targetFrame() const {
 }
 
 std::string FrameProcessor::samplingSummary() const {
-  return std::string(hpds::toString(config_.hpds.mode)) + " mode, " + pipeline_.outputResolution().reason + "; levels 0.." +
-         std::to_string(pipeline_.buildDepth()) + " built" + (config_.hpds.normals.enabled ? ", normals on" : ", normals off");
+  return std::string(hpds::toString(config_.hpds.mode)) + " mode, " + pipeline_.outputResolution().reason +
+         "; levels 0.." + std::to_string(pipeline_.buildDepth()) + " built" +
+         (config_.hpds.normals.enabled ? ", normals on" : ", normals off");
 }
 
 CloudError FrameProcessor::check(const sensor_msgs::PointCloud2 &msg, std::string *why) {
