@@ -74,7 +74,12 @@ TEST(HpdsReplay, NodeAndCliGiveTheSameSamples) {
       30.0))
       << target << " does not subscribe to /velodyne_points, /tf and /tf_static";
 
-  const std::string play = "rosbag play --clock -q -r " + std::to_string(rate) + " '" + bag + "'";
+  // hpds subscribing (above) is the master's view; its connection to the player is made only after the player
+  // advertises. rosbag play waits for a connected subscriber on each of the bag's topics (all of them hpds's), so
+  // the first frame cannot go out before hpds can receive it (with the default 0.2 s delay a slow, sanitized node
+  // missed it).
+  const std::string play =
+      "rosbag play --clock -q --wait-for-subscribers -r " + std::to_string(rate) + " '" + bag + "'";
   ASSERT_EQ(std::system(play.c_str()), 0) << play;
   ASSERT_TRUE(hpds_test::waitFor([&] { return fresh.size() >= std::size_t(frames); }, 120.0))
       << "got " << fresh.size() << " of " << frames << " frames";
