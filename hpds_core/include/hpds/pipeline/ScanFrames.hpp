@@ -33,7 +33,7 @@ void forEachScanFrame(const HpdsConfig &config, std::size_t n, int threads, Fn &
           fn(p, i);
         }
       },
-      /*grain=*/1);
+      /*grain=*/1, /*chunks_per_thread=*/1);
 }
 
 }  // namespace hpds
