@@ -46,8 +46,10 @@ class DaskRunner:
 
     A worker that dies takes every task queued on it along, not only the one that killed it; Dask fails a task once
     it was on `allowed-failures` + 1 dying workers. Such a task (KilledWorker) is submitted again, with the tasks
-    waiting for it, up to `retries` times: a task that only shared a worker with a crashing one completes, and the
-    task that crashes its workers every time stops the build with its own name.
+    waiting for it, up to `retries` times. A task that still fails is only a suspect: a task queued behind a crashing
+    one can share its fate every time. Once nothing else of the build is in flight, each suspect runs once more on
+    its own; one that completes goes on (with what waits on it), and one whose workers die while it runs alone is the
+    one that crashes them: it stops the build with its own name.
     """
 
     def __init__(self, client, wrap=None, retries=2):
@@ -86,20 +88,32 @@ class DaskRunner:
             attempts[key] += 1
             return [submit(t) for t in tasks if t.key in todo]
 
+        order = {t.key: i for i, t in enumerate(tasks)}
+        suspects, alone = set(), None  # keys out of retries; the key now running with nothing else in flight
         pending = as_completed([submit(t) for t in tasks])
         try:
-            for future in pending:
-                t = task_of[future.key]
-                if current.get(t.key) is not future:
-                    continue  # superseded by a resubmission
-                try:
-                    results[t.key] = future.result()
-                except Exception as e:  # noqa: BLE001 -- any task failure stops the build with its name
-                    culprit = _killed_task(e, task_of) or t
-                    if _is_killed_worker(e) and attempts[culprit.key] < self.retries:
-                        pending.update(resubmit(culprit.key))
-                        continue
-                    raise BuildError("%s: %s" % (culprit.name, _describe(e))) from e
+            while True:
+                for future in pending:
+                    t = task_of[future.key]
+                    if current.get(t.key) is not future:
+                        continue  # superseded by a resubmission
+                    try:
+                        results[t.key] = future.result()
+                    except Exception as e:  # noqa: BLE001 -- any task failure stops the build with its name
+                        culprit = _killed_task(e, task_of) or t
+                        if not _is_killed_worker(e) or culprit.key == alone:
+                            raise BuildError("%s: %s" % (culprit.name, _describe(e))) from e
+                        if attempts[culprit.key] < self.retries:
+                            pending.update(resubmit(culprit.key))
+                        else:
+                            suspects.add(culprit.key)  # its dependents failed with it: they wait for its verdict
+                # Nothing of this build is in flight: the first suspect in task order (what it waits for is done)
+                # runs alone; its dependents wait for it.
+                if not suspects:
+                    break
+                alone = min(suspects, key=order.get)
+                suspects.discard(alone)
+                pending = as_completed(resubmit(alone))
         finally:
             unfinished = [f for f in current.values() if not f.done()]
             if unfinished:

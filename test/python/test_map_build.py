@@ -197,23 +197,31 @@ class MapBuild(unittest.TestCase):
         self.assert_no_temporaries(out)
 
     def test_a_tile_whose_workers_keep_dying_stops_the_build_with_its_name(self):
+        # Tasks queued on the same worker die with the crashing one, and may do so every time they are retried:
+        # with no retries at all every such task is a suspect at once, and only a run alone tells them apart.
         tile = [t for t in self.manifest["tiles"] if t["phase"] == 1][0]
-        out, marks = self.out("killed_always"), self.out("marks_always")
-        os.makedirs(marks)
-        wrap = KillWorker("build-%d_%d" % (tile["i"], tile["j"]), marks, 100,
-                          os.path.join(out, ".hpds_work", "tiles", "tile_%d_%d.hpdsmap" % (tile["i"], tile["j"])))
-        with self.assertRaises(BuildError) as e:
-            build(self.frames, self.poses, out, TILE, self.config_yaml, DaskRunner(self.dask(), wrap=wrap),
-                  log=lambda m: None)
-        self.assertIn("tile (%d, %d)" % (tile["i"], tile["j"]), str(e.exception))
-        self.assertIn("died", str(e.exception))
-        self.assertFalse(os.path.exists(os.path.join(out, "manifest.json")))
-        self.assertNotIn(tile["file"], tile_files(out))
-        # What was published is complete: every tile file present equals the reference's.
-        for n in tile_files(out):
-            self.assertTrue(filecmp.cmp(os.path.join(out, n), os.path.join(self.reference, n), shallow=False), n)
-        self.assertEqual([p for p in os.listdir(out) if "tmp" in p], [])
-        self.assertFalse(os.path.exists(os.path.join(out, ".hpds_work")))
+        for retries in (0, 2):
+            with self.subTest(retries=retries):
+                out, marks = self.out("killed_always_%d" % retries), self.out("marks_always_%d" % retries)
+                os.makedirs(marks)
+                wrap = KillWorker("build-%d_%d" % (tile["i"], tile["j"]), marks, 100,
+                                  os.path.join(out, ".hpds_work", "tiles",
+                                               "tile_%d_%d.hpdsmap" % (tile["i"], tile["j"])))
+                with self.assertRaises(BuildError) as e:
+                    build(self.frames, self.poses, out, TILE, self.config_yaml,
+                          DaskRunner(self.dask(), wrap=wrap, retries=retries), log=lambda m: None)
+                self.assertIn("tile (%d, %d)" % (tile["i"], tile["j"]), str(e.exception))
+                self.assertIn("died", str(e.exception))
+                # Once per submission it died on allowed-failures + 1 = 2 workers, and twice more running alone.
+                self.assertEqual(len(os.listdir(marks)), 2 * (retries + 1) + 2, str(e.exception))
+                self.assertFalse(os.path.exists(os.path.join(out, "manifest.json")))
+                self.assertNotIn(tile["file"], tile_files(out))
+                # What was published is complete: every tile file present equals the reference's.
+                for n in tile_files(out):
+                    self.assertTrue(filecmp.cmp(os.path.join(out, n), os.path.join(self.reference, n),
+                                                shallow=False), n)
+                self.assertEqual([p for p in os.listdir(out) if "tmp" in p], [])
+                self.assertFalse(os.path.exists(os.path.join(out, ".hpds_work")))
 
     def test_never_overwrites_an_input_or_an_earlier_build(self):
         # An earlier build in OUTDIR: refused, nothing touched.
