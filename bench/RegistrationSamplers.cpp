@@ -56,6 +56,7 @@ SampledCloud HpdsFrame::levels(int d, double *seconds) const {
   for (std::size_t i = 0; i < ids.size(); ++i) {
     out.xyz.emplace_back(h.position(ids[i]));
     out.normal.emplace_back(normals[i].normal[0], normals[i].normal[1], normals[i].normal[2]);
+    out.centroid.emplace_back(neighbourhoods[i].centroid);
     const float *c = covs[i].cov;
     Eigen::Matrix3d m;
     m << c[0], c[1], c[2], c[1], c[3], c[4], c[2], c[4], c[5];

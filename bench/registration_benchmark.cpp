@@ -170,6 +170,7 @@ void writeCsv(const fs::path &path, const std::vector<Record> &records) {
 struct Prepared {
   std::map<int, SampledCloud> hpds, voxel, random;
   std::map<int, SampledCloud> hpds_planes;  // ablation: a plane covariance for every sample with a normal
+  std::map<int, SampledCloud> hpds_projected;  // samples with a plane covariance moved onto that plane
   std::map<int, double> hpds_seconds;  // normals + covariances per level
   double cell_size = 0.0;              // [m] the level-0 cell hpds sampled with (the stages' radii follow it)
 };
@@ -186,6 +187,13 @@ Prepared prepare(const PointBuffer &frame, std::uint64_t seed) {
       const Eigen::Vector3d &n = p.hpds[d].normal[i];
       if (n.allFinite())
         p.hpds_planes[d].covariance[i] = Eigen::Matrix3d::Identity() - (1.0 - kEpsilon) * n * n.transpose();
+    }
+    p.hpds_projected[d] = p.hpds[d];
+    for (std::size_t i = 0; i < p.hpds[d].xyz.size(); ++i) {
+      if (!p.hpds[d].plane_like[i]) continue;
+      const Eigen::Vector3d &n = p.hpds[d].normal[i];
+      Eigen::Vector3d &x = p.hpds_projected[d].xyz[i];
+      x -= n * n.dot(x - p.hpds[d].centroid[i]);
     }
     const std::size_t n = p.hpds[d].xyz.size();
     p.voxel[d] = voxelCentroidsAtCount(points, n, kCountTolerance);
@@ -289,6 +297,11 @@ int main(int argc, char **argv) {
         record(single, "GICP", "hpds + plane cov everywhere", st.kind, d, src.hpds_planes.at(d),
                tgt.hpds_planes.at(d), [&] {
                  return registerGicp(src.hpds_planes.at(d), tgt.hpds_planes.at(d), g, CovarianceSource::Given,
+                                     settings);
+               });
+        record(single, "GICP", "hpds projected + hierarchy cov", st.kind, d, src.hpds_projected.at(d),
+               tgt.hpds_projected.at(d), [&] {
+                 return registerGicp(src.hpds_projected.at(d), tgt.hpds_projected.at(d), g, CovarianceSource::Given,
                                      settings);
                });
         record(single, "GICP", "hpds + k-NN cov", st.kind, d, src.hpds.at(d), tgt.hpds.at(d),

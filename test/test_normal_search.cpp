@@ -307,6 +307,13 @@ TEST(SolveNormal, AgreesWithTheIterativeSolver) {
         EXPECT_NEAR(fast.l1, ref.l1, 1e-12 * trace);
         EXPECT_NEAR(fast.l2, ref.l2, 1e-12 * trace);
         EXPECT_NEAR(fast.surfaceVariation(), ref.surfaceVariation(), 1e-12);
+        // The centroid (both solvers), against the plain mean of the points; coordinates up to 5 km.
+        Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+        for (const auto &p : pts) mean += Eigen::Vector3d(p[0], p[1], p[2]) / static_cast<double>(pts.size());
+        for (int a = 0; a < 3; ++a) {
+          EXPECT_NEAR(fast.centroid[a], mean[a], 1e-9);
+          EXPECT_EQ(fast.centroid[a], ref.centroid[a]);
+        }
         if ((ref.l1 - ref.l0) < 1e-6 * trace) continue;  // the normal is not defined to better than round-off
         ASSERT_EQ(fast.valid, ref.valid);
         const double dot = std::fabs(fast.normal[0] * ref.normal[0] + fast.normal[1] * ref.normal[1] +
