@@ -49,14 +49,14 @@ SampledCloud HpdsFrame::levels(int d, double *seconds) const {
   const auto t0 = std::chrono::steady_clock::now();
   std::vector<LocalPca> neighbourhoods;
   const std::vector<SampleNormal> normals = pipeline.normals(ids, &neighbourhoods);
-  const std::vector<SampleCovariance> covs = sampleCovariances(normals, neighbourhoods, pipeline.config().normals);
+  const std::vector<SampleCovariance> covs =
+      estimateCovariances(h, ids, pipeline.outputLevel(), normals, neighbourhoods, pipeline.config());
   if (seconds) *seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   SampledCloud out;
   out.xyz.reserve(ids.size());
   for (std::size_t i = 0; i < ids.size(); ++i) {
     out.xyz.emplace_back(h.position(ids[i]));
     out.normal.emplace_back(normals[i].normal[0], normals[i].normal[1], normals[i].normal[2]);
-    out.centroid.emplace_back(neighbourhoods[i].centroid);
     const float *c = covs[i].cov;
     Eigen::Matrix3d m;
     m << c[0], c[1], c[2], c[1], c[3], c[4], c[2], c[4], c[5];

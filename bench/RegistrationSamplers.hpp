@@ -34,7 +34,6 @@ struct SampledCloud {
   std::vector<Eigen::Vector3d> normal;      ///< NaN where not estimated
   std::vector<Eigen::Matrix3d> covariance;  ///< NaN where not estimated
   std::vector<std::uint8_t> plane_like;     ///< hpds: 1 where the covariance is a plane (the normal is pinned)
-  std::vector<Eigen::Vector3d> centroid;    ///< hpds: the centroid of the neighbourhood the normal came from
   double cell = 0.0;                        ///< grid baselines: the cell edge that gave this count
   bool count_matched = true;                ///< grid baselines: within the tolerance of the target count
 };

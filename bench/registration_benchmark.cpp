@@ -170,7 +170,7 @@ void writeCsv(const fs::path &path, const std::vector<Record> &records) {
 struct Prepared {
   std::map<int, SampledCloud> hpds, voxel, random;
   std::map<int, SampledCloud> hpds_planes;  // ablation: a plane covariance for every sample with a normal
-  std::map<int, SampledCloud> hpds_projected;  // samples with a plane covariance moved onto that plane
+  std::map<int, SampledCloud> hpds_own_planes;  // ablation: normals.covariance_k 0, planes from the output normals
   std::map<int, double> hpds_seconds;  // normals + covariances per level
   double cell_size = 0.0;              // [m] the level-0 cell hpds sampled with (the stages' radii follow it)
 };
@@ -188,12 +188,11 @@ Prepared prepare(const PointBuffer &frame, std::uint64_t seed) {
       if (n.allFinite())
         p.hpds_planes[d].covariance[i] = Eigen::Matrix3d::Identity() - (1.0 - kEpsilon) * n * n.transpose();
     }
-    p.hpds_projected[d] = p.hpds[d];
+    p.hpds_own_planes[d] = p.hpds[d];
     for (std::size_t i = 0; i < p.hpds[d].xyz.size(); ++i) {
-      if (!p.hpds[d].plane_like[i]) continue;
       const Eigen::Vector3d &n = p.hpds[d].normal[i];
-      Eigen::Vector3d &x = p.hpds_projected[d].xyz[i];
-      x -= n * n.dot(x - p.hpds[d].centroid[i]);
+      if (n.allFinite() && p.hpds[d].plane_like[i])
+        p.hpds_own_planes[d].covariance[i] = Eigen::Matrix3d::Identity() - (1.0 - kEpsilon) * n * n.transpose();
     }
     const std::size_t n = p.hpds[d].xyz.size();
     p.voxel[d] = voxelCentroidsAtCount(points, n, kCountTolerance);
@@ -299,10 +298,10 @@ int main(int argc, char **argv) {
                  return registerGicp(src.hpds_planes.at(d), tgt.hpds_planes.at(d), g, CovarianceSource::Given,
                                      settings);
                });
-        record(single, "GICP", "hpds projected + hierarchy cov", st.kind, d, src.hpds_projected.at(d),
-               tgt.hpds_projected.at(d), [&] {
-                 return registerGicp(src.hpds_projected.at(d), tgt.hpds_projected.at(d), g, CovarianceSource::Given,
-                                     settings);
+        record(single, "GICP", "hpds + output-normal planes", st.kind, d, src.hpds_own_planes.at(d),
+               tgt.hpds_own_planes.at(d), [&] {
+                 return registerGicp(src.hpds_own_planes.at(d), tgt.hpds_own_planes.at(d), g,
+                                     CovarianceSource::Given, settings);
                });
         record(single, "GICP", "hpds + k-NN cov", st.kind, d, src.hpds.at(d), tgt.hpds.at(d),
                [&] { return registerGicp(src.hpds.at(d), tgt.hpds.at(d), g, CovarianceSource::Knn, settings); });

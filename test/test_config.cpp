@@ -31,7 +31,7 @@ std::size_t expectSameConfig(const HpdsConfig &a, const HpdsConfig &b) {
   [[maybe_unused]] const auto &[type, seed, feature_radius] = a.order;
   [[maybe_unused]] const auto &[level, spacing] = a.output;
   [[maybe_unused]] const auto &[enabled, radius, k, min_neighbors, neighborhood_level_offset, max_growth, covariances,
-                                 covariance_epsilon, covariance_line_ratio] = a.normals;
+                                 covariance_epsilon, covariance_line_ratio, covariance_k] = a.normals;
   [[maybe_unused]] const auto &[evict_distance, max_samples, keep_depth] = a.map;
   [[maybe_unused]] const auto &[skip_zero_points, min_range, max_range] = a.input;
 
@@ -57,6 +57,7 @@ std::size_t expectSameConfig(const HpdsConfig &a, const HpdsConfig &b) {
   same("normals.covariances", a.normals.covariances, b.normals.covariances);
   same("normals.covariance_epsilon", a.normals.covariance_epsilon, b.normals.covariance_epsilon);
   same("normals.covariance_line_ratio", a.normals.covariance_line_ratio, b.normals.covariance_line_ratio);
+  same("normals.covariance_k", a.normals.covariance_k, b.normals.covariance_k);
   same("map.evict_distance", a.map.evict_distance, b.map.evict_distance);
   same("map.max_samples", a.map.max_samples, b.map.max_samples);
   same("map.keep_depth", a.map.keep_depth, b.map.keep_depth);
@@ -105,6 +106,7 @@ HpdsConfig nonDefaultConfig() {
   c.normals.covariances = true;
   c.normals.covariance_epsilon = 0.01;
   c.normals.covariance_line_ratio = 0.05;
+  c.normals.covariance_k = 12;
   c.map.evict_distance = 123.456;
   c.map.max_samples = 1000000;
   c.map.keep_depth = 9;
@@ -232,6 +234,18 @@ TEST(ConfigYaml, AcceptedScalarSpellings) {
   EXPECT_EQ(c.input.max_range, 2.0);
 }
 
+TEST(ConfigYaml, CovarianceKMeetsMinNeighborsOnlyWhereCovariancesAreMade) {
+  // A larger min_neighbors than the default covariance_k is fine as long as no covariance is asked for.
+  EXPECT_EQ(hpds::loadConfigString("normals: {min_neighbors: 40}").normals.min_neighbors, 40);
+  EXPECT_EQ(loadError("normals: {min_neighbors: 40, covariances: true}").rfind("normals.covariance_k:", 0), 0u);
+  EXPECT_EQ(hpds::loadConfigString("normals: {min_neighbors: 40, covariances: true, covariance_k: 0}")
+                .normals.covariance_k,
+            0);
+  EXPECT_EQ(hpds::loadConfigString("normals: {min_neighbors: 40, covariances: true, covariance_k: 40}")
+                .normals.covariance_k,
+            40);
+}
+
 TEST(ConfigYaml, FailedOverlayLeavesConfigUnchanged) {
   HpdsConfig config = validNonDefaultConfig();
   // The first key is valid and would be applied before the second fails.
@@ -268,6 +282,9 @@ TEST(ConfigYaml, InvalidDocumentsNameTheKey) {
       {"normals: {covariance_epsilon: .nan}", "normals.covariance_epsilon", "finite"},
       {"normals: {covariance_line_ratio: -0.1}", "normals.covariance_line_ratio", "0..1"},
       {"normals: {covariance_line_ratio: 2}", "normals.covariance_line_ratio", "0..1"},
+      {"normals: {covariances: true, covariance_k: 4}", "normals.covariance_k", "min_neighbors (5)..1024"},
+      {"normals: {covariance_k: -1}", "normals.covariance_k", "must be 0"},
+      {"normals: {covariance_k: 2000}", "normals.covariance_k", "..1024"},
       {"threads: -1", "threads", "0..1024"},
       // size-like values beyond their bounds (each took 30-60 s per frame)
       {"normals: {k: 2000000000}", "normals.k", "must be in 0..1024"},

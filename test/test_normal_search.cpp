@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <map>
 #include <numeric>
 #include <random>
 #include <vector>
@@ -307,13 +308,6 @@ TEST(SolveNormal, AgreesWithTheIterativeSolver) {
         EXPECT_NEAR(fast.l1, ref.l1, 1e-12 * trace);
         EXPECT_NEAR(fast.l2, ref.l2, 1e-12 * trace);
         EXPECT_NEAR(fast.surfaceVariation(), ref.surfaceVariation(), 1e-12);
-        // The centroid (both solvers), against the plain mean of the points; coordinates up to 5 km.
-        Eigen::Vector3d mean = Eigen::Vector3d::Zero();
-        for (const auto &p : pts) mean += Eigen::Vector3d(p[0], p[1], p[2]) / static_cast<double>(pts.size());
-        for (int a = 0; a < 3; ++a) {
-          EXPECT_NEAR(fast.centroid[a], mean[a], 1e-9);
-          EXPECT_EQ(fast.centroid[a], ref.centroid[a]);
-        }
         if ((ref.l1 - ref.l0) < 1e-6 * trace) continue;  // the normal is not defined to better than round-off
         ASSERT_EQ(fast.valid, ref.valid);
         const double dot = std::fabs(fast.normal[0] * ref.normal[0] + fast.normal[1] * ref.normal[1] +
@@ -413,6 +407,97 @@ TEST(Normals, QueriesNeedNotBeTheCandidateSet) {
     }
     EXPECT_GT(valid, 200u);
   }
+}
+
+// k nearest without a radius: balls of 2 r_level doubling until k samples of levels 0..level are inside or the
+// radius reaches twice the level-0 cell; the k nearest by (distance, id), summed nearest first. The oracle walks
+// every candidate for every radius; a sparse far field makes queries end in every round, the last one included.
+TEST(Normals, AdaptiveKNearestMatchesBruteForce) {
+  std::mt19937_64 rng(21);
+  std::uniform_real_distribution<double> u(0.0, 3.0), far(-25.0, 25.0);
+  std::normal_distribution<double> g(0.0, 0.005);
+  std::vector<double> xyz;
+  for (int i = 0; i < 20000; ++i) {
+    const double x = u(rng), y = u(rng);
+    xyz.insert(xyz.end(), {x, y, 0.2 * x + (y > 1.5 ? 0.3 * y : 0.0) + g(rng)});
+  }
+  for (int i = 0; i < 400; ++i) {
+    const double x = far(rng), y = far(rng);
+    xyz.insert(xyz.end(), {x, y, 0.1 * y + g(rng)});
+  }
+  // A band thinning out with distance (log-uniform in x), as a scan's ground does.
+  std::uniform_real_distribution<double> logx(std::log(3.0), std::log(40.0));
+  for (int i = 0; i < 3000; ++i) {
+    const double x = std::exp(logx(rng)), y = u(rng);
+    xyz.insert(xyz.end(), {x, y, 0.6 + 0.05 * x + g(rng)});
+  }
+  Hierarchy h(1.0, 6);
+  std::vector<std::uint32_t> order(xyz.size() / 3);
+  std::iota(order.begin(), order.end(), 0u);
+  std::shuffle(order.begin(), order.end(), rng);
+  InsertBatch b;
+  b.xyz = xyz.data();
+  b.size = xyz.size() / 3;
+  b.order = order.data();
+  b.order_size = order.size();
+  b.viewpoint[2] = 10.0;
+  (void)h.insert(b);
+  const int level = 4;
+  NormalParams params;
+  params.level = level;
+  params.k = 12;
+  params.min_neighbors = 5;
+  const std::vector<SampleId> candidates = h.samplesUpTo(level);
+  std::vector<SampleId> ids = candidates;
+  std::shuffle(ids.begin(), ids.end(), rng);
+  ids.push_back(ids.front());
+  for (SampleId id : h.samplesUpTo(6))
+    if (h.level(id) > level && ids.size() < candidates.size() + 500) ids.push_back(id);
+  std::map<int, int> rounds;  // how many queries ended at each radius, to show every round is exercised
+  for (const int threads : {1, 3}) {
+    params.threads = threads;
+    const auto normals = estimateNormals(h, ids, params);
+    ASSERT_EQ(normals.size(), ids.size());
+    std::size_t valid = 0, invalid = 0;
+    for (std::size_t i = 0; i < ids.size(); i += 3) {
+      const double *q = h.position(ids[i]);
+      std::vector<std::pair<double, SampleId>> nb;
+      int round = 0;
+      for (double r = 2.0 * h.radius(level);; r *= 2.0, ++round) {
+        nb.clear();
+        for (SampleId o : candidates) {
+          const double *p = h.position(o);
+          const double ax = p[0] - q[0], ay = p[1] - q[1], az = p[2] - q[2];
+          const double d2 = ax * ax + ay * ay + az * az;
+          if (d2 < r * r) nb.emplace_back(d2, o);
+        }
+        if (nb.size() >= static_cast<std::size_t>(params.k) || r >= 2.0 * h.cellSize()) break;
+      }
+      if (threads == 1) ++rounds[round];
+      std::sort(nb.begin(), nb.end());
+      if (nb.size() > static_cast<std::size_t>(params.k)) nb.resize(static_cast<std::size_t>(params.k));
+      if (static_cast<int>(nb.size()) < params.min_neighbors) {
+        EXPECT_FALSE(normals[i].valid) << i;
+        ++invalid;
+        continue;
+      }
+      PcaAccumulator acc(q);
+      for (const auto &n : nb) acc.add(h.position(n.second));
+      const LocalPca ref = acc.solveNormal();
+      ASSERT_EQ(normals[i].valid, ref.valid) << i;
+      if (!ref.valid) continue;
+      ++valid;
+      // The same neighbours summed in the same order: the same bits, up to the orientation's sign.
+      for (int c = 0; c < 3; ++c) EXPECT_EQ(std::fabs(normals[i].normal[0 + c]), std::fabs(static_cast<float>(ref.normal[c]))) << i;
+      EXPECT_EQ(normals[i].curvature, static_cast<float>(ref.surfaceVariation())) << i;
+      const std::array<float, 3> v = h.toViewpoint(ids[i]);
+      EXPECT_GE(normals[i].normal[0] * v[0] + normals[i].normal[1] * v[1] + normals[i].normal[2] * v[2], 0.0f);
+    }
+    EXPECT_GT(valid, 500u);
+    EXPECT_GT(invalid, 0u);  // far samples with fewer than min_neighbors within the cap
+  }
+  EXPECT_GE(rounds.size(), 5u);
+  EXPECT_GT(rounds.rbegin()->second, 0);
 }
 
 }  // namespace

@@ -237,6 +237,24 @@ TEST(SampleCovariance, LineLikeNeighbourhoodsGetTheIdentityAndSizesMustMatch) {
   EXPECT_THROW((void)sampleCovariances({up}, {}, 1e-3, 0.05), std::invalid_argument);
 }
 
+TEST(SampleCovariance, PlaneNormalsReplaceTheNormalOnlyWhereThereIsAPlane) {
+  const SampleNormal up = normalOf(Eigen::Vector3d::UnitZ()), side = normalOf(Eigen::Vector3d::UnitX());
+  LocalPca plane, line;
+  plane.l0 = 1e-6, plane.l1 = 0.2, plane.l2 = 0.3, plane.valid = true;
+  line.l0 = 1e-6, line.l1 = 0.001, line.l2 = 0.3, line.valid = true;
+  const SampleNormal none = invalidNormalForTest();
+  // plane + valid plane normal: its plane; plane + invalid plane normal: the normal's; line: identity; no normal: NaN.
+  const auto covs = sampleCovariances({up, up, up, none}, {plane, plane, line, plane}, {side, none, side, side}, 1e-3,
+                                      0.05);
+  ASSERT_EQ(covs.size(), 4u);
+  EXPECT_TRUE((full(covs[0]) * Eigen::Vector3d::UnitX() - 1e-3 * Eigen::Vector3d::UnitX()).norm() < 1e-6);
+  EXPECT_TRUE((full(covs[1]) * Eigen::Vector3d::UnitZ() - 1e-3 * Eigen::Vector3d::UnitZ()).norm() < 1e-6);
+  EXPECT_TRUE(full(covs[2]).isApprox(Eigen::Matrix3d::Identity()));
+  EXPECT_FALSE(covs[3].valid);
+  EXPECT_TRUE(std::isnan(covs[3].cov[0]));
+  EXPECT_THROW((void)sampleCovariances({up}, {plane}, {}, 1e-3, 0.05), std::invalid_argument);
+}
+
 // ------------------------------------------------------------------------------------------------ output cloud
 
 TEST(SampleCovariance, OutputCloudCarriesCovFieldsOnlyWhenAsked) {
@@ -250,50 +268,76 @@ TEST(SampleCovariance, OutputCloudCarriesCovFieldsOnlyWhenAsked) {
   c.normals.enabled = true;
   c.normals.covariances = true;
   c.normals.covariance_epsilon = 0.002;
-  Pipeline p(c);
-  p.addFrame(lidar.frame(0).frame);
-  const PointBuffer cloud = p.makeCloud(p.outputSamples(), false);
-  const PointLayout &l = cloud.layout();
   const char *names[6] = {"cov_xx", "cov_xy", "cov_xz", "cov_yy", "cov_yz", "cov_zz"};
-  const PointField *f[6];
-  for (int k = 0; k < 6; ++k) {
-    f[k] = l.find(names[k]);
-    ASSERT_NE(f[k], nullptr) << names[k];
-    EXPECT_EQ(f[k]->type, FieldType::Float32);
-  }
-  const PointField *nx = l.find("normal_x"), *ny = l.find("normal_y"), *nz = l.find("normal_z");
-  ASSERT_TRUE(nx && ny && nz);
-  std::size_t valid = 0, invalid = 0, lines = 0;
-  for (std::size_t i = 0; i < cloud.size(); ++i) {
-    const std::uint8_t *r = cloud.record(i);
-    const Eigen::Vector3d n(readAsDouble(r, *nx), readAsDouble(r, *ny), readAsDouble(r, *nz));
-    Eigen::Matrix3d m;
-    m << readAsDouble(r, *f[0]), readAsDouble(r, *f[1]), readAsDouble(r, *f[2]), readAsDouble(r, *f[1]),
-        readAsDouble(r, *f[3]), readAsDouble(r, *f[4]), readAsDouble(r, *f[2]), readAsDouble(r, *f[4]),
-        readAsDouble(r, *f[5]);
-    if (!n.allFinite()) {
-      ++invalid;
-      EXPECT_TRUE(m.array().isNaN().all()) << "sample " << i;
-      continue;
+  // covariance_k 0: the plane is the written normal's. The default: the PCA normal of the covariance_k nearest
+  // output samples (the oracle: estimateNormals with covarianceNormalParams), on the same samples, and the same
+  // samples get the identity (the output normal's neighbourhood decides that).
+  std::vector<bool> identity_at_k0;
+  for (const int covariance_k : {0, HpdsConfig{}.normals.covariance_k}) {
+    SCOPED_TRACE("covariance_k " + std::to_string(covariance_k));
+    c.normals.covariance_k = covariance_k;
+    Pipeline p(c);
+    p.addFrame(lidar.frame(0).frame);
+    const std::vector<SampleId> ids = p.outputSamples();
+    const PointBuffer cloud = p.makeCloud(ids, false);
+    std::vector<SampleNormal> planes;
+    if (covariance_k > 0) planes = estimateNormals(p.hierarchy(), ids, covarianceNormalParams(c, p.outputLevel()));
+    const PointLayout &l = cloud.layout();
+    const PointField *f[6];
+    for (int k = 0; k < 6; ++k) {
+      f[k] = l.find(names[k]);
+      ASSERT_NE(f[k], nullptr) << names[k];
+      EXPECT_EQ(f[k]->type, FieldType::Float32);
     }
-    ++valid;
-    if (m.isApprox(Eigen::Matrix3d::Identity())) {
-      ++lines;  // a neighbourhood on one scan line
-      continue;
+    const PointField *nx = l.find("normal_x"), *ny = l.find("normal_y"), *nz = l.find("normal_z");
+    ASSERT_TRUE(nx && ny && nz);
+    ASSERT_EQ(cloud.size(), ids.size());
+    std::size_t valid = 0, invalid = 0, lines = 0, apart = 0;
+    for (std::size_t i = 0; i < cloud.size(); ++i) {
+      const std::uint8_t *r = cloud.record(i);
+      const Eigen::Vector3d n(readAsDouble(r, *nx), readAsDouble(r, *ny), readAsDouble(r, *nz));
+      Eigen::Matrix3d m;
+      m << readAsDouble(r, *f[0]), readAsDouble(r, *f[1]), readAsDouble(r, *f[2]), readAsDouble(r, *f[1]),
+          readAsDouble(r, *f[3]), readAsDouble(r, *f[4]), readAsDouble(r, *f[2]), readAsDouble(r, *f[4]),
+          readAsDouble(r, *f[5]);
+      const bool identity = n.allFinite() && m.isApprox(Eigen::Matrix3d::Identity());
+      if (covariance_k == 0) {
+        identity_at_k0.push_back(identity);
+      } else {
+        EXPECT_EQ(identity, identity_at_k0.at(i)) << "sample " << i;
+      }
+      if (!n.allFinite()) {
+        ++invalid;
+        EXPECT_TRUE(m.array().isNaN().all()) << "sample " << i;
+        continue;
+      }
+      ++valid;
+      if (identity) {
+        ++lines;  // a neighbourhood on one scan line
+        continue;
+      }
+      Eigen::Vector3d axis = n;  // the plane's normal: the covariance's small axis
+      if (covariance_k > 0 && planes[i].valid) {
+        axis = Eigen::Vector3d(planes[i].normal[0], planes[i].normal[1], planes[i].normal[2]);
+        apart += std::abs(axis.normalized().dot(n.normalized())) < std::cos(1.0 * M_PI / 180.0) ? 1 : 0;
+      }
+      EXPECT_LT((m * axis - 0.002 * axis).norm(), 1e-5) << "sample " << i;
+      EXPECT_NEAR(m.trace(), 2.002, 1e-5);
     }
-    EXPECT_LT((m * n - 0.002 * n).norm(), 1e-5) << "sample " << i;  // the written normal is the small axis
-    EXPECT_NEAR(m.trace(), 2.002, 1e-5);
+    EXPECT_GT(valid - lines, 100u);
+    EXPECT_LT(lines, valid / 2);
+    EXPECT_EQ(invalid + valid, cloud.size());
+    if (covariance_k > 0) {
+      EXPECT_GT(apart, 20u);  // the two neighbourhoods do give different planes
+    }
   }
-  EXPECT_GT(valid - lines, 100u);
-  EXPECT_LT(lines, valid / 2);
-  EXPECT_EQ(invalid + valid, cloud.size());
 
   c.normals.covariances = false;
   Pipeline plain(c);
   plain.addFrame(lidar.frame(0).frame);
   const PointBuffer without = plain.makeCloud(plain.outputSamples(), false);
   for (const char *name : names) EXPECT_EQ(without.layout().find(name), nullptr) << name;
-  ASSERT_EQ(without.size(), cloud.size());
+  ASSERT_GT(without.size(), 0u);
 }
 
 }  // namespace

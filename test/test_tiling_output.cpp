@@ -1,11 +1,12 @@
 // The tiled map build's output files: each tile's PLY holds its samples of the output levels in the `hpds sample`
-// layout, and its normals are those one hierarchy holding the whole map gives (the neighbours' border samples are
-// read for them); without the neighbours they are not (the negative control).
+// layout, and its normals (and covariances) are those one hierarchy holding the whole map gives (the neighbours'
+// border samples are read for them); without the neighbours they are not (the negative control).
 #include <gtest/gtest.h>
 
 #include "TestData.hpp"
 #include "TiledRun.hpp"
 #include "hpds/normals/NormalEstimator.hpp"
+#include "hpds/normals/SampleCovariance.hpp"
 #include "hpds/pcl/PointCloudFile.hpp"
 #include "hpds/pipeline/OutputCloud.hpp"
 
@@ -52,6 +53,28 @@ std::vector<OutputSample> readTile(const fs::path &ply, const PointLayout &expec
   return out;
 }
 
+/// One hierarchy holding every tile's samples (the reference for what the tiles wrote), and each sample's id in it
+/// by its float position (as the PLYs hold it).
+struct MergedTiles {
+  Hierarchy h;
+  std::map<std::array<float, 3>, SampleId> by_position;
+};
+
+MergedTiles mergeTiles(const HpdsConfig &config, const test::TiledRun &run) {
+  MergedTiles m{Hierarchy(config.hierarchy.cell_size, config.hierarchy.max_depth), {}};
+  for (const TileKey &key : run.tiles) {
+    const Hierarchy h = loadHierarchy(run.maps.at(key).string()).hierarchy;
+    m.h.setRecordLayout(h.recordLayout());
+    for (SampleId id = 0; id < h.idBound(); ++id) {
+      const auto v = h.toViewpoint(id);
+      const SampleId to = m.h.restoreSample(h.position(id), h.level(id), h.frameIndex(id), v.data(), h.record(id));
+      const double *p = h.position(id);
+      m.by_position[{float(p[0]), float(p[1]), float(p[2])}] = to;
+    }
+  }
+  return m;
+}
+
 TEST(TiledOutput, TilePlysHoldTheOutputLevelsWithTheNormalsOfTheWholeMap) {
   const HpdsConfig config = normalsConfig();
   const TileGrid grid(config.hierarchy, 1.0);
@@ -60,18 +83,9 @@ TEST(TiledOutput, TilePlysHoldTheOutputLevelsWithTheNormalsOfTheWholeMap) {
   const test::TiledRun run = test::runTiled(config, grid, input, test::scratchDir("tiled_out"));
 
   // One hierarchy holding every tile's samples: the reference for the normals.
-  Hierarchy merged(config.hierarchy.cell_size, config.hierarchy.max_depth);
-  std::map<std::array<float, 3>, SampleId> by_position;
-  for (const TileKey &key : run.tiles) {
-    const Hierarchy h = loadHierarchy(run.maps.at(key).string()).hierarchy;
-    merged.setRecordLayout(h.recordLayout());
-    for (SampleId id = 0; id < h.idBound(); ++id) {
-      const auto v = h.toViewpoint(id);
-      const SampleId m = merged.restoreSample(h.position(id), h.level(id), h.frameIndex(id), v.data(), h.record(id));
-      const double *p = h.position(id);
-      by_position[{float(p[0]), float(p[1]), float(p[2])}] = m;
-    }
-  }
+  const MergedTiles m = mergeTiles(config, run);
+  const Hierarchy &merged = m.h;
+  const auto &by_position = m.by_position;
   std::vector<SampleId> queries = merged.samplesUpTo(config.output.level);
   const std::vector<SampleNormal> reference =
       estimateNormals(merged, queries, normalParamsFor(config, config.output.level));
@@ -124,35 +138,58 @@ TEST(TiledOutput, NormalsWithoutTheNeighboursSamplesDiffer) {
   EXPECT_GT(differ, 50u);
 }
 
-TEST(TiledOutput, CovariancesAreWrittenWhenAsked) {
-  HpdsConfig config = normalsConfig();
-  config.normals.covariances = true;
-  const TileGrid grid(config.hierarchy, 1.0);
-  const test::TiledRun run = test::runTiled(config, grid, test::denseFrames(3, 6000, 31), test::scratchDir("tiled_cov"));
-  std::size_t planes = 0;
-  for (const TileKey &key : run.tiles) {
-    const PointBuffer cloud = readPointCloud(run.plys.at(key).string());
-    const PointLayout &l = cloud.layout();
-    const char *names[6] = {"cov_xx", "cov_xy", "cov_xz", "cov_yy", "cov_yz", "cov_zz"};
-    for (const char *name : names) ASSERT_NE(l.find(name), nullptr) << name;
-    for (std::size_t i = 0; i < cloud.size(); ++i) {
-      double c[6];
-      for (int k = 0; k < 6; ++k) c[k] = readAsDouble(cloud.record(i), *l.find(names[k]));
-      const Eigen::Vector3d n(readAsDouble(cloud.record(i), *l.find("normal_x")),
-                              readAsDouble(cloud.record(i), *l.find("normal_y")),
-                              readAsDouble(cloud.record(i), *l.find("normal_z")));
-      Eigen::Matrix3d m;
-      m << c[0], c[1], c[2], c[1], c[3], c[4], c[2], c[4], c[5];
-      if (!n.allFinite()) {
-        EXPECT_TRUE(m.array().isNaN().all());
-        continue;
-      }
-      if (m.isApprox(Eigen::Matrix3d::Identity())) continue;  // a line-like neighbourhood
-      EXPECT_LT((m * n - config.normals.covariance_epsilon * n).norm(), 1e-5);  // the written normal, small axis
-      ++planes;
+// With covariances the tiles also read as far as the covariances' k nearest samples reach (normalRing): each
+// tile's covariances are those of one hierarchy holding the whole map, for either plane normal.
+TEST(TiledOutput, CovariancesAreWrittenWhenAskedAsTheWholeMapGivesThem) {
+  for (const int covariance_k : {0, HpdsConfig{}.normals.covariance_k}) {
+    SCOPED_TRACE("covariance_k " + std::to_string(covariance_k));
+    HpdsConfig config = normalsConfig();
+    config.normals.covariances = true;
+    config.normals.covariance_k = covariance_k;
+    HpdsConfig without = config;
+    without.normals.covariances = false;
+    if (covariance_k > 0) {
+      EXPECT_GT(normalRing(config), normalRing(without));
     }
+    const TileGrid grid(config.hierarchy, 1.0);
+    const test::TiledRun run = test::runTiled(config, grid, test::denseFrames(3, 6000, 31),
+                                              test::scratchDir("tiled_cov_" + std::to_string(covariance_k)));
+    const MergedTiles m = mergeTiles(config, run);
+    const int level = config.output.level;
+    const std::vector<SampleId> ids = m.h.samplesUpTo(level);
+    std::vector<LocalPca> neighbourhoods;
+    const std::vector<SampleNormal> normals =
+        estimateNormals(m.h, ids, normalParamsFor(config, level), &neighbourhoods);
+    const std::vector<SampleCovariance> reference =
+        estimateCovariances(m.h, ids, level, normals, neighbourhoods, config);
+    std::map<SampleId, std::size_t> index_of;
+    for (std::size_t i = 0; i < ids.size(); ++i) index_of[ids[i]] = i;
+
+    std::size_t planes = 0, written = 0;
+    const char *names[6] = {"cov_xx", "cov_xy", "cov_xz", "cov_yy", "cov_yz", "cov_zz"};
+    for (const TileKey &key : run.tiles) {
+      const PointBuffer cloud = readPointCloud(run.plys.at(key).string());
+      const PointLayout &l = cloud.layout();
+      for (const char *name : names) ASSERT_NE(l.find(name), nullptr) << name;
+      for (std::size_t i = 0; i < cloud.size(); ++i) {
+        const std::uint8_t *r = cloud.record(i);
+        const std::array<float, 3> at{float(readAsDouble(r, *l.find("x"))), float(readAsDouble(r, *l.find("y"))),
+                                      float(readAsDouble(r, *l.find("z")))};
+        const SampleCovariance &e = reference.at(index_of.at(m.by_position.at(at)));
+        ++written;
+        for (int k = 0; k < 6; ++k) {
+          const double c = readAsDouble(r, *l.find(names[k]));
+          ASSERT_EQ(std::isnan(c), !e.valid) << names[k];
+          if (e.valid) {
+            EXPECT_NEAR(c, e.cov[k], 1e-5) << names[k];
+          }
+        }
+        planes += e.valid && !(e.cov[0] == 1.0f && e.cov[3] == 1.0f && e.cov[5] == 1.0f) ? 1 : 0;
+      }
+    }
+    EXPECT_EQ(written, ids.size());
+    EXPECT_GT(planes, 100u);
   }
-  EXPECT_GT(planes, 100u);
 }
 
 }  // namespace

@@ -66,25 +66,40 @@ class MatchesTheCppApi(support.ScratchCase):
         self.check_file(frame, NORMALS)
         self.check_file(frame, {"order": {"type": "sphericity"}, "output": {"level": 3}})
 
-    def test_covariances_have_the_normal_as_small_axis(self):
+    def test_covariances_are_gicp_planes_or_the_identity(self):
         support.run([support.CLI, "synth", "-o", self.path("synth"), "--frames", "1", "--beams", "16",
                      "--azimuth-steps", "720", "--format", "pcd"])
         points = hpds.read_points(self.path("synth/frame_000000.pcd"))
-        config = {"output": {"spacing": 0.2}, "normals": {"enabled": True, "covariances": True}}
-        s = hpds.downsample(points, config)
-        n = len(s["index"])
-        self.assertEqual(s["covariance"].shape, (n, 3, 3))
-        self.assertEqual(s["covariance"].dtype, np.float32)
         self.assertNotIn("covariance", hpds.downsample(points, NORMALS))
-        valid = np.isfinite(s["normal"]).all(axis=1)
-        self.assertTrue(np.isnan(s["covariance"][~valid]).all())
-        cov, normal = s["covariance"][valid].astype(np.float64), s["normal"][valid].astype(np.float64)
-        np.testing.assert_allclose(cov, np.transpose(cov, (0, 2, 1)))
-        identity = np.all(np.isclose(cov, np.eye(3)), axis=(1, 2))  # a neighbourhood on one scan line
-        planes = ~identity
-        self.assertGreater(planes.sum(), n // 2)
-        along = np.einsum("nij,nj->ni", cov[planes], normal[planes])
-        np.testing.assert_allclose(along, 0.001 * normal[planes], atol=1e-5)
+        identities = {}
+        # covariance_k 0: the plane is the output normal's; the default: the plane of the 30 nearest samples.
+        for k in (0, None):
+            normals = {"enabled": True, "covariances": True}
+            if k is not None:
+                normals["covariance_k"] = k
+            s = hpds.downsample(points, {"output": {"spacing": 0.2}, "normals": normals})
+            n = len(s["index"])
+            self.assertEqual(s["covariance"].shape, (n, 3, 3))
+            self.assertEqual(s["covariance"].dtype, np.float32)
+            valid = np.isfinite(s["normal"]).all(axis=1)
+            self.assertTrue(np.isnan(s["covariance"][~valid]).all())
+            cov, normal = s["covariance"][valid].astype(np.float64), s["normal"][valid].astype(np.float64)
+            np.testing.assert_allclose(cov, np.transpose(cov, (0, 2, 1)))
+            identity = np.all(np.isclose(cov, np.eye(3)), axis=(1, 2))  # a neighbourhood on one scan line
+            identities[k] = identity
+            planes = ~identity
+            self.assertGreater(planes.sum(), n // 2)
+            # GICP's plane: eigenvalues (0.001, 1, 1).
+            np.testing.assert_allclose(np.linalg.eigvalsh(cov[planes]), np.tile([0.001, 1.0, 1.0], (planes.sum(), 1)),
+                                       atol=1e-5)
+            along = np.einsum("nij,nj->ni", cov[planes], normal[planes])
+            on_normal = np.isclose(along, 0.001 * normal[planes], atol=1e-5).all(axis=1)
+            if k == 0:
+                self.assertTrue(on_normal.all())
+            else:
+                self.assertGreater((~on_normal).sum(), 20)  # other planes than the output normals'
+        # Which samples get a plane is the output normal's neighbourhood's to say, whatever k.
+        np.testing.assert_array_equal(identities[0], identities[None])
 
     def test_synthetic_planes_from_numpy(self):
         rng = np.random.default_rng(7)

@@ -2,6 +2,8 @@
 // core pipeline's, map-mode ~output is the set of samples hit by the frame, local-map timing, drops.
 #include <gtest/gtest.h>
 
+#include <Eigen/Eigenvalues>
+
 #include <unistd.h>
 
 #include <cmath>
@@ -97,7 +99,8 @@ TEST(FrameProcessor, CovariancesArePointCloud2Fields) {
     EXPECT_EQ(f->datatype, sensor_msgs::PointField::FLOAT32) << name;
     EXPECT_EQ(f->count, 1u) << name;
   }
-  // Each plane covariance has the published normal as its small axis (epsilon 0.001 along it, 1 across).
+  // Each plane covariance is GICP's (epsilon 0.001 along its normal, 1 across), and the published cloud is the core
+  // pipeline's, covariances included.
   const hpds::PointBuffer out = hpds_test::toBuffer(r.output);
   const hpds::PointLayout &l = out.layout();
   std::size_t valid = 0;
@@ -109,10 +112,20 @@ TEST(FrameProcessor, CovariancesArePointCloud2Fields) {
     c << at("cov_xx"), at("cov_xy"), at("cov_xz"), at("cov_xy"), at("cov_yy"), at("cov_yz"), at("cov_xz"),
         at("cov_yz"), at("cov_zz");
     if (c.isApprox(Eigen::Matrix3d::Identity())) continue;  // a neighbourhood on one scan line
-    EXPECT_LT((c * n - 0.001 * n).norm(), 1e-5) << "point " << i;
+    const Eigen::Vector3d values = Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(c).eigenvalues();
+    EXPECT_NEAR(values(0), 0.001, 1e-5) << "point " << i;
+    EXPECT_NEAR(values(1), 1.0, 1e-5) << "point " << i;
+    EXPECT_NEAR(values(2), 1.0, 1e-5) << "point " << i;
     ++valid;
   }
   EXPECT_GT(valid, 100u);
+  hpds::Pipeline pipeline(config.hpds);
+  hpds::Frame frame;
+  frame.points = lidar.frame(1).frame.points;
+  pipeline.addFrame(frame);
+  PointCloud2 expected;
+  hpds_node::toRosCloud(pipeline.makeCloud(pipeline.outputSamples(), false), msg.header, expected);
+  EXPECT_TRUE(r.output.data == expected.data);
 }
 
 TEST(FrameProcessor, ScanModeBuildsThePublishedLevelsBelowTheOutputLevel) {

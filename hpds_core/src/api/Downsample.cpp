@@ -53,7 +53,8 @@ Samples downsample(const std::vector<Eigen::Vector3f> &points, const HpdsConfig 
     const std::vector<SampleNormal> normals =
         pipeline.normals(ids, config.normals.covariances ? &neighbourhoods : nullptr);
     if (config.normals.covariances) {
-      const std::vector<SampleCovariance> covs = sampleCovariances(normals, neighbourhoods, config.normals);
+      const std::vector<SampleCovariance> covs = estimateCovariances(hierarchy, ids, pipeline.outputLevel(), normals,
+                                                                     neighbourhoods, pipeline.config());
       out.covariance.resize(ids.size());
       for (std::size_t i = 0; i < ids.size(); ++i) {
         const float *c = covs[i].cov;

@@ -87,6 +87,13 @@ void validateNeighbourhoods(const HpdsConfig &c) {
   if (c.normals.min_neighbors > kMaxNeighbours)
     fail("normals.min_neighbors",
          "must be in 3.." + std::to_string(kMaxNeighbours) + ", got " + std::to_string(c.normals.min_neighbors));
+  // After min_neighbors' own bounds, so that an error names the key that is out of range. Below min_neighbors
+  // every search would fail; that matters only where covariances are made.
+  if (c.normals.covariance_k < 0 || c.normals.covariance_k > kMaxNeighbours ||
+      (c.normals.covariances && c.normals.covariance_k != 0 && c.normals.covariance_k < c.normals.min_neighbors))
+    fail("normals.covariance_k", "must be 0 (the output normal's plane) or in normals.min_neighbors (" +
+                                     std::to_string(c.normals.min_neighbors) + ").." +
+                                     std::to_string(kMaxNeighbours) + ", got " + std::to_string(c.normals.covariance_k));
   const OutputResolution resolved = resolveOutput(c);  // a derived cell (0) is measured as the pipeline runs it
   const int output = resolved.level;
   // Normals read the samples of levels up to output + neighborhood_level_offset; feature orders raw points, which

@@ -70,6 +70,7 @@ constexpr Key kKeys[] = {
     HPDS_SECTION_KEY(normals, covariances),
     HPDS_SECTION_KEY(normals, covariance_epsilon),
     HPDS_SECTION_KEY(normals, covariance_line_ratio),
+    HPDS_SECTION_KEY(normals, covariance_k),
     HPDS_SECTION_KEY(map, evict_distance),
     HPDS_SECTION_KEY(map, max_samples),
     HPDS_SECTION_KEY(map, keep_depth),
@@ -90,11 +91,11 @@ constexpr Key kKeys[] = {
   [[maybe_unused]] auto &[type, seed, feature_radius] = c.order;
   [[maybe_unused]] auto &[level, spacing] = c.output;
   [[maybe_unused]] auto &[enabled, radius, k, min_neighbors, neighborhood_level_offset, max_growth, covariances,
-                           covariance_epsilon, covariance_line_ratio] = c.normals;
+                           covariance_epsilon, covariance_line_ratio, covariance_k] = c.normals;
   [[maybe_unused]] auto &[evict_distance, max_samples, keep_depth] = c.map;
   [[maybe_unused]] auto &[skip_zero_points, min_range, max_range] = c.input;
 }
-static_assert(std::size(kKeys) == 2 + 2 + 3 + 2 + 9 + 3 + 3,
+static_assert(std::size(kKeys) == 2 + 2 + 3 + 2 + 10 + 3 + 3,
               "one row per leaf bound in everyMemberHasARow: the top-level scalars plus every section member");
 
 const Key *findKey(std::string_view section, std::string_view name) {

@@ -11,7 +11,6 @@ LocalPca PcaAccumulator::solve(bool accurate) const {
   if (n_ < 3) return out;
   const double inv = 1.0 / static_cast<double>(n_);
   const double mx = s_[0] * inv, my = s_[1] * inv, mz = s_[2] * inv;
-  out.centroid[0] = ref_[0] + mx, out.centroid[1] = ref_[1] + my, out.centroid[2] = ref_[2] + mz;
   Eigen::Matrix3d c;
   c(0, 0) = ss_[0] * inv - mx * mx;
   c(0, 1) = c(1, 0) = ss_[1] * inv - mx * my;
@@ -45,7 +44,6 @@ LocalPca PcaAccumulator::solveNormal() const {
   if (n_ < 3) return out;
   const double inv = 1.0 / static_cast<double>(n_);
   const double mx = s_[0] * inv, my = s_[1] * inv, mz = s_[2] * inv;
-  out.centroid[0] = ref_[0] + mx, out.centroid[1] = ref_[1] + my, out.centroid[2] = ref_[2] + mz;
   const double xx = ss_[0] * inv - mx * mx, xy = ss_[1] * inv - mx * my, xz = ss_[2] * inv - mx * mz;
   const double yy = ss_[3] * inv - my * my, yz = ss_[4] * inv - my * mz, zz = ss_[5] * inv - mz * mz;
   const double trace = xx + yy + zz;

@@ -25,6 +25,15 @@ NormalParams normalParamsFor(const HpdsConfig &config, int level) {
   return p;
 }
 
+NormalParams covarianceNormalParams(const HpdsConfig &config, int level) {
+  NormalParams p;
+  p.level = level;
+  p.k = config.normals.covariance_k;
+  p.min_neighbors = config.normals.min_neighbors;
+  p.threads = config.threads;
+  return p;
+}
+
 double neighborhoodReach(const NormalParams &p, double cell_size, double level_radius) {
   const double cap = 2.0 * cell_size;  // max_radius of both estimators
   const bool refined = p.neighborhood_level_offset > 0 || p.max_growth > 1.0;
@@ -69,14 +78,6 @@ void orientTowardViewpoints(const Hierarchy &h, const std::vector<SampleId> &ids
     }
   }, /*grain=*/std::size_t(1) << 15);
 }
-
-namespace {
-void gather(const Hierarchy &h, const double *q, double radius, int level,
-            std::vector<std::pair<double, SampleId>> &out) {
-  out.clear();
-  h.forEachInBall(q, radius, level, [&](SampleId id, double d2) { out.emplace_back(d2, id); });
-}
-}  // namespace
 
 std::vector<SampleNormal> estimateNormals(const Hierarchy &h, const std::vector<SampleId> &ids,
                                           const NormalParams &params, std::vector<LocalPca> *neighbourhoods) {
@@ -143,29 +144,60 @@ std::vector<SampleNormal> estimateNormals(const Hierarchy &h, const std::vector<
     return result;
   }
 
-  // Adaptive radius (k nearest, no radius): grow the ball over the level grids until k are found.
+  // Adaptive radius (k nearest, no radius): balls of radius 2 r_level, doubling until k are found or the radius
+  // reaches the cap. Each round searches the still open queries at once (a BallGrid over the union samples near
+  // them), as the fixed radius does: per query, a walk over the level grids cost ~16 us at k = 30.
   const double max_radius = 2.0 * h.cellSize();
-  parallelFor(ids.size(), params.threads, [&](std::size_t b, std::size_t e) {
-    std::vector<std::pair<double, SampleId>> nb;
-    for (std::size_t i = b; i < e; ++i) {
-      const double *q = h.position(ids[i]);
-      for (double r = 2.0 * h.radius(level);; r *= 2.0) {
-        gather(h, q, r, level, nb);
-        if (static_cast<int>(nb.size()) >= params.k || r >= max_radius) break;
-      }
-      if (params.k > 0 && nb.size() > static_cast<std::size_t>(params.k)) {
-        std::nth_element(nb.begin(), nb.begin() + params.k, nb.end());
-        nb.resize(static_cast<std::size_t>(params.k));
-      }
-      // Summed nearest first: the normal's last bits then depend on the neighbours alone, not on the order the
-      // grid walk met them in (a full scan of a level follows its hash slots).
-      std::sort(nb.begin(), nb.end());
-      if (static_cast<int>(nb.size()) < params.min_neighbors) continue;
-      PcaAccumulator acc(q);
-      for (const auto &n : nb) acc.add(h.position(n.second));
-      store(i, acc);
+  const std::size_t k = static_cast<std::size_t>(std::max(params.k, 0));
+  const std::vector<SampleId> all = h.samplesUpTo(level);  // increasing ids: (distance, index) ties resolve by id
+  const double *base = all.empty() ? nullptr : h.position(0);
+  std::vector<std::uint32_t> open(ids.size());  // positions in ids of the queries still without k neighbours
+  for (std::size_t i = 0; i < ids.size(); ++i) open[i] = static_cast<std::uint32_t>(i);
+  std::vector<SampleId> inside, queries;
+  std::vector<std::uint8_t> resolved;
+  for (double r = 2.0 * h.radius(level); !open.empty() && base; r *= 2.0) {
+    const bool last = r >= max_radius;
+    double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+    queries.clear();
+    for (std::uint32_t i : open) {
+      queries.push_back(ids[i]);
+      const double *p = h.position(ids[i]);
+      for (int a = 0; a < 3; ++a) lo[a] = std::min(lo[a], p[a] - r), hi[a] = std::max(hi[a], p[a] + r);
     }
-  });
+    inside.clear();
+    for (SampleId id : all) {
+      const double *p = h.position(id);
+      if (p[0] >= lo[0] && p[0] <= hi[0] && p[1] >= lo[1] && p[1] <= hi[1] && p[2] >= lo[2] && p[2] <= hi[2])
+        inside.push_back(id);
+    }
+    const PointSet points{base, inside.data(), inside.size()};
+    const BallGrid grid(points, inside == queries ? points : PointSet{base, queries.data(), queries.size()}, r);
+    resolved.assign(open.size(), 0);
+    parallelFor(grid.cellCount(), params.threads, [&](std::size_t b, std::size_t e) {
+      std::vector<std::pair<double, std::uint32_t>> nb;
+      grid.visit(b, e, [&](std::size_t t, const BallView &v) {
+        if (v.count < k && !last) return;  // the next round's larger ball
+        resolved[t] = 1;
+        nb.clear();
+        for (std::size_t j = 0; j < v.count; ++j) nb.emplace_back(v.d2[j], v.point[v.inside[j]]);
+        if (k > 0 && nb.size() > k) {
+          std::nth_element(nb.begin(), nb.begin() + static_cast<std::ptrdiff_t>(k), nb.end());
+          nb.resize(k);
+        }
+        if (nb.size() < static_cast<std::size_t>(std::max(params.min_neighbors, 0))) return;
+        // Summed nearest first: the normal's last bits then depend on the neighbours alone.
+        std::sort(nb.begin(), nb.end());
+        PcaAccumulator acc(v.q);
+        for (const auto &n : nb) acc.add(h.position(inside[n.second]));
+        store(open[t], acc);
+      });
+    }, /*grain=*/256);
+    if (last) break;  // what is left has no cell in the grid (beyond its 2^21-cell range): no neighbours
+    std::size_t kept = 0;
+    for (std::size_t t = 0; t < open.size(); ++t)
+      if (!resolved[t]) open[kept++] = open[t];
+    open.resize(kept);
+  }
   orientTowardViewpoints(h, ids, result, params.threads);
   return result;
 }

@@ -58,4 +58,29 @@ std::vector<SampleCovariance> sampleCovariances(const std::vector<SampleNormal> 
   return sampleCovariances(normals, neighbourhoods, config.covariance_epsilon, config.covariance_line_ratio);
 }
 
+std::vector<SampleCovariance> sampleCovariances(const std::vector<SampleNormal> &normals,
+                                               const std::vector<LocalPca> &neighbourhoods,
+                                               const std::vector<SampleNormal> &plane_normals, double epsilon,
+                                               double line_ratio) {
+  if (plane_normals.size() != normals.size())
+    throw std::invalid_argument("sampleCovariances: one plane normal per normal");
+  std::vector<SampleCovariance> out = sampleCovariances(normals, neighbourhoods, epsilon, line_ratio);
+  for (std::size_t i = 0; i < out.size(); ++i) {
+    const LocalPca &pca = neighbourhoods[i];
+    const bool plane = normals[i].valid && !(pca.l1 < line_ratio * pca.l2);
+    if (plane && plane_normals[i].valid) out[i] = planeCovariance(plane_normals[i], epsilon);
+  }
+  return out;
+}
+
+std::vector<SampleCovariance> estimateCovariances(const Hierarchy &hierarchy, const std::vector<SampleId> &ids,
+                                                  int level, const std::vector<SampleNormal> &normals,
+                                                  const std::vector<LocalPca> &neighbourhoods,
+                                                  const HpdsConfig &config) {
+  const NormalConfig &n = config.normals;
+  if (n.covariance_k <= 0) return sampleCovariances(normals, neighbourhoods, n);
+  const std::vector<SampleNormal> planes = estimateNormals(hierarchy, ids, covarianceNormalParams(config, level));
+  return sampleCovariances(normals, neighbourhoods, planes, n.covariance_epsilon, n.covariance_line_ratio);
+}
+
 }  // namespace hpds

@@ -248,7 +248,7 @@ PointBuffer Pipeline::makeCloud(const std::vector<SampleId> &ids, bool with_fram
   const std::vector<SampleNormal> normals = this->normals(ids, with_covariances ? &neighbourhoods : nullptr);
   std::vector<SampleCovariance> covariances;
   if (with_covariances)
-    covariances = sampleCovariances(normals, neighbourhoods, config_.normals);
+    covariances = estimateCovariances(hierarchy_, ids, output_level_, normals, neighbourhoods, config_);
   if (seconds_normals) *seconds_normals = secondsSince(t0);
   return buildOutputCloud(hierarchy_, ids, &normals, with_frame_field, with_covariances ? &covariances : nullptr);
 }

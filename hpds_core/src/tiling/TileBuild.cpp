@@ -175,7 +175,7 @@ TileFinishStats finishTile(const HpdsConfig &given, const TileGrid &grid, const 
     normals = estimateNormals(h, ids, normalParamsFor(config, level),
                               config.normals.covariances ? &neighbourhoods : nullptr);
     for (const SampleNormal &n : normals) stats.invalid_normals += n.valid ? 0 : 1;
-    if (config.normals.covariances) covariances = sampleCovariances(normals, neighbourhoods, config.normals);
+    if (config.normals.covariances) covariances = estimateCovariances(h, ids, level, normals, neighbourhoods, config);
   }
   const PointBuffer cloud = buildOutputCloud(h, ids, config.normals.enabled ? &normals : nullptr, false,
                                              config.normals.covariances ? &covariances : nullptr);

@@ -91,8 +91,12 @@ int normalRing(const HpdsConfig &given) {
   if (!given.normals.enabled) return 0;
   const HpdsConfig config = resolvedConfig(given);
   const int level = resolveOutputLevel(config);
-  const double reach = neighborhoodReach(normalParamsFor(config, level), config.hierarchy.cell_size,
-                                         poissonRadius(config.hierarchy.cell_size, level));
+  const double level_radius = poissonRadius(config.hierarchy.cell_size, level);
+  double reach = neighborhoodReach(normalParamsFor(config, level), config.hierarchy.cell_size, level_radius);
+  // The covariances' k nearest samples may lie farther than the normals' neighbourhood.
+  if (config.normals.covariances && config.normals.covariance_k > 0)
+    reach = std::max(reach, neighborhoodReach(covarianceNormalParams(config, level), config.hierarchy.cell_size,
+                                              level_radius));
   return static_cast<int>(std::ceil(reach / config.hierarchy.cell_size));
 }
 

@@ -56,6 +56,7 @@ struct NormalConfig {
   bool covariances = false;  ///< also output a GICP covariance per sample (cov_xx..cov_zz) from its normal; needs enabled
   double covariance_epsilon = 0.001;  ///< covariance's variance along the normal, the in-plane one being 1; 1e-4..1
   double covariance_line_ratio = 0.2;  ///< l1 / l2 of the normal's neighbourhood below this -> identity covariance
+  int covariance_k = 30;  ///< a plane covariance's normal: PCA of the k nearest output samples; 0 = the output normal
 };
 
 struct MapConfig {

@@ -11,7 +11,6 @@ namespace hpds {
 
 struct LocalPca {
   double normal[3] = {0.0, 0.0, 0.0};
-  double centroid[3] = {0.0, 0.0, 0.0};  ///< of the neighbours (same frame as the points); set from 3 points on
   double l0 = 0.0, l1 = 0.0, l2 = 0.0;
   bool valid = false;
 

@@ -2,9 +2,11 @@
 //
 // Contract
 // - Neighbours of a sample are the samples of levels 0..`level` within `radius`, and with k > 0 the k nearest of
-//   those; with radius = 0 the radius grows from 2 r_level until k are found (or it reaches twice the level-0 cell
-//   edge). A fixed radius is searched for all ids at once (samples and queries sorted by cell once, the queries of
-//   a cell sharing one search); radius 0 walks the level grids per sample.
+//   those; with radius = 0 the radius doubles from 2 r_level until k are found (or it reaches twice the level-0 cell
+//   edge). Every radius is searched for all ids at once (BallGrid: samples and queries sorted by cell once, the
+//   queries of a cell sharing one search; with radius 0, one such search per doubling over the ids still short of
+//   k). A search spans at most 2^21 cells of its radius per axis from the queries' bounding box (56 km at 2.7 cm):
+//   samples beyond have no neighbours (invalid normal).
 // - PCA by LocalPca's solveNormal (eigenvalues and normal agree with an iterative eigensolver to ~1e-15).
 // - The normal is oriented toward the viewpoint of the frame that contributed the sample.
 // - Fewer than `min_neighbors` neighbours (the sample included) or a degenerate neighbourhood gives valid = false
@@ -52,6 +54,9 @@ struct SampleNormal {
 
 /// Resolves the config's defaults (radius 0 and k 0 -> 2.5 r_level) for output level `level`.
 [[nodiscard]] NormalParams normalParamsFor(const HpdsConfig &config, int level);
+/// The search behind a covariance's plane (normals.covariance_k > 0): the normals.covariance_k nearest samples of
+/// levels 0..level, no refinement (SampleCovariance.hpp).
+[[nodiscard]] NormalParams covarianceNormalParams(const HpdsConfig &config, int level);
 
 /// An upper bound [m] on the distance from a sample to any sample its normal reads, for a hierarchy of level-0
 /// cell edge `cell_size` and radius `level_radius` of params.level: samples farther than this from every queried id

@@ -16,6 +16,8 @@
 //   Such a sample gets the identity (unit variance in every direction: a weak point-to-point term next to the
 //   planes' 1 / epsilon) instead of a confident plane in a wrong direction, which traps GICP in false minima
 //   (docs/quality.md, Registration).
+// - By default (normals.covariance_k = 30) the plane's normal is not the output normal but the PCA normal of the
+//   30 nearest output samples, where the output normal's own neighbourhood is not line-like (estimateCovariances).
 // - An invalid normal (not estimated) gives NaN in all six entries, as PCL marks a missing normal.
 // - Stored as the six upper-triangle entries xx xy xz yy yz zz (the output fields cov_xx ... cov_zz).
 #pragma once
@@ -48,5 +50,24 @@ struct SampleCovariance {
 [[nodiscard]] std::vector<SampleCovariance> sampleCovariances(const std::vector<SampleNormal> &normals,
                                                               const std::vector<LocalPca> &neighbourhoods,
                                                               const NormalConfig &config);
+/// As sampleCovariances, but a plane takes its normal from `plane_normals` (same order) where that one is valid,
+/// else from `normals`; whether a sample gets a plane at all is still its `neighbourhoods` entry's to decide.
+[[nodiscard]] std::vector<SampleCovariance> sampleCovariances(const std::vector<SampleNormal> &normals,
+                                                              const std::vector<LocalPca> &neighbourhoods,
+                                                              const std::vector<SampleNormal> &plane_normals,
+                                                              double epsilon, double line_ratio);
+
+/// The covariances the library outputs for samples `ids` of output level `level` (levels 0..level of `hierarchy`),
+/// given their normals and the neighbourhoods those came from (estimateNormals or Pipeline::normals). With
+/// normals.covariance_k > 0 a plane's normal is the PCA normal of the covariance_k nearest samples of levels
+/// 0..level (covarianceNormalParams): the refined neighbourhood finds where a scan line pins no plane, while a
+/// neighbourhood of a fixed number of samples, alike in every frame, gives the plane GICP matches best (at equal
+/// point count: GICP rotation error 0.054 -> 0.009 deg at level 4 of the synthetic drive; docs/quality.md).
+/// Thread count from config.threads; const on the hierarchy.
+[[nodiscard]] std::vector<SampleCovariance> estimateCovariances(const Hierarchy &hierarchy,
+                                                                const std::vector<SampleId> &ids, int level,
+                                                                const std::vector<SampleNormal> &normals,
+                                                                const std::vector<LocalPca> &neighbourhoods,
+                                                                const HpdsConfig &config);
 
 }  // namespace hpds

@@ -71,7 +71,8 @@ class TileGrid {
 };
 
 /// Level-0 cell rings a tiled build exchanges for `config`: its insertions need kInsertionRing; its normals (when
-/// enabled) every sample within neighborhoodReach (NormalEstimator.hpp) of the tile, i.e. ceil(reach / cell_size).
+/// enabled) every sample within neighborhoodReach (NormalEstimator.hpp) of the tile, i.e. ceil(reach / cell_size),
+/// and with covariances the reach of their k nearest samples (covarianceNormalParams) too.
 [[nodiscard]] int normalRing(const HpdsConfig &config);
 /// max(kInsertionRing, normalRing): the depth of the border files a tile writes for its neighbours.
 [[nodiscard]] int borderRing(const HpdsConfig &config);
