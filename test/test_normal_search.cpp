@@ -12,6 +12,7 @@
 #include <random>
 #include <vector>
 
+#include "HierarchyTestSupport.hpp"
 #include "sampling/BallGrid.hpp"
 #include "hpds/sampling/FrameGridIndex.hpp"
 #include "hpds/sampling/Hierarchy.hpp"
@@ -355,17 +356,7 @@ TEST(Normals, QueriesNeedNotBeTheCandidateSet) {
     const double x = u(rng), y = u(rng);
     xyz.insert(xyz.end(), {x, y, 0.2 * x + (y > 1.5 ? 0.3 * y : 0.0) + g(rng)});
   }
-  Hierarchy h(1.0, 6);
-  std::vector<std::uint32_t> order(xyz.size() / 3);
-  std::iota(order.begin(), order.end(), 0u);
-  std::shuffle(order.begin(), order.end(), rng);
-  InsertBatch b;
-  b.xyz = xyz.data();
-  b.size = xyz.size() / 3;
-  b.order = order.data();
-  b.order_size = order.size();
-  b.viewpoint[2] = 10.0;
-  (void)h.insert(b);
+  const Hierarchy h = test::buildShuffled(xyz, 1.0, 6, 9, {0.0, 0.0, 10.0});
   const int level = 4;
   NormalParams params;
   params.level = level;
@@ -431,17 +422,7 @@ TEST(Normals, AdaptiveKNearestMatchesBruteForce) {
     const double x = std::exp(logx(rng)), y = u(rng);
     xyz.insert(xyz.end(), {x, y, 0.6 + 0.05 * x + g(rng)});
   }
-  Hierarchy h(1.0, 6);
-  std::vector<std::uint32_t> order(xyz.size() / 3);
-  std::iota(order.begin(), order.end(), 0u);
-  std::shuffle(order.begin(), order.end(), rng);
-  InsertBatch b;
-  b.xyz = xyz.data();
-  b.size = xyz.size() / 3;
-  b.order = order.data();
-  b.order_size = order.size();
-  b.viewpoint[2] = 10.0;
-  (void)h.insert(b);
+  const Hierarchy h = test::buildShuffled(xyz, 1.0, 6, 9, {0.0, 0.0, 10.0});
   const int level = 4;
   NormalParams params;
   params.level = level;
