@@ -128,7 +128,7 @@ std::vector<SampleNormal> estimateNormals(const Hierarchy &h, const std::vector<
         PcaAccumulator acc(v.q);
         if (k == 0 || v.count <= k) {
           // Every neighbour: the sums straight from the scan, no neighbour list.
-          for (std::size_t t = 0; t < v.count; ++t) acc.add(&v.xyz[3 * std::size_t(v.inside[t])]);
+          acc.addWithin(v.xyz, v.inside, v.d2, v.count, INFINITY);  // every one is within the radius
         } else {
           // (distance, index) pairs: ties resolve by index, so the neighbourhood is deterministic.
           nb.clear();

@@ -142,8 +142,7 @@ std::vector<SampleNormal> estimateNormalsRefined(const Hierarchy &h, const std::
     sweep(fine_set, round, radius, [&](std::uint32_t i, const BallView &v, std::vector<double> &) {
       const double r2 = rho[i] * rho[i];
       PcaAccumulator acc(v.q);
-      for (std::size_t t = 0; t < v.count; ++t)
-        if (v.d2[t] < r2) acc.add(&v.xyz[3 * std::size_t(v.inside[t])]);
+      acc.addWithin(v.xyz, v.inside, v.d2, v.count, r2);
       // Too few neighbours: nothing is chosen and only the limit stops growth, whatever the PCA says (a
       // neighbourhood only gains points as it grows, so no earlier round chose one either), so it is not solved.
       // Most first rounds at fine levels are such: a footprint of a few centimetres holds a short piece of one line.

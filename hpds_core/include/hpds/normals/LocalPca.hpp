@@ -6,6 +6,7 @@
 #pragma once
 
 #include <cstddef>
+#include <cstdint>
 
 namespace hpds {
 
@@ -39,6 +40,24 @@ class PcaAccumulator {
     s_[0] += w * x, s_[1] += w * y, s_[2] += w * z;
     ss_[0] += w * x * x, ss_[1] += w * x * y, ss_[2] += w * x * z, ss_[3] += w * y * y, ss_[4] += w * y * z,
         ss_[5] += w * z * z;
+  }
+  /// add(xyz + 3 * slot[t]) for every t < count with d2[t] < r2, in order: the same sums, bit for bit, kept in
+  /// registers through the loop (add() stores nine sums a point; in the normal sweeps that was a sixth of their time).
+  void addWithin(const double *xyz, const std::uint32_t *slot, const double *d2, std::size_t count, double r2) {
+    double s0 = s_[0], s1 = s_[1], s2 = s_[2];
+    double q0 = ss_[0], q1 = ss_[1], q2 = ss_[2], q3 = ss_[3], q4 = ss_[4], q5 = ss_[5];
+    std::size_t n = n_;
+    for (std::size_t t = 0; t < count; ++t) {
+      if (!(d2[t] < r2)) continue;
+      const double *p = xyz + 3 * std::size_t(slot[t]);
+      const double x = p[0] - ref_[0], y = p[1] - ref_[1], z = p[2] - ref_[2];
+      ++n;
+      s0 += x, s1 += y, s2 += z;
+      q0 += x * x, q1 += x * y, q2 += x * z, q3 += y * y, q4 += y * z, q5 += z * z;
+    }
+    s_[0] = s0, s_[1] = s1, s_[2] = s2;
+    ss_[0] = q0, ss_[1] = q1, ss_[2] = q2, ss_[3] = q3, ss_[4] = q4, ss_[5] = q5;
+    n_ = n;
   }
   [[nodiscard]] std::size_t count() const { return n_; }
   /// Eigen-decomposition of the covariance; `accurate` uses Eigen's iterative solver, else its closed form.
