@@ -21,6 +21,10 @@
 #include <cstdint>
 #include <vector>
 
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
+
 namespace hpds {
 
 /// Positions of a point set: element i is at base + 3 * index[i] (index null: base + 3 * i).
@@ -107,15 +111,39 @@ void BallGrid::visit(std::size_t begin, std::size_t end, Fn &&fn, std::size_t mi
       const double *q = same_ ? &pos[3 * std::size_t(k)] : &qpos_[3 * std::size_t(k)];
       const double qx = q[0], qy = q[1], qz = q[2];
       std::size_t m = 0;
-      for (int col = 0; col < 9; ++col)
-        for (std::uint32_t j = rb[col]; j < re[col]; ++j) {
+      for (int col = 0; col < 9; ++col) {
+        std::uint32_t j = rb[col];
+#if defined(__SSE2__)
+        // Two slots at a time: their six coordinates are three 16-byte loads, and every sum below is the scalar
+        // loop's, in its order ((x^2 + y^2) + z^2), so the distances are the same bits.
+        const __m128d qxy = _mm_set_pd(qy, qx), qzx = _mm_set_pd(qx, qz), qyz = _mm_set_pd(qz, qy);
+        const __m128d lim = _mm_set1_pd(r2);
+        for (; j + 1 < re[col]; j += 2) {
+          const double *p = pos + 3 * std::size_t(j);
+          const __m128d u = _mm_sub_pd(_mm_loadu_pd(p), qxy);      // x0 y0
+          const __m128d v = _mm_sub_pd(_mm_loadu_pd(p + 2), qzx);  // z0 x1
+          const __m128d w = _mm_sub_pd(_mm_loadu_pd(p + 4), qyz);  // y1 z1
+          const __m128d sa = _mm_mul_pd(u, u), sb = _mm_mul_pd(v, v), sc = _mm_mul_pd(w, w);
+          const __m128d xx = _mm_shuffle_pd(sa, sb, 2), yy = _mm_shuffle_pd(sa, sc, 1), zz = _mm_shuffle_pd(sb, sc, 2);
+          const __m128d d = _mm_add_pd(_mm_add_pd(xx, yy), zz);
+          const int kept = _mm_movemask_pd(_mm_cmplt_pd(d, lim));
+          in[m] = j;  // branch-free compaction: the slot is kept only if the test passes
+          _mm_store_sd(&dd[m], d);
+          m += kept & 1;
+          in[m] = j + 1;
+          _mm_storeh_pd(&dd[m], d);
+          m += kept >> 1;
+        }
+#endif
+        for (; j < re[col]; ++j) {
           const double *p = pos + 3 * std::size_t(j);
           const double ax = p[0] - qx, ay = p[1] - qy, az = p[2] - qz;
           const double d = ax * ax + ay * ay + az * az;
-          in[m] = j;  // branch-free compaction: the slot is kept only if the test passes
+          in[m] = j;
           dd[m] = d;
           m += d < r2 ? 1 : 0;
         }
+      }
       fn(std::size_t(qorder_[k]), BallView{q, pos, pidx_.data(), in, dd, m});
     }
   }
