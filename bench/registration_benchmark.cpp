@@ -182,18 +182,19 @@ Prepared prepare(const PointBuffer &frame, std::uint64_t seed) {
   p.cell_size = h.cellSize();
   for (int d = kCoarsest; d <= kFinest; ++d) {
     p.hpds[d] = h.levels(d, &p.hpds_seconds[d]);
-    p.hpds_planes[d] = p.hpds[d];
-    for (std::size_t i = 0; i < p.hpds[d].xyz.size(); ++i) {
-      const Eigen::Vector3d &n = p.hpds[d].normal[i];
-      if (n.allFinite())
-        p.hpds_planes[d].covariance[i] = Eigen::Matrix3d::Identity() - (1.0 - kEpsilon) * n * n.transpose();
-    }
-    p.hpds_own_planes[d] = p.hpds[d];
-    for (std::size_t i = 0; i < p.hpds[d].xyz.size(); ++i) {
-      const Eigen::Vector3d &n = p.hpds[d].normal[i];
-      if (n.allFinite() && p.hpds[d].plane_like[i])
-        p.hpds_own_planes[d].covariance[i] = Eigen::Matrix3d::Identity() - (1.0 - kEpsilon) * n * n.transpose();
-    }
+    // The samples' covariances with the output normal's plane: for every sample with a normal, or only where the
+    // covariance is a plane (the others keep the identity).
+    auto withOwnPlanes = [&](bool only_plane_like) {
+      SampledCloud c = p.hpds[d];
+      for (std::size_t i = 0; i < c.xyz.size(); ++i) {
+        const Eigen::Vector3d &n = c.normal[i];
+        if (n.allFinite() && (!only_plane_like || c.plane_like[i]))
+          c.covariance[i] = Eigen::Matrix3d::Identity() - (1.0 - kEpsilon) * n * n.transpose();
+      }
+      return c;
+    };
+    p.hpds_planes[d] = withOwnPlanes(false);
+    p.hpds_own_planes[d] = withOwnPlanes(true);
     const std::size_t n = p.hpds[d].xyz.size();
     p.voxel[d] = voxelCentroidsAtCount(points, n, kCountTolerance);
     p.random[d] = randomPerVoxelAtCount(points, n, kCountTolerance, seed + static_cast<std::uint64_t>(d));

@@ -79,6 +79,29 @@ void orientTowardViewpoints(const Hierarchy &h, const std::vector<SampleId> &ids
   }, /*grain=*/std::size_t(1) << 15);
 }
 
+namespace {
+/// The samples of `candidates` (increasing ids) inside the box around `queries` widened by r, into `inside`, and a
+/// BallGrid of radius r over them for the queries; usually the queries are exactly the candidates (all output
+/// samples), and then one sort serves both. `queries` must not be empty.
+BallGrid gridAround(const Hierarchy &h, const std::vector<SampleId> &candidates, const std::vector<SampleId> &queries,
+                    double r, std::vector<SampleId> &inside) {
+  double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+  for (SampleId id : queries) {
+    const double *p = h.position(id);
+    for (int a = 0; a < 3; ++a) lo[a] = std::min(lo[a], p[a] - r), hi[a] = std::max(hi[a], p[a] + r);
+  }
+  inside.clear();
+  for (SampleId id : candidates) {
+    const double *p = h.position(id);
+    if (p[0] >= lo[0] && p[0] <= hi[0] && p[1] >= lo[1] && p[1] <= hi[1] && p[2] >= lo[2] && p[2] <= hi[2])
+      inside.push_back(id);
+  }
+  const double *base = h.position(0);  // a query exists, so the position array does
+  const PointSet points{base, inside.data(), inside.size()};
+  return BallGrid(points, inside == queries ? points : PointSet{base, queries.data(), queries.size()}, r);
+}
+}  // namespace
+
 std::vector<SampleNormal> estimateNormals(const Hierarchy &h, const std::vector<SampleId> &ids,
                                           const NormalParams &params, std::vector<LocalPca> *neighbourhoods) {
   if (neighbourhoods) neighbourhoods->assign(ids.size(), LocalPca{});
@@ -98,27 +121,9 @@ std::vector<SampleNormal> estimateNormals(const Hierarchy &h, const std::vector<
   if (params.radius > 0.0) {
     // Fixed radius: the union samples of levels 0..level near the queried ids and the queries, both sorted by cell
     // once (BallGrid); queries of one cell share the search of their 27 cells, and each is one pass over them.
-    double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
-    for (SampleId id : ids) {
-      const double *p = h.position(id);
-      for (int a = 0; a < 3; ++a) {
-        lo[a] = std::min(lo[a], p[a] - params.radius);
-        hi[a] = std::max(hi[a], p[a] + params.radius);
-      }
-    }
     // Candidates in increasing id order (ties of the k nearest resolve by this index).
-    std::vector<SampleId> inside = h.samplesUpTo(level);
-    inside.erase(std::remove_if(inside.begin(), inside.end(),
-                                [&](SampleId id) {
-                                  const double *p = h.position(id);
-                                  return !(p[0] >= lo[0] && p[0] <= hi[0] && p[1] >= lo[1] && p[1] <= hi[1] &&
-                                           p[2] >= lo[2] && p[2] <= hi[2]);
-                                }),
-                 inside.end());
-    // Usually the queries are exactly the candidates (all output samples): then one sort serves both.
-    const double *base = h.position(0);
-    const PointSet points{base, inside.data(), inside.size()};
-    const BallGrid grid(points, inside == ids ? points : PointSet{base, ids.data(), ids.size()}, params.radius);
+    std::vector<SampleId> inside;
+    const BallGrid grid = gridAround(h, h.samplesUpTo(level), ids, params.radius, inside);
     const std::size_t k = params.k > 0 ? static_cast<std::size_t>(params.k) : 0;
     const std::size_t min_n = static_cast<std::size_t>(std::max(params.min_neighbors, 0));
     parallelFor(grid.cellCount(), params.threads, [&](std::size_t b, std::size_t e) {
@@ -150,28 +155,15 @@ std::vector<SampleNormal> estimateNormals(const Hierarchy &h, const std::vector<
   const double max_radius = 2.0 * h.cellSize();
   const std::size_t k = static_cast<std::size_t>(std::max(params.k, 0));
   const std::vector<SampleId> all = h.samplesUpTo(level);  // increasing ids: (distance, index) ties resolve by id
-  const double *base = all.empty() ? nullptr : h.position(0);
   std::vector<std::uint32_t> open(ids.size());  // positions in ids of the queries still without k neighbours
   for (std::size_t i = 0; i < ids.size(); ++i) open[i] = static_cast<std::uint32_t>(i);
   std::vector<SampleId> inside, queries;
   std::vector<std::uint8_t> resolved;
-  for (double r = 2.0 * h.radius(level); !open.empty() && base; r *= 2.0) {
+  for (double r = 2.0 * h.radius(level); !open.empty() && !all.empty(); r *= 2.0) {
     const bool last = r >= max_radius;
-    double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
     queries.clear();
-    for (std::uint32_t i : open) {
-      queries.push_back(ids[i]);
-      const double *p = h.position(ids[i]);
-      for (int a = 0; a < 3; ++a) lo[a] = std::min(lo[a], p[a] - r), hi[a] = std::max(hi[a], p[a] + r);
-    }
-    inside.clear();
-    for (SampleId id : all) {
-      const double *p = h.position(id);
-      if (p[0] >= lo[0] && p[0] <= hi[0] && p[1] >= lo[1] && p[1] <= hi[1] && p[2] >= lo[2] && p[2] <= hi[2])
-        inside.push_back(id);
-    }
-    const PointSet points{base, inside.data(), inside.size()};
-    const BallGrid grid(points, inside == queries ? points : PointSet{base, queries.data(), queries.size()}, r);
+    for (std::uint32_t i : open) queries.push_back(ids[i]);
+    const BallGrid grid = gridAround(h, all, queries, r, inside);
     resolved.assign(open.size(), 0);
     parallelFor(grid.cellCount(), params.threads, [&](std::size_t b, std::size_t e) {
       std::vector<std::pair<double, std::uint32_t>> nb;

@@ -35,21 +35,36 @@ std::vector<SampleCovariance> planeCovariances(const std::vector<SampleNormal> &
   return out;
 }
 
-std::vector<SampleCovariance> sampleCovariances(const std::vector<SampleNormal> &normals,
-                                               const std::vector<LocalPca> &neighbourhoods, double epsilon,
-                                               double line_ratio) {
+namespace {
+/// The one rule behind both overloads: no normal, NaN; a line-like neighbourhood, the identity; else the plane of
+/// `plane` when it is given and valid, of the normal otherwise.
+std::vector<SampleCovariance> covariancesFor(const std::vector<SampleNormal> &normals,
+                                             const std::vector<LocalPca> &neighbourhoods,
+                                             const std::vector<SampleNormal> *plane, double epsilon,
+                                             double line_ratio) {
   if (normals.size() != neighbourhoods.size())
     throw std::invalid_argument("sampleCovariances: one neighbourhood per normal");
+  if (plane && plane->size() != normals.size())
+    throw std::invalid_argument("sampleCovariances: one plane normal per normal");
   std::vector<SampleCovariance> out;
   out.reserve(normals.size());
   for (std::size_t i = 0; i < normals.size(); ++i) {
     const LocalPca &pca = neighbourhoods[i];
     if (normals[i].valid && pca.l1 < line_ratio * pca.l2)
       out.push_back(SampleCovariance{{1.0f, 0.0f, 0.0f, 1.0f, 0.0f, 1.0f}, true});
+    else if (normals[i].valid && plane && (*plane)[i].valid)
+      out.push_back(planeCovariance((*plane)[i], epsilon));
     else
       out.push_back(planeCovariance(normals[i], epsilon));
   }
   return out;
+}
+}  // namespace
+
+std::vector<SampleCovariance> sampleCovariances(const std::vector<SampleNormal> &normals,
+                                               const std::vector<LocalPca> &neighbourhoods, double epsilon,
+                                               double line_ratio) {
+  return covariancesFor(normals, neighbourhoods, nullptr, epsilon, line_ratio);
 }
 
 std::vector<SampleCovariance> sampleCovariances(const std::vector<SampleNormal> &normals,
@@ -62,15 +77,7 @@ std::vector<SampleCovariance> sampleCovariances(const std::vector<SampleNormal> 
                                                const std::vector<LocalPca> &neighbourhoods,
                                                const std::vector<SampleNormal> &plane_normals, double epsilon,
                                                double line_ratio) {
-  if (plane_normals.size() != normals.size())
-    throw std::invalid_argument("sampleCovariances: one plane normal per normal");
-  std::vector<SampleCovariance> out = sampleCovariances(normals, neighbourhoods, epsilon, line_ratio);
-  for (std::size_t i = 0; i < out.size(); ++i) {
-    const LocalPca &pca = neighbourhoods[i];
-    const bool plane = normals[i].valid && !(pca.l1 < line_ratio * pca.l2);
-    if (plane && plane_normals[i].valid) out[i] = planeCovariance(plane_normals[i], epsilon);
-  }
-  return out;
+  return covariancesFor(normals, neighbourhoods, &plane_normals, epsilon, line_ratio);
 }
 
 std::vector<SampleCovariance> estimateCovariances(const Hierarchy &hierarchy, const std::vector<SampleId> &ids,
