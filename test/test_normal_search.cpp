@@ -239,6 +239,69 @@ TEST(FrameGridIndex, AnyWithinAtTheRadiusEdgeFarFromTheOriginMatchesBruteForce) 
   EXPECT_GT(outside, 10000u);
 }
 
+/// viaGrid over points sorted ahead (BallGridPoints over the box lo..hi).
+std::vector<Found> viaSortedAhead(const BallGridPoints &sorted, const PointSet &points, const PointSet &queries,
+                                  std::size_t chunks) {
+  std::vector<Found> out(queries.size);
+  const BallGrid grid(sorted, queries);
+  const std::size_t n = grid.cellCount(), step = std::max<std::size_t>(1, (n + chunks - 1) / chunks);
+  for (std::size_t b = 0; b < n; b += step)
+    grid.visit(b, std::min(n, b + step), [&](std::size_t i, const BallView &v) {
+      Found &f = out[i];
+      ++f.calls;
+      for (std::size_t t = 0; t < v.count; ++t) {
+        const std::uint32_t slot = v.inside[t];
+        f.points.push_back(v.point[slot]);
+        f.d2.push_back(v.d2[t]);
+        for (int a = 0; a < 3; ++a) EXPECT_EQ(v.xyz[3 * std::size_t(slot) + a], points.at(v.point[slot])[a]);
+      }
+    });
+  return out;
+}
+
+TEST(BallGrid, PointsSortedAheadOverABoxMatchBruteForce) {
+  // The point side built before the queries are known (the pipeline's averaging grids): over a box wider than the
+  // points, queries inside it find exactly their neighbours, in one order whatever the chunks; queries outside it
+  // are never visited; one sorted point side serves several query sets.
+  std::mt19937_64 rng(21);
+  const std::vector<double> xyz = clusteredPoints(rng, 30, 150, -20.0, 20.0, 0.3, 0.2, 40);
+  const PointSet points{xyz.data(), nullptr, xyz.size() / 3};
+  const double lo[3] = {-25.0, -25.0, -10.0}, hi[3] = {25.0, 25.0, 10.0}, radius = 0.4;
+  const BallGridPoints sorted(points, radius, lo, hi);
+  EXPECT_EQ(sorted.radius(), radius);
+  EXPECT_GT(sorted.memUsage(), 0u);
+  std::uniform_int_distribution<std::size_t> pick(0, points.size - 1);
+  std::normal_distribution<double> g(0.0, 0.2);
+  for (int set = 0; set < 2; ++set) {
+    std::vector<double> qxyz;
+    for (int i = 0; i < 400; ++i) {
+      const double *p = points.at(pick(rng));
+      qxyz.insert(qxyz.end(), {p[0] + g(rng), p[1] + g(rng), p[2] + g(rng)});
+    }
+    qxyz.insert(qxyz.end(), {24.9, -24.9, 9.9});   // inside the box, far from every point
+    qxyz.insert(qxyz.end(), {30.0, 0.0, 0.0});     // outside the box
+    qxyz.insert(qxyz.end(), {NAN, 0.0, 0.0});      // not finite
+    const PointSet queries{qxyz.data(), nullptr, qxyz.size() / 3};
+    const auto once = viaSortedAhead(sorted, points, queries, 1), split = viaSortedAhead(sorted, points, queries, 6);
+    for (std::size_t i = 0; i + 2 < queries.size; ++i) {
+      ASSERT_EQ(once[i].calls, 1) << "query " << i;
+      ASSERT_EQ(once[i].points, split[i].points);
+      std::vector<std::uint32_t> got = once[i].points;
+      std::sort(got.begin(), got.end());
+      ASSERT_EQ(got, bruteForce(points, queries.at(i), radius)) << "query " << i;
+    }
+    EXPECT_TRUE(once[queries.size - 3].points.empty());
+    EXPECT_EQ(once[queries.size - 2].calls, 0);
+    EXPECT_EQ(once[queries.size - 1].calls, 0);
+  }
+  // A box that is not one, or a radius that is not positive and finite: nothing is visited.
+  const double nan_lo[3] = {NAN, 0.0, 0.0}, inverted_hi[3] = {-30.0, 25.0, 10.0};
+  const PointSet one{xyz.data(), nullptr, 1};
+  EXPECT_EQ(BallGrid(BallGridPoints(points, radius, nan_lo, hi), one).cellCount(), 0u);
+  EXPECT_EQ(BallGrid(BallGridPoints(points, radius, lo, inverted_hi), one).cellCount(), 0u);
+  EXPECT_EQ(BallGrid(BallGridPoints(points, 0.0, lo, hi), one).cellCount(), 0u);
+}
+
 TEST(BallGrid, EmptyDegenerateAndOutOfRangeInputs) {
   const std::vector<double> one = {1.0, 2.0, 3.0};
   // No points: every query is visited with no neighbours.

@@ -18,6 +18,7 @@
 #include "HierarchyTestSupport.hpp"
 #include "hpds/sampling/Hierarchy.hpp"
 #include "normals/CellCentroids.hpp"
+#include "normals/RefinedNormals.hpp"
 
 namespace hpds {
 namespace {
@@ -224,6 +225,90 @@ TEST(CellCentroids, MatchBruteForceInCellOrder) {
   expectCentroidsMatch(xyz, all, 1.0 / 32.0);
   EXPECT_TRUE(cellCentroids(xyz.data(), all.data(), 0, 0.1).empty());
   EXPECT_TRUE(cellCentroids(xyz.data(), all.data(), all.size(), 0.0).empty());
+}
+
+TEST(CellCentroids, BoxHoldsEveryKeptPoint) {
+  std::mt19937_64 rng(6);
+  std::uniform_real_distribution<double> u(-40.0, 40.0);
+  std::vector<double> xyz;
+  for (int i = 0; i < 5000; ++i) xyz.insert(xyz.end(), {u(rng), u(rng), 0.1 * u(rng)});
+  xyz.insert(xyz.end(), {NAN, 0.0, 0.0});
+  std::vector<std::uint32_t> all(xyz.size() / 3);
+  std::iota(all.begin(), all.end(), 0u);
+  double box[6];
+  const double edge = 0.05;
+  (void)cellCentroids(xyz.data(), all.data(), all.size(), edge, box);
+  for (std::size_t i = 0; i + 1 < all.size(); ++i)
+    for (int a = 0; a < 3; ++a) {
+      ASSERT_LT(box[a], xyz[3 * i + a]);
+      ASSERT_GT(box[3 + a], xyz[3 * i + a]);
+    }
+  for (int a = 0; a < 3; ++a) EXPECT_LE(box[3 + a] - box[a], 80.0 * (a == 2 ? 0.1 : 1.0) + 3.0 * edge + 1e-9);
+  // The wide path (a point 2^30 cells away) has no box.
+  xyz.insert(xyz.end(), {1e9, 0.0, 0.0});
+  all.push_back(static_cast<std::uint32_t>(all.size()));
+  (void)cellCentroids(xyz.data(), all.data(), all.size(), edge, box);
+  for (double v : box) EXPECT_TRUE(std::isnan(v));
+}
+
+TEST(RefinedNormals, AveragingGridsSortedAheadDoNotChangeTheNormals) {
+  // The pipeline sorts the averaging points for the first search radii while a frame is inserted, as many as are
+  // ready when the insertion ends; the rest are sorted over the same box when needed. However many were ready, and
+  // whatever the thread count, the normals and their neighbourhoods are the same bits.
+  std::mt19937_64 rng(8);
+  std::uniform_real_distribution<double> u(0.0, 4.0);
+  std::normal_distribution<double> noise(0.0, 0.01);
+  std::vector<double> xyz;
+  for (int i = 0; i < 20000; ++i) {
+    const double x = u(rng), y = u(rng);
+    // A floor with sparse scan lines far out (footprints grow over several radii) and a wall.
+    if (i % 5 == 0) xyz.insert(xyz.end(), {4.0 + 0.5 * x, std::floor(y * 2.0) * 0.7, noise(rng)});
+    else if (i % 5 == 1) xyz.insert(xyz.end(), {x, 4.0 + noise(rng), y});
+    else xyz.insert(xyz.end(), {x, y, noise(rng)});
+  }
+  const Hierarchy h = build(xyz, 4, 3);
+  const std::vector<SampleId> ids = h.samplesUpTo(3);
+  NormalParams p = params(3, 10, 0.0);
+  p.neighborhood_level_offset = 2;
+  p.max_growth = 8.0;
+  std::vector<std::uint32_t> all(xyz.size() / 3);
+  std::iota(all.begin(), all.end(), 0u);
+  double box[6];
+  const std::vector<double> centroids = cellCentroids(xyz.data(), all.data(), all.size(), h.edge(3) / 4.0, box);
+  auto gridsWith = [&](std::size_t built) {
+    AveragingGrids g;
+    g.radii = refinedSearchRadii(h, p);
+    std::copy(box, box + 3, g.lo);
+    std::copy(box + 3, box + 6, g.hi);
+    g.by_radius.resize(g.radii.size());
+    const PointSet points{centroids.data(), nullptr, centroids.size() / 3};
+    for (std::size_t r = 0; r < std::min(built, g.radii.size()); ++r)
+      g.by_radius[r] = std::make_unique<BallGridPoints>(points, g.radii[r], g.lo, g.hi);
+    return g;
+  };
+  std::vector<LocalPca> ref_pca(ids.size());
+  const AveragingGrids none = gridsWith(0);
+  ASSERT_GE(none.radii.size(), 3u);
+  const std::vector<SampleNormal> ref = estimateNormalsRefined(h, ids, p, &centroids, &ref_pca, &none);
+  std::size_t valid = 0;
+  for (const SampleNormal &n : ref) valid += n.valid ? 1 : 0;
+  EXPECT_GT(valid, ids.size() * 9 / 10);
+  for (std::size_t built : {std::size_t(1), std::size_t(2), none.radii.size()})
+    for (int threads : {1, 2}) {
+      p.threads = threads;
+      const AveragingGrids g = gridsWith(built);
+      std::vector<LocalPca> pca(ids.size());
+      const std::vector<SampleNormal> got = estimateNormalsRefined(h, ids, p, &centroids, &pca, &g);
+      ASSERT_EQ(got.size(), ref.size());
+      for (std::size_t i = 0; i < ref.size(); ++i) {
+        ASSERT_EQ(got[i].valid, ref[i].valid) << "sample " << i << ", " << built << " built ahead";
+        if (!ref[i].valid) continue;
+        ASSERT_EQ(std::memcmp(got[i].normal, ref[i].normal, sizeof ref[i].normal), 0) << "sample " << i;
+        ASSERT_EQ(got[i].curvature, ref[i].curvature);
+        ASSERT_EQ(pca[i].l0, ref_pca[i].l0);
+        ASSERT_EQ(pca[i].normal[2], ref_pca[i].normal[2]);
+      }
+    }
 }
 
 TEST(RefinedNormals, ScanModeNormalsArePcaOfTheFramesCellCentroids) {

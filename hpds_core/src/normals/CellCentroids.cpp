@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 #include "sampling/KeyRadixSort.hpp"
 
@@ -61,7 +62,9 @@ std::vector<double> wideCentroids(const double *xyz, const std::uint32_t *indice
 
 }  // namespace
 
-std::vector<double> cellCentroids(const double *xyz, const std::uint32_t *indices, std::size_t count, double edge) {
+std::vector<double> cellCentroids(const double *xyz, const std::uint32_t *indices, std::size_t count, double edge,
+                                  double *box) {
+  if (box) std::fill(box, box + 6, std::numeric_limits<double>::quiet_NaN());
   if (count == 0 || !(edge > 0.0) || !std::isfinite(edge)) return {};
   const double inv = 1.0 / edge;
   // Cell coordinates of every point, floor(p / edge) by truncation and a correction below zero (baseline x86-64 has
@@ -89,6 +92,11 @@ std::vector<double> cellCentroids(const double *xyz, const std::uint32_t *indice
     pos[kept++] = static_cast<std::uint32_t>(i);
   }
   if (kept == 0) return {};
+  if (box)  // a cell of margin on each side absorbs the round-off of p * inv
+    for (int a = 0; a < 3; ++a) {
+      box[a] = (static_cast<double>(lo[a]) - 1.0) * edge;
+      box[3 + a] = (static_cast<double>(hi[a]) + 2.0) * edge;
+    }
   int bits[3];
   for (int a = 0; a < 3; ++a) bits[a] = bitWidth(static_cast<std::uint64_t>(std::int64_t(hi[a]) - lo[a]));
   const int key_bits = bits[0] + bits[1] + bits[2];  // <= 3 * 31

@@ -12,7 +12,9 @@ namespace hpds {
 /// 3 doubles each, in increasing cell order (x-major, z fastest), so the result depends on the point set and its
 /// order only. Points with a non-finite coordinate are left out. Single-threaded; reads only its inputs. Linear
 /// (radix sort) unless the points span 2^21 cells or more on some axis (~65 km at 3 cm): then a comparison sort.
+/// `box`, when given: lo x y z, hi x y z of a box holding every kept point (a few cells wider than their extent), or
+/// NaNs when there is none or the points span too many cells for the linear path.
 [[nodiscard]] std::vector<double> cellCentroids(const double *xyz, const std::uint32_t *indices, std::size_t count,
-                                                double edge);
+                                                double edge, double *box = nullptr);
 
 }  // namespace hpds

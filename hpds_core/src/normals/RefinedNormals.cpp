@@ -10,6 +10,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <optional>
 #include <utility>
 
 #include "hpds/normals/LocalPca.hpp"
@@ -18,9 +19,28 @@
 
 namespace hpds {
 
+std::vector<double> refinedSearchRadii(const Hierarchy &h, const NormalParams &params) {
+  const int level = std::min(params.level, h.maxDepth());
+  const double max_radius = 2.0 * h.cellSize();
+  const double base = params.radius > 0.0 ? params.radius : 2.5 * h.radius(level);
+  std::vector<double> radii;
+  for (double r = base;; r *= 2.0) {
+    radii.push_back(r);
+    if (r >= max_radius) break;
+  }
+  return radii;
+}
+
+std::size_t AveragingGrids::memUsage() const {
+  std::size_t bytes = 0;
+  for (const auto &g : by_radius)
+    if (g) bytes += g->memUsage();
+  return bytes;
+}
+
 std::vector<SampleNormal> estimateNormalsRefined(const Hierarchy &h, const std::vector<SampleId> &ids,
                                                  const NormalParams &params, const std::vector<double> *centroids,
-                                                 std::vector<LocalPca> *neighbourhoods) {
+                                                 std::vector<LocalPca> *neighbourhoods, const AveragingGrids *grids) {
   std::vector<SampleNormal> result(ids.size(), invalidNormal());
   if (ids.empty()) return result;
   const int level = std::min(params.level, h.maxDepth());
@@ -57,11 +77,7 @@ std::vector<SampleNormal> estimateNormalsRefined(const Hierarchy &h, const std::
   // Search radii: one per doubling of the base radius up to twice the level-0 cell edge. A footprint rho is searched
   // with the smallest of them >= rho, all queries of one radius at once (BallGrid), round after round: a query
   // whose footprint doubles waits for the next round. Each query's result depends only on its own neighbourhoods.
-  std::vector<double> radii;
-  for (double r = base;; r *= 2.0) {
-    radii.push_back(r);
-    if (r >= max_radius) break;
-  }
+  const std::vector<double> radii = refinedSearchRadii(h, params);
   auto gridFor = [&](double rho) {
     std::size_t g = 0;
     while (radii[g] < rho && g + 1 < radii.size()) ++g;
@@ -71,7 +87,17 @@ std::vector<SampleNormal> estimateNormalsRefined(const Hierarchy &h, const std::
   auto sweep = [&](const PointSet &points, const std::vector<std::uint32_t> &subset, double radius, auto &&fn) {
     std::vector<SampleId> qids(subset.size());
     for (std::size_t t = 0; t < subset.size(); ++t) qids[t] = ids[subset[t]];
-    const BallGrid grid(points, PointSet{hbase, qids.data(), qids.size()}, radius);
+    const PointSet queries{hbase, qids.data(), qids.size()};
+    std::optional<BallGridPoints> sorted_here;
+    const BallGridPoints *ahead = nullptr;
+    if (grids && centroids && points == fine_set) {
+      for (std::size_t g = 0; g < grids->radii.size() && g < grids->by_radius.size(); ++g)
+        if (grids->radii[g] == radius && grids->by_radius[g]) ahead = grids->by_radius[g].get();
+      if (!ahead) ahead = &sorted_here.emplace(points, radius, grids->lo, grids->hi);
+    }
+    std::optional<BallGrid> grid_storage;
+    const BallGrid &grid =
+        ahead ? grid_storage.emplace(*ahead, queries) : grid_storage.emplace(points, queries, radius);
     // The later rounds hold few queries (HDL-32: 1 578 and 534 of 8 873) with wide footprints, microseconds each:
     // threads from 32 cells on, and 8 chunks per thread against the uneven cost (2 threads, HDL-32: those rounds
     // 0.82 -> 0.50 and 0.75 -> 0.51 ms against a thread per 256 cells in 4 chunks each).

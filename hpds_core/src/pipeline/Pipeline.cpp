@@ -1,6 +1,7 @@
 #include "hpds/pipeline/Pipeline.hpp"
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <cstring>
@@ -20,6 +21,9 @@
 namespace hpds {
 
 namespace {
+
+/// Search radii of the scan-mode normals sorted ahead on the second thread (see addFrame).
+constexpr std::size_t kAheadRadii = 4;
 double secondsSince(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 }
@@ -128,19 +132,39 @@ FrameResult Pipeline::addFrame(const Frame &frame) {
 
   // 5. Scan-mode normals average the frame's points per cell of the fine level instead of that many more levels of
   //    the hierarchy: those centroids only need the points, so with a second thread they are made during step 6.
+  //    Their search grids of the first radii are sorted there too, until the insertion is done (the normals sort
+  //    the others over the same box, so the output does not depend on how many were ready).
   std::thread fine_worker;
   std::exception_ptr fine_error;
+  std::atomic<bool> inserted_all{false};
   fine_points_.clear();
+  fine_grids_.reset();
   if (fine_level_ >= 0) {
-    auto centroids = [this, &fine_error] {
+    const bool ahead = resolveThreads(config_.threads) > 1;
+    auto centroids = [this, &fine_error, &inserted_all, ahead] {
       try {
+        double box[6];
         fine_points_ = cellCentroids(xyz_.data(), candidates_.data(), candidates_.size(),
-                                     cellEdge(config_.hierarchy.cell_size, fine_level_));
+                                     cellEdge(config_.hierarchy.cell_size, fine_level_), box);
+        if (!std::isfinite(box[0])) return;
+        auto grids = std::make_shared<AveragingGrids>();
+        grids->radii = refinedSearchRadii(hierarchy_, normalParamsFor(config_, output_level_));
+        std::copy(box, box + 3, grids->lo);
+        std::copy(box + 3, box + 6, grids->hi);
+        grids->by_radius.resize(grids->radii.size());
+        const PointSet points{fine_points_.data(), nullptr, fine_points_.size() / 3};
+        // The first rounds hold most queries; later radii are few queries over as many points, and held until the
+        // next frame, so at most kAheadRadii of them.
+        for (std::size_t g = 0; ahead && g < std::min(grids->radii.size(), kAheadRadii); ++g) {
+          if (inserted_all.load(std::memory_order_relaxed)) break;
+          grids->by_radius[g] = std::make_unique<BallGridPoints>(points, grids->radii[g], grids->lo, grids->hi);
+        }
+        fine_grids_ = std::move(grids);
       } catch (...) {
         fine_error = std::current_exception();
       }
     };
-    if (resolveThreads(config_.threads) > 1)
+    if (ahead)
       fine_worker = std::thread(centroids);
     else
       centroids();
@@ -162,9 +186,11 @@ FrameResult Pipeline::addFrame(const Frame &frame) {
   try {
     inserted = hierarchy_.insert(batch);
   } catch (...) {
+    inserted_all = true;
     if (fine_worker.joinable()) fine_worker.join();
     throw;
   }
+  inserted_all = true;
   result.seconds_insert = secondsSince(t_insert);
   if (fine_worker.joinable()) fine_worker.join();
   if (fine_error) std::rethrow_exception(fine_error);
@@ -181,7 +207,8 @@ FrameResult Pipeline::addFrame(const Frame &frame) {
 
 std::size_t Pipeline::memUsage() const {
   return hierarchy_.memUsage() + hierarchy_.scratchBytes() + xyz_.capacity() * sizeof(double) +
-         candidates_.capacity() * sizeof(std::uint32_t);
+         candidates_.capacity() * sizeof(std::uint32_t) + fine_points_.capacity() * sizeof(double) +
+         (fine_grids_ ? fine_grids_->memUsage() : 0);
 }
 
 void Pipeline::replaceMap(Hierarchy &&map, std::uint32_t next_frame) {
@@ -237,7 +264,13 @@ std::vector<SampleNormal> Pipeline::normals(const std::vector<SampleId> &ids,
   const NormalParams params = normalParamsFor(config_, output_level_);
   if (fine_level_ < 0) return estimateNormals(hierarchy_, ids, params, neighbourhoods);
   if (neighbourhoods) neighbourhoods->assign(ids.size(), LocalPca{});
-  return estimateNormalsRefined(hierarchy_, ids, params, &fine_points_, neighbourhoods);
+  std::vector<SampleNormal> normals =
+      estimateNormalsRefined(hierarchy_, ids, params, &fine_points_, neighbourhoods, fine_grids_.get());
+  // The grids sorted ahead serve the frame's first estimate only (VLS-128: 26 MB held to the next frame otherwise);
+  // a second one sorts over the same box, with the same result.
+  if (fine_grids_)
+    for (auto &g : fine_grids_->by_radius) g.reset();
+  return normals;
 }
 
 PointBuffer Pipeline::makeCloud(const std::vector<SampleId> &ids, bool with_frame_field, double *seconds_normals) const {

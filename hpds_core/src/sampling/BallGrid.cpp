@@ -86,12 +86,57 @@ void sortIntoCells(const PointSet &set, const KeyOf &keyOf, int key_bits, std::v
 }
 }  // namespace
 
-BallGrid::BallGrid(const PointSet &points, const PointSet &queries, double radius) : r2_(radius * radius) {
-  if (!(radius > 0.0) || !std::isfinite(radius) || queries.size == 0) return;
-  same_ = points == queries;
+void BallGridPoints::frame(double radius, const double lo[3], const double hi[3]) {
+  radius_ = radius;
+  r2_ = radius * radius;
   // Cells a hair wider than the radius, so that round-off in the cell computation cannot put a point within the
   // radius two cells away from the query's.
-  const double edge = radius * (1.0 + 1e-8), inv = 1.0 / edge;
+  const double edge = radius * (1.0 + 1e-8);
+  inv_ = 1.0 / edge;
+  // Two cells of margin below and one above: every cell c of a point has c - 1 >= 0 and c + 1 < dims, so the 27
+  // neighbours of a cell are plain key offsets. Keys are linear, x-major and z fastest.
+  std::uint64_t dims[3];
+  for (int a = 0; a < 3; ++a) {
+    origin_[a] = lo[a] - 2.0 * edge;
+    const double top = std::floor((hi[a] - origin_[a]) * inv_) + 2.0;  // largest cell + 2
+    dims[a] = static_cast<std::uint64_t>(std::min(top, static_cast<double>(kAxisCells)));
+    limit_[a] = static_cast<double>(dims[a] - 1);
+  }
+  stride_y_ = dims[2];
+  stride_x_ = dims[1] * dims[2];
+  key_bits_ = bitWidth(dims[0] * stride_x_ - 1);
+  int col = 0;
+  for (std::int64_t dx = -1; dx <= 1; ++dx)
+    for (std::int64_t dy = -1; dy <= 1; ++dy)
+      column_offset_[col++] =
+          static_cast<std::uint64_t>(dx * std::int64_t(stride_x_) + dy * std::int64_t(stride_y_) - 1);
+  framed_ = true;
+}
+
+void BallGridPoints::sortPoints(const PointSet &points) {
+  // Far outliers (beyond 2^21 cells) and non-finite coordinates have no cell. Positive, so truncation is floor.
+  sortIntoCells(points, [this](const double *p, std::uint64_t &key) { return keyOf(p, key); }, key_bits_, pos_, pidx_,
+                ckey_, cstart_);
+  cells_ = ckey_.size();
+  ckey_.insert(ckey_.end(), 3, ~std::uint64_t(0));  // sentinels: above any key (keys stay below 2^63)
+}
+
+BallGridPoints::BallGridPoints(const PointSet &points, double radius, const double lo[3], const double hi[3]) {
+  if (!(radius > 0.0) || !std::isfinite(radius)) return;
+  for (int a = 0; a < 3; ++a)
+    if (!(std::isfinite(lo[a]) && std::isfinite(hi[a]) && lo[a] <= hi[a])) return;
+  frame(radius, lo, hi);
+  sortPoints(points);
+}
+
+std::size_t BallGridPoints::memUsage() const {
+  return pos_.capacity() * sizeof(double) + pidx_.capacity() * sizeof(std::uint32_t) +
+         ckey_.capacity() * sizeof(std::uint64_t) + cstart_.capacity() * sizeof(std::uint32_t);
+}
+
+BallGrid::BallGrid(const PointSet &points, const PointSet &queries, double radius) {
+  if (!(radius > 0.0) || !std::isfinite(radius) || queries.size == 0) return;
+  same_ = points == queries;
   double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
   auto extend = [&](const PointSet &set) {
     for (std::size_t i = 0; i < set.size; ++i) {
@@ -103,43 +148,27 @@ BallGrid::BallGrid(const PointSet &points, const PointSet &queries, double radiu
   extend(points);
   if (!same_) extend(queries);
   if (!(lo[0] <= hi[0])) return;  // nothing finite
-  // Two cells of margin below and one above: every cell c of a point has c - 1 >= 0 and c + 1 < dims, so the 27
-  // neighbours of a cell are plain key offsets. Keys are linear, x-major and z fastest.
-  double origin[3], limit[3];
-  std::uint64_t dims[3];
-  for (int a = 0; a < 3; ++a) {
-    origin[a] = lo[a] - 2.0 * edge;
-    const double top = std::floor((hi[a] - origin[a]) * inv) + 2.0;  // largest cell + 2
-    dims[a] = static_cast<std::uint64_t>(std::min(top, static_cast<double>(kAxisCells)));
-    limit[a] = static_cast<double>(dims[a] - 1);
-  }
-  const std::uint64_t stride_y = dims[2], stride_x = dims[1] * dims[2];
-  const int key_bits = bitWidth(dims[0] * stride_x - 1);
-  // Far outliers (beyond 2^21 cells) and non-finite coordinates have no cell. Positive, so truncation is floor.
-  auto keyOf = [&](const double *p, std::uint64_t &key) {
-    const double fx = (p[0] - origin[0]) * inv, fy = (p[1] - origin[1]) * inv, fz = (p[2] - origin[2]) * inv;
-    if (!(fx >= 1.0 && fx < limit[0] && fy >= 1.0 && fy < limit[1] && fz >= 1.0 && fz < limit[2])) return false;
-    key = static_cast<std::uint64_t>(fx) * stride_x + static_cast<std::uint64_t>(fy) * stride_y +
-          static_cast<std::uint64_t>(fz);
-    return true;
-  };
-  int col = 0;
-  for (std::int64_t dx = -1; dx <= 1; ++dx)
-    for (std::int64_t dy = -1; dy <= 1; ++dy)
-      column_offset_[col++] = static_cast<std::uint64_t>(dx * std::int64_t(stride_x) + dy * std::int64_t(stride_y) - 1);
-
-  sortIntoCells(points, keyOf, key_bits, pos_, pidx_, ckey_, cstart_);
-  cells_ = ckey_.size();
-  ckey_.insert(ckey_.end(), 3, ~std::uint64_t(0));  // sentinels: above any key (keys stay below 2^63)
-
+  own_.frame(radius, lo, hi);
+  own_.sortPoints(points);
   if (same_) {
-    qorder_ = pidx_.data();
-    qcell_key_ = ckey_.data();
-    qcell_start_ = cstart_.data();
-    qcells_ = cells_;
+    qorder_ = own_.pidx_.data();
+    qcell_key_ = own_.ckey_.data();
+    qcell_start_ = own_.cstart_.data();
+    qcells_ = own_.cells_;
     return;
   }
-  sortIntoCells(queries, keyOf, key_bits, qpos_, qorder_own_, qkey_own_, qstart_own_);
+  sortQueries(queries);
+}
+
+BallGrid::BallGrid(const BallGridPoints &points, const PointSet &queries) : pts_(&points) {
+  if (!points.framed_ || queries.size == 0) return;
+  sortQueries(queries);
+}
+
+void BallGrid::sortQueries(const PointSet &queries) {
+  const BallGridPoints &pts = *pts_;
+  sortIntoCells(queries, [&pts](const double *p, std::uint64_t &key) { return pts.keyOf(p, key); }, pts.key_bits_,
+                qpos_, qorder_own_, qkey_own_, qstart_own_);
   qorder_ = qorder_own_.data();
   qcell_key_ = qkey_own_.data();
   qcell_start_ = qstart_own_.data();
@@ -147,30 +176,35 @@ BallGrid::BallGrid(const PointSet &points, const PointSet &queries, double radiu
 }
 
 void BallGrid::initCursors(std::size_t c, std::size_t cursor[9]) const {
-  const std::uint64_t *ckey = ckey_.data();
+  const std::uint64_t *ckey = pts_->ckey_.data();
+  const std::size_t cells = pts_->cells_;
   for (int col = 0; col < 9; ++col)
-    cursor[col] = static_cast<std::size_t>(std::lower_bound(ckey, ckey + cells_, qcell_key_[c] + column_offset_[col]) - ckey);
+    cursor[col] =
+        static_cast<std::size_t>(std::lower_bound(ckey, ckey + cells, qcell_key_[c] + pts_->column_offset_[col]) - ckey);
 }
 
 std::size_t BallGrid::columns(std::size_t c, std::size_t cursor[9], std::uint32_t b[9], std::uint32_t e[9]) const {
   const std::uint64_t key = qcell_key_[c];
-  const std::uint64_t *ckey = ckey_.data();  // followed by 3 sentinels, so ckey[cur + 2] is readable
+  const BallGridPoints &pts = *pts_;
+  const std::uint64_t *ckey = pts.ckey_.data();  // followed by 3 sentinels, so ckey[cur + 2] is readable
+  const std::size_t cells = pts.cells_;
+  const std::uint32_t *cstart = pts.cstart_.data();
   std::size_t total = 0;
   for (int col = 0; col < 9; ++col) {
-    const std::uint64_t lo = key + column_offset_[col], hi = lo + 2;
+    const std::uint64_t lo = key + pts.column_offset_[col], hi = lo + 2;
     std::size_t cur = cursor[col];
     // Forward: usually 0..2 cells (branch-free), else a few more steps or a binary search over a long gap.
     cur += ckey[cur] < lo ? 1 : 0;
     cur += ckey[cur] < lo ? 1 : 0;
     if (ckey[cur] < lo) {
-      if (ckey[cur + 2] < lo) cur = static_cast<std::size_t>(std::lower_bound(ckey + cur + 2, ckey + cells_, lo) - ckey);
+      if (ckey[cur + 2] < lo) cur = static_cast<std::size_t>(std::lower_bound(ckey + cur + 2, ckey + cells, lo) - ckey);
       while (ckey[cur] < lo) ++cur;
     }
     cursor[col] = cur;
     // The column's cells lo..hi are among the next 3 keys (sorted, distinct).
     const std::size_t end = cur + (ckey[cur] <= hi ? 1 : 0) + (ckey[cur + 1] <= hi ? 1 : 0) + (ckey[cur + 2] <= hi ? 1 : 0);
-    b[col] = cstart_[cur];
-    e[col] = cstart_[end];
+    b[col] = cstart[cur];
+    e[col] = cstart[end];
     total += e[col] - b[col];
   }
   return total;

@@ -9,6 +9,8 @@
 //   split among threads.
 // - Points or queries more than 2^21 cells from the data's bounding-box corner on some axis are left out (no
 //   neighbours / never visited), as in FrameGridIndex. Const; visit() may run concurrently on disjoint ranges.
+// - The point side can be sorted ahead, over a box given instead of the data's bounding box (BallGridPoints), and
+//   then serve query sets that lie in that box.
 //
 // Why it is fast: points and queries are both sorted by a linear cell key (x-major, z fastest; LSD radix sort, no
 // hashing). Queries of one cell share the search for the 27 cells around it, which are 9 contiguous runs of the
@@ -49,10 +51,56 @@ struct BallView {
   std::size_t count;            ///< number of neighbours
 };
 
+/// The point side of a BallGrid: the points sorted into cells of edge ~R laid over a box given up front, so that it
+/// can be built before the queries are known (the pipeline builds it while a frame is inserted) and serve several
+/// query sets of that radius. A BallGrid over it only visits queries inside the box. Two of these over the same
+/// points, radius and box visit every query's neighbours in the same order. Const after construction.
+class BallGridPoints {
+ public:
+  /// lo/hi: the box (both corners finite, lo <= hi on every axis); points outside it are left out, as far outliers.
+  BallGridPoints(const PointSet &points, double radius, const double lo[3], const double hi[3]);
+  [[nodiscard]] double radius() const { return radius_; }
+  /// Bytes held.
+  [[nodiscard]] std::size_t memUsage() const;
+
+ private:
+  friend class BallGrid;
+  BallGridPoints() = default;
+  void frame(double radius, const double lo[3], const double hi[3]);
+  /// The cell key of p, false when p has no cell (outside the frame or not finite).
+  bool keyOf(const double *p, std::uint64_t &key) const {
+    const double fx = (p[0] - origin_[0]) * inv_, fy = (p[1] - origin_[1]) * inv_, fz = (p[2] - origin_[2]) * inv_;
+    if (!(fx >= 1.0 && fx < limit_[0] && fy >= 1.0 && fy < limit_[1] && fz >= 1.0 && fz < limit_[2])) return false;
+    key = static_cast<std::uint64_t>(fx) * stride_x_ + static_cast<std::uint64_t>(fy) * stride_y_ +
+          static_cast<std::uint64_t>(fz);
+    return true;
+  }
+  void sortPoints(const PointSet &points);
+
+  double radius_ = 0.0, r2_ = 0.0;
+  bool framed_ = false;  ///< false: no finite box, no cells
+  double origin_[3] = {}, limit_[3] = {}, inv_ = 0.0;
+  std::uint64_t stride_x_ = 0, stride_y_ = 0;
+  int key_bits_ = 0;
+  std::uint64_t column_offset_[9] = {};  // key offset of the (dx, dy) columns' dz = -1 cell
+  // Points sorted by cell: positions and point index by slot; distinct cells (keys, then 3 sentinels) with
+  // the slot of their first point (cells_ + 1 entries).
+  std::vector<double> pos_;  // 3 per slot: a candidate's coordinates share a cache line
+  std::vector<std::uint32_t> pidx_;
+  std::vector<std::uint64_t> ckey_;
+  std::vector<std::uint32_t> cstart_;
+  std::size_t cells_ = 0;
+};
+
 class BallGrid {
  public:
   /// `queries` may be the very same set as `points` (same base, index and size): then one sort serves both.
   BallGrid(const PointSet &points, const PointSet &queries, double radius);
+  /// Over points sorted ahead; `points` must outlive the grid. Queries outside its box are never visited.
+  BallGrid(const BallGridPoints &points, const PointSet &queries);
+  // Holds a pointer to its own point side.
+  BallGrid(const BallGrid &) = delete;
+  BallGrid &operator=(const BallGrid &) = delete;
 
   /// Number of distinct query cells; visit() takes ranges of them (parallelFor over [0, cellCount())).
   [[nodiscard]] std::size_t cellCount() const { return qcell_start_ ? qcells_ : 0; }
@@ -68,16 +116,10 @@ class BallGrid {
   /// the cursors only move forward over ascending query cells.
   std::size_t columns(std::size_t c, std::size_t cursor[9], std::uint32_t b[9], std::uint32_t e[9]) const;
   void initCursors(std::size_t c, std::size_t cursor[9]) const;
+  void sortQueries(const PointSet &queries);
 
-  double r2_ = 0.0;
-  std::uint64_t column_offset_[9] = {};  // key offset of the (dx, dy) columns' dz = -1 cell
-  // Points sorted by cell: positions and point index by slot; distinct cells (keys, then 3 sentinels) with
-  // the slot of their first point (cells_ + 1 entries).
-  std::vector<double> pos_;  // 3 per slot: a candidate's coordinates share a cache line
-  std::vector<std::uint32_t> pidx_;
-  std::vector<std::uint64_t> ckey_;
-  std::vector<std::uint32_t> cstart_;
-  std::size_t cells_ = 0;
+  BallGridPoints own_;                   ///< the point side when built here
+  const BallGridPoints *pts_ = &own_;  ///< the point side in use
   // Queries sorted by cell (the point arrays themselves when the sets are the same): query index and position
   // by sorted position, distinct query cells with their first sorted position.
   bool same_ = false;
@@ -98,8 +140,8 @@ void BallGrid::visit(std::size_t begin, std::size_t end, Fn &&fn, std::size_t mi
   std::vector<double> d2;
   std::size_t cursor[9];
   initCursors(begin, cursor);
-  const double r2 = r2_;
-  const double *pos = pos_.data();
+  const double r2 = pts_->r2_;
+  const double *pos = pts_->pos_.data();
   for (std::size_t c = begin; c < end; ++c) {
     std::uint32_t rb[9], re[9];
     const std::size_t total = columns(c, cursor, rb, re);
@@ -144,7 +186,7 @@ void BallGrid::visit(std::size_t begin, std::size_t end, Fn &&fn, std::size_t mi
           m += d < r2 ? 1 : 0;
         }
       }
-      fn(std::size_t(qorder_[k]), BallView{q, pos, pidx_.data(), in, dd, m});
+      fn(std::size_t(qorder_[k]), BallView{q, pos, pts_->pidx_.data(), in, dd, m});
     }
   }
 }

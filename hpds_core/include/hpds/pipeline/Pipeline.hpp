@@ -11,7 +11,7 @@
 // - Scan mode: every frame is sampled on its own (the hierarchy is cleared first). The normals' finer detail
 //   (normals.neighborhood_level_offset) comes from the frame itself: the centroids of its points per cell of level
 //   output + offset (clamped to max_depth) stand in for the samples of those levels, which are not built for it
-//   (with threads > 1, beside the insertion). Map mode: one persistent
+//   (with threads > 1, beside the insertion, and with them the normals' first search grids). Map mode: one persistent
 //   hierarchy in the fixed frame; earlier samples never move or change level; samples farther than
 //   map.evict_distance from the latest sensor position are evicted before the frame is inserted, and the store is
 //   cut back to map.max_samples (farthest first), so memory is bounded by the cap plus one frame.
@@ -25,6 +25,7 @@
 
 #include <array>
 #include <cstdint>
+#include <memory>
 #include <vector>
 
 #include "hpds/config/Config.hpp"
@@ -34,6 +35,8 @@
 #include "hpds/points/PointBuffer.hpp"
 
 namespace hpds {
+
+struct AveragingGrids;  // internal: the scan-mode normals' search grids
 
 struct FrameCounters {
   std::uint64_t input = 0;            ///< points in the frame
@@ -119,6 +122,8 @@ class Pipeline {
   // points in (-1: the normals read the hierarchy's own levels), and those cell centroids (3 doubles each).
   int fine_level_;
   std::vector<double> fine_points_;
+  // Their search grids, the first radii sorted while the frame is inserted when a second thread is allowed.
+  std::shared_ptr<AveragingGrids> fine_grids_;
   Hierarchy hierarchy_;
   FrameCounters totals_;
   std::uint32_t frames_ = 0;
