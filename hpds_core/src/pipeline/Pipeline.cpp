@@ -141,20 +141,21 @@ FrameResult Pipeline::addFrame(const Frame &frame) {
   fine_grids_.reset();
   if (fine_level_ >= 0) {
     const bool ahead = resolveThreads(config_.threads) > 1;
-    auto centroids = [this, &fine_error, &inserted_all, ahead] {
+    std::vector<double> radii = refinedSearchRadii(hierarchy_, normalParamsFor(config_, output_level_));
+    auto centroids = [this, &fine_error, &inserted_all, ahead, radii = std::move(radii)]() mutable {
       try {
         double box[6];
         fine_points_ = cellCentroids(xyz_.data(), candidates_.data(), candidates_.size(),
                                      cellEdge(config_.hierarchy.cell_size, fine_level_), box);
         if (!std::isfinite(box[0])) return;
         auto grids = std::make_shared<AveragingGrids>();
-        grids->radii = refinedSearchRadii(hierarchy_, normalParamsFor(config_, output_level_));
+        grids->radii = std::move(radii);
         std::copy(box, box + 3, grids->lo);
         std::copy(box + 3, box + 6, grids->hi);
         grids->by_radius.resize(grids->radii.size());
         const PointSet points{fine_points_.data(), nullptr, fine_points_.size() / 3};
-        // The first rounds hold most queries; later radii are few queries over as many points, and held until the
-        // next frame, so at most kAheadRadii of them.
+        // The first rounds hold most queries; a later round is a few queries over as many points, where sorting ahead
+        // saves as much but is less likely to finish in time: at most kAheadRadii of them.
         for (std::size_t g = 0; ahead && g < std::min(grids->radii.size(), kAheadRadii); ++g) {
           if (inserted_all.load(std::memory_order_relaxed)) break;
           grids->by_radius[g] = std::make_unique<BallGridPoints>(points, grids->radii[g], grids->lo, grids->hi);
