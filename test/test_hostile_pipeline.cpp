@@ -155,6 +155,41 @@ TEST(HostilePipeline, CoordinatesAt1e7MetresAreExactOrCounted) {
   EXPECT_EQ(pc.addFrame(frameOf(typedCloud(FieldType::Float64, {{1e30, 0, 0}}))).counters.out_of_range, 1u);
 }
 
+TEST(HostilePipeline, AFarOutlierReturnLeavesTheFramesNormalsAndMapOutput) {
+  // A frame of two walls and a floor plus one glitched return 2 000 km away, below it on x: the normals' and the
+  // map output's neighbour searches address 2^21 cells per axis, and counted from the outlier they held nothing
+  // else (every normal invalid). Every sample but the outlier keeps a valid normal, in scan mode on 1 and 2 threads,
+  // and in map mode the samples the frame hit are still found.
+  std::mt19937_64 rng(4);
+  std::uniform_real_distribution<double> u(-5.0, 5.0);
+  std::vector<std::array<double, 3>> pts;
+  for (int i = 0; i < 6000; ++i) {
+    const double a = u(rng), b = u(rng);
+    pts.push_back(i % 3 == 0 ? std::array<double, 3>{a, b, -1.5} : i % 3 == 1 ? std::array<double, 3>{6.0, a, b}
+                                                                               : std::array<double, 3>{a, 6.0, b});
+  }
+  pts.push_back({-2e6, 1.0, 0.0});
+  for (int threads : {1, 2}) {
+    HpdsConfig c;
+    c.threads = threads;
+    Pipeline p(c);
+    p.addFrame(frameOf(typedCloud(FieldType::Float32, pts)));
+    const std::vector<SampleId> ids = p.outputSamples();
+    const std::vector<SampleNormal> normals = p.normals(ids);
+    std::size_t valid = 0;
+    for (const SampleNormal &n : normals) valid += n.valid ? 1 : 0;
+    EXPECT_GE(valid + 1, ids.size()) << threads << " threads: " << valid << " valid of " << ids.size();
+    EXPECT_GT(ids.size(), 1000u);
+  }
+  HpdsConfig m;
+  m.mode = Mode::Map;
+  m.map.evict_distance = 0.0;
+  Pipeline map(m);
+  map.addFrame(frameOf(typedCloud(FieldType::Float32, pts)));
+  const std::vector<SampleId> hit = map.samplesHitByLastFrame(0, map.outputLevel(), map.hierarchy().radius(map.outputLevel()));
+  EXPECT_EQ(hit.size() + 1, map.outputSamples().size());
+}
+
 TEST(HostilePipeline, TenMillionPointFrameInBoundedTimeAndMemory) {
   // 10 M records of 16 bytes (160 MB) plus the pipeline's per-point scratch; max_depth 2 keeps the hierarchy tiny.
   constexpr std::size_t kPoints = 10'000'000;

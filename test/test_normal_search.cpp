@@ -302,6 +302,56 @@ TEST(BallGrid, PointsSortedAheadOverABoxMatchBruteForce) {
   EXPECT_EQ(BallGrid(BallGridPoints(points, 0.0, lo, hi), one).cellCount(), 0u);
 }
 
+TEST(BallGrid, AFarOutlierBelowTheFrameLeavesTheRestTheirNeighbours) {
+  // One glitched return 10 000 km below a frame on x and y (4e7 cells of 0.25 m): keys reach 2^21 cells per axis,
+  // and a window counted from the low corner held only the outlier (every normal of the frame was invalid). The
+  // window is centred on the points' median there: the frame keeps exactly its neighbourhoods, and the outlier,
+  // alone, gets none.
+  std::mt19937_64 rng(31);
+  std::vector<double> xyz = clusteredPoints(rng, 20, 100, 990.0, 1010.0, 0.2, 0.1, 10);
+  xyz.insert(xyz.end(), {1000.0 - 1e7, 1000.0 - 1e7, 0.0});
+  const std::size_t n = xyz.size() / 3;
+  const PointSet all{xyz.data(), nullptr, n};
+  const double radius = 0.25;
+  const auto check = [&](const std::vector<Found> &found) {
+    for (std::size_t i = 0; i + 1 < n; ++i) {
+      ASSERT_EQ(found[i].calls, 1) << "point " << i;
+      std::vector<std::uint32_t> got = found[i].points;
+      std::sort(got.begin(), got.end());
+      ASSERT_EQ(got, bruteForce(all, all.at(i), radius)) << "point " << i;
+    }
+    EXPECT_TRUE(found[n - 1].points.empty());
+  };
+  check(viaGrid(all, all, radius, 3));
+  double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+  for (std::size_t i = 0; i < n; ++i)
+    for (int a = 0; a < 3; ++a) lo[a] = std::min(lo[a], all.at(i)[a]), hi[a] = std::max(hi[a], all.at(i)[a]);
+  const BallGridPoints sorted(all, radius, lo, hi);
+  check(viaSortedAhead(sorted, all, all, 3));
+}
+
+TEST(FrameGridIndex, AFarOutlierBelowTheFrameLeavesTheRestTheirNeighbours) {
+  std::mt19937_64 rng(32);
+  std::vector<double> xyz = clusteredPoints(rng, 20, 100, -10.0, 10.0, 0.2, 0.1, 0);
+  xyz.insert(xyz.end(), {-2e6, 0.0, -2e6});  // 2e7 cells of 0.1 m below the frame on x and z
+  std::vector<std::uint32_t> ids(xyz.size() / 3);
+  std::iota(ids.begin(), ids.end(), 0u);
+  const double radius = 0.1;
+  const FrameGridIndex index(xyz.data(), ids, radius);
+  const PointSet all{xyz.data(), nullptr, ids.size()};
+  for (std::size_t i = 0; i + 1 < ids.size(); ++i) {
+    std::vector<std::uint32_t> got;
+    index.forEachNeighbor(static_cast<std::uint32_t>(i), [&](std::uint32_t j) { got.push_back(j); });
+    std::sort(got.begin(), got.end());
+    ASSERT_EQ(got, bruteForce(all, all.at(i), radius)) << "point " << i;
+    ASSERT_TRUE(index.anyWithin(all.at(i)));
+  }
+  std::size_t outlier_neighbours = 0;
+  index.forEachNeighbor(static_cast<std::uint32_t>(ids.size() - 1), [&](std::uint32_t) { ++outlier_neighbours; });
+  EXPECT_EQ(outlier_neighbours, 0u);
+  EXPECT_FALSE(index.anyWithin(all.at(ids.size() - 1)));
+}
+
 TEST(BallGrid, EmptyDegenerateAndOutOfRangeInputs) {
   const std::vector<double> one = {1.0, 2.0, 3.0};
   // No points: every query is visited with no neighbours.

@@ -84,9 +84,22 @@ void sortIntoCells(const PointSet &set, const KeyOf &keyOf, int key_bits, std::v
   index.resize(slot);
   starts.push_back(static_cast<std::uint32_t>(slot));
 }
+
+/// The median of the finite coordinates of `set` along `axis`, or `fallback` when there is none.
+double medianAlong(const PointSet &set, int axis, double fallback) {
+  std::vector<double> v;
+  v.reserve(set.size);
+  for (std::size_t i = 0; i < set.size; ++i) {
+    const double *p = set.at(i);
+    if (std::isfinite(p[0]) && std::isfinite(p[1]) && std::isfinite(p[2])) v.push_back(p[axis]);
+  }
+  if (v.empty()) return fallback;
+  std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2), v.end());
+  return v[v.size() / 2];
+}
 }  // namespace
 
-void BallGridPoints::frame(double radius, const double lo[3], const double hi[3]) {
+void BallGridPoints::frame(double radius, const double lo[3], const double hi[3], const PointSet &points) {
   radius_ = radius;
   r2_ = radius * radius;
   // Cells a hair wider than the radius, so that round-off in the cell computation cannot put a point within the
@@ -97,7 +110,14 @@ void BallGridPoints::frame(double radius, const double lo[3], const double hi[3]
   // neighbours of a cell are plain key offsets. Keys are linear, x-major and z fastest.
   std::uint64_t dims[3];
   for (int a = 0; a < 3; ++a) {
-    origin_[a] = lo[a] - 2.0 * edge;
+    // At most 2^21 cells per axis (63-bit keys). Data wider than that is nearly always one far outlier or a few (a
+    // glitched return 2 000 km out): a window from the low corner would then leave the frame's bulk out, and every
+    // one of its normals invalid. The window is centred on the points' median along that axis instead; what lies
+    // beyond it has no neighbour within the radius anyway.
+    double low = lo[a];
+    if ((hi[a] - lo[a]) * inv_ + 4.0 >= static_cast<double>(kAxisCells))
+      low = medianAlong(points, a, lo[a]) - 0.5 * static_cast<double>(kAxisCells) * edge;
+    origin_[a] = low - 2.0 * edge;
     const double top = std::floor((hi[a] - origin_[a]) * inv_) + 2.0;  // largest cell + 2
     dims[a] = static_cast<std::uint64_t>(std::min(top, static_cast<double>(kAxisCells)));
     limit_[a] = static_cast<double>(dims[a] - 1);
@@ -114,7 +134,8 @@ void BallGridPoints::frame(double radius, const double lo[3], const double hi[3]
 }
 
 void BallGridPoints::sortPoints(const PointSet &points) {
-  // Far outliers (beyond 2^21 cells) and non-finite coordinates have no cell. Positive, so truncation is floor.
+  // Far outliers (outside the 2^21-cell window) and non-finite coordinates have no cell. Positive, so truncation is
+  // floor.
   sortIntoCells(points, [this](const double *p, std::uint64_t &key) { return keyOf(p, key); }, key_bits_, pos_, pidx_,
                 ckey_, cstart_);
   cells_ = ckey_.size();
@@ -125,7 +146,7 @@ BallGridPoints::BallGridPoints(const PointSet &points, double radius, const doub
   if (!(radius > 0.0) || !std::isfinite(radius)) return;
   for (int a = 0; a < 3; ++a)
     if (!(std::isfinite(lo[a]) && std::isfinite(hi[a]) && lo[a] <= hi[a])) return;
-  frame(radius, lo, hi);
+  frame(radius, lo, hi, points);
   sortPoints(points);
 }
 
@@ -148,7 +169,7 @@ BallGrid::BallGrid(const PointSet &points, const PointSet &queries, double radiu
   extend(points);
   if (!same_) extend(queries);
   if (!(lo[0] <= hi[0])) return;  // nothing finite
-  own_.frame(radius, lo, hi);
+  own_.frame(radius, lo, hi, points);
   own_.sortPoints(points);
   if (same_) {
     qorder_ = own_.pidx_.data();

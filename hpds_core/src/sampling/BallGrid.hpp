@@ -7,8 +7,10 @@
 // - Neighbours are visited in a fixed order (the 27 cells of edge ~R around the query's cell by x, then y, then z;
 //   a cell's points by increasing index), so anything computed from them is independent of how the queries are
 //   split among threads.
-// - Points or queries more than 2^21 cells from the data's bounding-box corner on some axis are left out (no
-//   neighbours / never visited), as in FrameGridIndex. Const; visit() may run concurrently on disjoint ranges.
+// - Keys address at most 2^21 cells per axis: from the data's bounding-box corner, or, where the data is wider, a
+//   window centred on the points' median along that axis. Points or queries outside it are left out (no neighbours
+//   / never visited): far outliers, alone within the radius anyway. Const; visit() may run concurrently on disjoint
+//   ranges.
 // - The point side can be sorted ahead, over a box given instead of the data's bounding box (BallGridPoints), and
 //   then serve query sets that lie in that box.
 //
@@ -66,7 +68,8 @@ class BallGridPoints {
  private:
   friend class BallGrid;
   BallGridPoints() = default;
-  void frame(double radius, const double lo[3], const double hi[3]);
+  /// The cell frame over lo..hi; `points` only matter when that is wider than 2^21 cells on some axis (see .cpp).
+  void frame(double radius, const double lo[3], const double hi[3], const PointSet &points);
   /// The cell key of p, false when p has no cell (outside the frame or not finite).
   bool keyOf(const double *p, std::uint64_t &key) const {
     const double fx = (p[0] - origin_[0]) * inv_, fy = (p[1] - origin_[1]) * inv_, fz = (p[2] - origin_[2]) * inv_;

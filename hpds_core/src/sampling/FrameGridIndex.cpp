@@ -23,12 +23,32 @@ std::uint64_t mix(std::uint64_t k) {
 FrameGridIndex::FrameGridIndex(const double *xyz, const std::vector<std::uint32_t> &subset, double radius)
     : xyz_(xyz), radius_(radius), inv_(1.0 / radius) {
   // Cells are counted from one radius below the points' minimum corner, so that 21 bits per axis cover 2M cells
-  // of `radius` and any query within `radius` of an indexed point has non-negative cells.
+  // of `radius` and any query within `radius` of an indexed point has non-negative cells. Where the points span
+  // more than that (nearly always a far outlier or a few, such as a glitched return 2 000 km out), counting from
+  // the corner would leave the frame's bulk without a cell: the window is centred on the points' median along that
+  // axis instead, and what lies beyond it, alone within the radius anyway, has no neighbours.
   if (!subset.empty()) {
-    for (int a = 0; a < 3; ++a) origin_[a] = xyz[3 * std::size_t(subset[0]) + a];
+    double lo[3], hi[3];
+    for (int a = 0; a < 3; ++a) lo[a] = hi[a] = xyz[3 * std::size_t(subset[0]) + a];
     for (std::uint32_t i : subset)
-      for (int a = 0; a < 3; ++a) origin_[a] = std::min(origin_[a], xyz[3 * std::size_t(i) + a]);
-    for (double &o : origin_) o -= radius;
+      for (int a = 0; a < 3; ++a) {
+        lo[a] = std::min(lo[a], xyz[3 * std::size_t(i) + a]);
+        hi[a] = std::max(hi[a], xyz[3 * std::size_t(i) + a]);
+      }
+    for (int a = 0; a < 3; ++a) {
+      origin_[a] = lo[a] - radius;
+      if (!((hi[a] - lo[a]) * inv_ + 2.0 < static_cast<double>(kAxisMax))) {
+        std::vector<double> v;
+        v.reserve(subset.size());
+        for (std::uint32_t i : subset) {
+          const double *p = xyz + 3 * std::size_t(i);
+          if (std::isfinite(p[0]) && std::isfinite(p[1]) && std::isfinite(p[2])) v.push_back(p[a]);
+        }
+        if (v.empty()) continue;
+        std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2), v.end());
+        origin_[a] = v[v.size() / 2] - 0.5 * static_cast<double>(kAxisMax) * radius;
+      }
+    }
   }
   // Points by (cell key, index). A frame's candidates come in ascending index order, so a stable radix sort by key
   // gives that order (a comparison sort of the pairs was a third of a map-mode frame's output selection); any
