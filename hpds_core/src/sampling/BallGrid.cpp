@@ -1,5 +1,6 @@
 #include "sampling/BallGrid.hpp"
 
+#include "sampling/AxisMedian.hpp"
 #include "sampling/KeyRadixSort.hpp"
 
 #include <algorithm>
@@ -85,18 +86,6 @@ void sortIntoCells(const PointSet &set, const KeyOf &keyOf, int key_bits, std::v
   starts.push_back(static_cast<std::uint32_t>(slot));
 }
 
-/// The median of the finite coordinates of `set` along `axis`, or `fallback` when there is none.
-double medianAlong(const PointSet &set, int axis, double fallback) {
-  std::vector<double> v;
-  v.reserve(set.size);
-  for (std::size_t i = 0; i < set.size; ++i) {
-    const double *p = set.at(i);
-    if (std::isfinite(p[0]) && std::isfinite(p[1]) && std::isfinite(p[2])) v.push_back(p[axis]);
-  }
-  if (v.empty()) return fallback;
-  std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2), v.end());
-  return v[v.size() / 2];
-}
 }  // namespace
 
 void BallGridPoints::frame(double radius, const double lo[3], const double hi[3], const PointSet &points) {
@@ -116,7 +105,8 @@ void BallGridPoints::frame(double radius, const double lo[3], const double hi[3]
     // beyond it has no neighbour within the radius anyway.
     double low = lo[a];
     if ((hi[a] - lo[a]) * inv_ + 4.0 >= static_cast<double>(kAxisCells))
-      low = medianAlong(points, a, lo[a]) - 0.5 * static_cast<double>(kAxisCells) * edge;
+      low = medianCoordinate(points.base, points.index, points.size, a, lo[a]) -
+            0.5 * static_cast<double>(kAxisCells) * edge;
     origin_[a] = low - 2.0 * edge;
     const double top = std::floor((hi[a] - origin_[a]) * inv_) + 2.0;  // largest cell + 2
     dims[a] = static_cast<std::uint64_t>(std::min(top, static_cast<double>(kAxisCells)));
@@ -169,8 +159,7 @@ BallGrid::BallGrid(const PointSet &points, const PointSet &queries, double radiu
   extend(points);
   if (!same_) extend(queries);
   if (!(lo[0] <= hi[0])) return;  // nothing finite
-  own_.frame(radius, lo, hi, points);
-  own_.sortPoints(points);
+  own_ = BallGridPoints(points, radius, lo, hi);
   if (same_) {
     qorder_ = own_.pidx_.data();
     qcell_key_ = own_.ckey_.data();

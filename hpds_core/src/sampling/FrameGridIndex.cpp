@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 
+#include "sampling/AxisMedian.hpp"
 #include "sampling/KeyRadixSort.hpp"
 
 namespace hpds {
@@ -38,15 +39,8 @@ FrameGridIndex::FrameGridIndex(const double *xyz, const std::vector<std::uint32_
     for (int a = 0; a < 3; ++a) {
       origin_[a] = lo[a] - radius;
       if (!((hi[a] - lo[a]) * inv_ + 2.0 < static_cast<double>(kAxisMax))) {
-        std::vector<double> v;
-        v.reserve(subset.size());
-        for (std::uint32_t i : subset) {
-          const double *p = xyz + 3 * std::size_t(i);
-          if (std::isfinite(p[0]) && std::isfinite(p[1]) && std::isfinite(p[2])) v.push_back(p[a]);
-        }
-        if (v.empty()) continue;
-        std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2), v.end());
-        origin_[a] = v[v.size() / 2] - 0.5 * static_cast<double>(kAxisMax) * radius;
+        const double median = medianCoordinate(xyz, subset.data(), subset.size(), a, NAN);
+        if (std::isfinite(median)) origin_[a] = median - 0.5 * static_cast<double>(kAxisMax) * radius;
       }
     }
   }

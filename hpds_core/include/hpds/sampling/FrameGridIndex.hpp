@@ -4,8 +4,9 @@
 // Contract: built once per frame from a subset of point indices; cells of edge = radius, points bucketed by
 // sorting their packed cell keys, then hashing the distinct keys (a few allocations per build, none per query).
 // Keys address 2^21 cells per axis, from the points' minimum corner or, where they span more, a window centred on
-// their median along that axis: points outside it (far outliers) have no neighbours and are nobody's. The hierarchy is not built yet when
-// the order is computed, so this is the one search structure outside it. Const queries are thread-safe.
+// their median along that axis: points outside it (far outliers) have no neighbours and are nobody's. The hierarchy
+// is not built yet when the order is computed, so this is the one search structure outside it. Const queries are
+// thread-safe.
 #pragma once
 
 #include <cstddef>
