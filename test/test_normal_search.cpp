@@ -29,10 +29,10 @@ struct Found {
   int calls = 0;
 };
 
-/// Every query's neighbourhood through BallGrid, visiting the query cells in `chunks` ranges.
-std::vector<Found> viaGrid(const PointSet &points, const PointSet &queries, double radius, std::size_t chunks) {
+/// Every query's neighbourhood through `grid` (over `points`, for `queries`), visiting the query cells in `chunks`
+/// ranges.
+std::vector<Found> visitAll(const BallGrid &grid, const PointSet &points, const PointSet &queries, std::size_t chunks) {
   std::vector<Found> out(queries.size);
-  const BallGrid grid(points, queries, radius);
   const std::size_t n = grid.cellCount(), step = std::max<std::size_t>(1, (n + chunks - 1) / chunks);
   for (std::size_t b = 0; b < n; b += step)
     grid.visit(b, std::min(n, b + step), [&](std::size_t i, const BallView &v) {
@@ -47,6 +47,11 @@ std::vector<Found> viaGrid(const PointSet &points, const PointSet &queries, doub
       }
     });
   return out;
+}
+
+/// Every query's neighbourhood through a BallGrid of its own.
+std::vector<Found> viaGrid(const PointSet &points, const PointSet &queries, double radius, std::size_t chunks) {
+  return visitAll(BallGrid(points, queries, radius), points, queries, chunks);
 }
 
 /// `clusters` clusters of `per_cluster` points: centres uniform in [lo, hi) on x and y and z_scale times that on z,
@@ -239,24 +244,10 @@ TEST(FrameGridIndex, AnyWithinAtTheRadiusEdgeFarFromTheOriginMatchesBruteForce) 
   EXPECT_GT(outside, 10000u);
 }
 
-/// viaGrid over points sorted ahead (BallGridPoints over the box lo..hi).
+/// Every query's neighbourhood through a BallGrid over points sorted ahead (BallGridPoints over their box).
 std::vector<Found> viaSortedAhead(const BallGridPoints &sorted, const PointSet &points, const PointSet &queries,
                                   std::size_t chunks) {
-  std::vector<Found> out(queries.size);
-  const BallGrid grid(sorted, queries);
-  const std::size_t n = grid.cellCount(), step = std::max<std::size_t>(1, (n + chunks - 1) / chunks);
-  for (std::size_t b = 0; b < n; b += step)
-    grid.visit(b, std::min(n, b + step), [&](std::size_t i, const BallView &v) {
-      Found &f = out[i];
-      ++f.calls;
-      for (std::size_t t = 0; t < v.count; ++t) {
-        const std::uint32_t slot = v.inside[t];
-        f.points.push_back(v.point[slot]);
-        f.d2.push_back(v.d2[t]);
-        for (int a = 0; a < 3; ++a) EXPECT_EQ(v.xyz[3 * std::size_t(slot) + a], points.at(v.point[slot])[a]);
-      }
-    });
-  return out;
+  return visitAll(BallGrid(sorted, queries), points, queries, chunks);
 }
 
 TEST(BallGrid, PointsSortedAheadOverABoxMatchBruteForce) {
