@@ -72,22 +72,24 @@ namespace {
 constexpr double kMinCell = 1e-3, kMaxCell = 100.0;
 }  // namespace
 
-SampledCloud voxelCentroidsAtCount(const std::vector<Eigen::Vector3d> &points, std::size_t target, double tolerance) {
-  const CountMatch m = matchCellToCount([&](double cell) { return voxelCentroids(points, cell).size(); }, target,
-                                        tolerance, kMinCell, kMaxCell);
+SampledCloud voxelCentroidsAtCount(const std::vector<Eigen::Vector3d> &points, std::size_t target, double tolerance,
+                                   const Eigen::Vector3d &shift) {
+  const CountMatch m = matchCellToCount([&](double cell) { return voxelCentroids(points, cell, shift * cell).size(); },
+                                        target, tolerance, kMinCell, kMaxCell);
   SampledCloud out;
-  out.xyz = voxelCentroids(points, m.cell);
+  out.xyz = voxelCentroids(points, m.cell, shift * m.cell);
   out.cell = m.cell;
   out.count_matched = m.within;
   return out;
 }
 
 SampledCloud randomPerVoxelAtCount(const std::vector<Eigen::Vector3d> &points, std::size_t target, double tolerance,
-                                   std::uint64_t seed) {
-  const CountMatch m = matchCellToCount([&](double cell) { return gridRandom(points, cell, seed).size(); }, target,
-                                        tolerance, kMinCell, kMaxCell);
+                                   std::uint64_t seed, const Eigen::Vector3d &shift) {
+  const CountMatch m = matchCellToCount(
+      [&](double cell) { return gridRandom(points, cell, seed, shift * cell).size(); }, target, tolerance, kMinCell,
+      kMaxCell);
   SampledCloud out;
-  for (std::uint32_t i : gridRandom(points, m.cell, seed)) out.xyz.push_back(points[i]);
+  for (std::uint32_t i : gridRandom(points, m.cell, seed, shift * m.cell)) out.xyz.push_back(points[i]);
   out.cell = m.cell;
   out.count_matched = m.within;
   return out;

@@ -10,8 +10,8 @@
 //   per cell of level d + offset; SampleCovariance.hpp). Samples whose normal could not be estimated keep NaN
 //   normals and an invalid covariance.
 // - voxelCentroidsAtCount / randomPerVoxelAtCount bisect the cell edge until the count is within `tolerance` of
-//   the target (EqualCount.hpp); the grid is anchored at the origin as PCL's VoxelGrid (same cells, same centroids,
-//   without VoxelGrid's 32-bit index limit that small leaves on 100 m frames exceed).
+//   the target (EqualCount.hpp); the grid is anchored at `shift` * cell (zero: at the origin as PCL's VoxelGrid, same
+//   cells, same centroids, without VoxelGrid's 32-bit index limit that small leaves on 100 m frames exceed).
 #pragma once
 
 #include <Eigen/Core>
@@ -57,8 +57,10 @@ class HpdsFrame {
 };
 
 [[nodiscard]] SampledCloud voxelCentroidsAtCount(const std::vector<Eigen::Vector3d> &points, std::size_t target,
-                                                 double tolerance);
+                                                 double tolerance,
+                                                 const Eigen::Vector3d &shift = Eigen::Vector3d::Zero());
 [[nodiscard]] SampledCloud randomPerVoxelAtCount(const std::vector<Eigen::Vector3d> &points, std::size_t target,
-                                                 double tolerance, std::uint64_t seed);
+                                                 double tolerance, std::uint64_t seed,
+                                                 const Eigen::Vector3d &shift = Eigen::Vector3d::Zero());
 
 }  // namespace hpds::bench
