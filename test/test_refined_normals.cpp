@@ -311,6 +311,111 @@ TEST(RefinedNormals, AveragingGridsSortedAheadDoNotChangeTheNormals) {
     }
 }
 
+TEST(RefinedNormals, NeighbourhoodsEstimatedInPiecesWithoutTheHierarchyAreTheSameBits) {
+  // The pipeline's second thread estimates the neighbourhoods of samples as the insertion accepts them, in pieces,
+  // from the frame's points (no hierarchy yet), sorting the grids it needs into the shared AveragingGrids; the
+  // normals then take those as known and estimate the rest. Whatever the split, the same bits as estimating all.
+  std::mt19937_64 rng(11);
+  std::uniform_real_distribution<double> u(0.0, 4.0);
+  std::normal_distribution<double> noise(0.0, 0.01);
+  std::vector<double> xyz;
+  for (int i = 0; i < 20000; ++i) {
+    const double x = u(rng), y = u(rng);
+    if (i % 5 == 0) xyz.insert(xyz.end(), {4.0 + 0.5 * x, std::floor(y * 2.0) * 0.7, noise(rng)});  // sparse lines
+    else if (i % 5 == 1) xyz.insert(xyz.end(), {x, 4.0 + noise(rng), y});
+    else xyz.insert(xyz.end(), {x, y, noise(rng)});
+  }
+  for (int i = 0; i < 4; ++i) xyz.insert(xyz.end(), {20.0 + 10.0 * i, 20.0, 1.0});  // alone: no normal
+  const Hierarchy h = build(xyz, 4, 3);
+  const std::vector<SampleId> ids = h.samplesUpTo(3);
+  NormalParams p = params(3, 0, 2.5 * h.radius(3));
+  p.neighborhood_level_offset = 2;
+  p.max_growth = 8.0;
+  std::vector<std::uint32_t> all(xyz.size() / 3);
+  std::iota(all.begin(), all.end(), 0u);
+  double box[6];
+  const std::vector<double> centroids = cellCentroids(xyz.data(), all.data(), all.size(), h.edge(3) / 4.0, box);
+  auto emptyGrids = [&] {
+    AveragingGrids g;
+    g.radii = refinedSearchRadii(h, p);
+    std::copy(box, box + 3, g.lo);
+    std::copy(box + 3, box + 6, g.hi);
+    g.by_radius.resize(g.radii.size());
+    return g;
+  };
+  const AveragingGrids none = emptyGrids();
+  std::vector<LocalPca> ref_pca(ids.size());
+  const std::vector<SampleNormal> ref = estimateNormalsRefined(h, ids, p, &centroids, &ref_pca, &none);
+  std::size_t valid = 0;
+  for (const SampleNormal &n : ref) valid += n.valid ? 1 : 0;
+  ASSERT_GT(valid, ids.size() * 9 / 10);
+  ASSERT_LT(valid, ids.size()) << "the scene should also hold samples without a normal";
+
+  // The samples' positions as the pipeline has them: the frame's points, addressed by point index.
+  std::vector<double> frame_xyz;
+  std::vector<std::uint32_t> point_of(ids.size());
+  for (std::size_t i = 0; i < ids.size(); ++i) {
+    point_of[i] = static_cast<std::uint32_t>(frame_xyz.size() / 3);
+    frame_xyz.insert(frame_xyz.end(), h.position(ids[i]), h.position(ids[i]) + 3);
+  }
+  // Pieces of 1, 7, 300 and the rest of the first two thirds, in a shuffled order; the last third left unknown.
+  std::vector<std::uint32_t> order(ids.size());
+  std::iota(order.begin(), order.end(), 0u);
+  std::shuffle(order.begin(), order.end(), rng);
+  const std::size_t known_count = ids.size() * 2 / 3;
+  std::vector<std::uint32_t> piece_points(known_count);
+  for (std::size_t t = 0; t < known_count; ++t) piece_points[t] = point_of[order[t]];
+  AveragingGrids grids = emptyGrids();
+  grids.by_radius[0] = std::make_unique<BallGridPoints>(PointSet{centroids.data(), nullptr, centroids.size() / 3},
+                                                        grids.radii[0], grids.lo, grids.hi);
+  std::vector<LocalPca> piece_pca(known_count);
+  std::vector<std::uint8_t> piece_have(known_count, 7);
+  std::size_t done = 0;
+  for (std::size_t size : {std::size_t(1), std::size_t(7), std::size_t(300), known_count}) {
+    const std::size_t count = std::min(size, known_count - done);
+    refinedNeighbourhoodsOverCentroids(frame_xyz.data(), piece_points.data() + done, count, p, h.cellSize(),
+                                       centroids, grids, piece_pca.data() + done, piece_have.data() + done);
+    done += count;
+  }
+  ASSERT_EQ(done, known_count);
+  std::size_t kept = 0;
+  for (const auto &g : grids.by_radius) kept += g ? 1 : 0;
+  EXPECT_GE(kept, 3u) << "footprints grew over several radii: their grids are kept for the next pieces";
+
+  std::vector<std::uint8_t> state(ids.size(), KnownNeighbourhoods::kUnknown);
+  std::vector<LocalPca> chosen(ids.size());
+  std::size_t known_none = 0;
+  for (std::size_t t = 0; t < known_count; ++t) {
+    ASSERT_LE(piece_have[t], 1u);
+    state[order[t]] = piece_have[t] ? KnownNeighbourhoods::kChosen : KnownNeighbourhoods::kNone;
+    chosen[order[t]] = piece_pca[t];
+    known_none += piece_have[t] ? 0 : 1;
+  }
+  EXPECT_GT(known_none, 0u);
+  const KnownNeighbourhoods known{state.data(), chosen.data()};
+  for (int threads : {1, 2}) {
+    p.threads = threads;
+    std::vector<LocalPca> pca(ids.size());
+    const std::vector<SampleNormal> got = estimateNormalsRefined(h, ids, p, &centroids, &pca, &grids, &known);
+    ASSERT_EQ(got.size(), ref.size());
+    for (std::size_t i = 0; i < ref.size(); ++i) {
+      ASSERT_EQ(got[i].valid, ref[i].valid) << "sample " << i << ", " << threads << " threads";
+      if (!ref[i].valid) continue;
+      ASSERT_EQ(std::memcmp(got[i].normal, ref[i].normal, sizeof ref[i].normal), 0) << "sample " << i;
+      ASSERT_EQ(got[i].curvature, ref[i].curvature);
+      ASSERT_EQ(std::memcmp(&pca[i], &ref_pca[i], sizeof(LocalPca::normal) + 3 * sizeof(double)), 0);
+    }
+  }
+  // Known neighbourhoods need the centroids and a fixed footprint.
+  EXPECT_THROW((void)estimateNormalsRefined(h, ids, p, nullptr, nullptr, nullptr, &known), std::invalid_argument);
+  NormalParams knn = p;
+  knn.k = 10;
+  EXPECT_THROW((void)estimateNormalsRefined(h, ids, knn, &centroids, nullptr, &grids, &known), std::invalid_argument);
+  EXPECT_THROW(refinedNeighbourhoodsOverCentroids(frame_xyz.data(), piece_points.data(), 1, knn, h.cellSize(),
+                                                  centroids, grids, piece_pca.data(), piece_have.data()),
+               std::invalid_argument);
+}
+
 TEST(RefinedNormals, ScanModeNormalsArePcaOfTheFramesCellCentroids) {
   // A noisy tilted plane and a wall, seen from the origin, in one scan-mode frame: with growth off, each output
   // sample's normal is the PCA of the frame's cell centroids (cells of level output + offset) within the radius.

@@ -11,6 +11,7 @@
 #include <cmath>
 #include <cstdint>
 #include <optional>
+#include <stdexcept>
 #include <utility>
 
 #include "hpds/normals/LocalPca.hpp"
@@ -38,134 +39,92 @@ std::size_t AveragingGrids::memUsage() const {
   return bytes;
 }
 
-std::vector<SampleNormal> estimateNormalsRefined(const Hierarchy &h, const std::vector<SampleId> &ids,
-                                                 const NormalParams &params, const std::vector<double> *centroids,
-                                                 std::vector<LocalPca> *neighbourhoods, const AveragingGrids *grids) {
-  std::vector<SampleNormal> result(ids.size(), invalidNormal());
-  if (ids.empty()) return result;
-  const int level = std::min(params.level, h.maxDepth());
-  const int finest = std::min(level + std::max(0, params.neighborhood_level_offset), h.maxDepth());
-  const double max_radius = 2.0 * h.cellSize();
-  const double growth = std::max(1.0, params.max_growth);
-  const double base = params.radius > 0.0 ? params.radius : 2.5 * h.radius(level);
+namespace {
 
-  // Points: samples of levels 0..finest near the queried ids (a map may hold far more than a query needs), and
-  // those of levels 0..level for k-NN footprints.
-  const double margin = std::min(max_radius, base * growth * 4.0);
-  double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
-  for (SampleId id : ids)
-    for (int a = 0; a < 3; ++a) {
-      lo[a] = std::min(lo[a], h.position(id)[a] - margin);
-      hi[a] = std::max(hi[a], h.position(id)[a] + margin);
-    }
-  std::vector<SampleId> fine = h.samplesUpTo(centroids ? level : finest), coarse;
-  fine.erase(std::remove_if(fine.begin(), fine.end(),
-                            [&](SampleId id) {
-                              const double *p = h.position(id);
-                              return p[0] < lo[0] || p[0] > hi[0] || p[1] < lo[1] || p[1] > hi[1] || p[2] < lo[2] ||
-                                     p[2] > hi[2];
-                            }),
-             fine.end());
-  if (params.k > 0)
-    for (SampleId id : fine)
-      if (h.level(id) <= level) coarse.push_back(id);
-  const double *hbase = h.position(0);
-  const PointSet coarse_set{hbase, coarse.data(), coarse.size()};
-  const PointSet fine_set = centroids ? PointSet{centroids->data(), nullptr, centroids->size() / 3}
-                                      : PointSet{hbase, fine.data(), fine.size()};
+/// What a refined estimate needs besides its queries.
+struct RefinedSetup {
+  NormalParams params;
+  double max_radius = 0.0;     ///< twice the level-0 cell edge: no footprint grows past it
+  std::vector<double> radii;   ///< refinedSearchRadii
+  PointSet fine;               ///< the averaging points
+  bool over_centroids = false; ///< `fine` is the frame's centroids, searched through `grids` (or over their box)
+  const AveragingGrids *grids = nullptr;
+  AveragingGrids *keep = nullptr;  ///< over centroids: grids sorted here are kept in it for later calls
+};
 
-  // Search radii: one per doubling of the base radius up to twice the level-0 cell edge. A footprint rho is searched
-  // with the smallest of them >= rho, all queries of one radius at once (BallGrid), round after round: a query
-  // whose footprint doubles waits for the next round. Each query's result depends only on its own neighbourhoods.
-  const std::vector<double> radii = refinedSearchRadii(h, params);
-  auto gridFor = [&](double rho) {
+/// Queries: element i at base + 3 * index[i].
+struct QuerySet {
+  const double *base;
+  const std::uint32_t *index;
+  std::size_t size;
+};
+
+std::size_t gridFor(const RefinedSetup &s, double rho) {
+  std::size_t g = 0;
+  while (s.radii[g] < rho && g + 1 < s.radii.size()) ++g;
+  return g;
+}
+
+/// Calls fn(i, view, scratch) for the queries subset[...] with their neighbours of `points` within `radius`.
+template <typename Fn>
+void sweep(const RefinedSetup &s, const PointSet &points, const QuerySet &q, const std::vector<std::uint32_t> &subset,
+           double radius, Fn &&fn) {
+  std::vector<std::uint32_t> qidx(subset.size());
+  for (std::size_t t = 0; t < subset.size(); ++t) qidx[t] = q.index[subset[t]];
+  const PointSet queries{q.base, qidx.data(), qidx.size()};
+  std::optional<BallGridPoints> sorted_here;
+  const BallGridPoints *ahead = nullptr;
+  if (s.over_centroids && points == s.fine && s.grids) {
+    const std::size_t grids = std::min(s.grids->radii.size(), s.grids->by_radius.size());
     std::size_t g = 0;
-    while (radii[g] < rho && g + 1 < radii.size()) ++g;
-    return g;
-  };
-  // Calls fn(i, view, scratch) for the queries ids[subset[...]] with their neighbours of `points` within `radius`.
-  auto sweep = [&](const PointSet &points, const std::vector<std::uint32_t> &subset, double radius, auto &&fn) {
-    std::vector<SampleId> qids(subset.size());
-    for (std::size_t t = 0; t < subset.size(); ++t) qids[t] = ids[subset[t]];
-    const PointSet queries{hbase, qids.data(), qids.size()};
-    std::optional<BallGridPoints> sorted_here;
-    const BallGridPoints *ahead = nullptr;
-    if (grids && centroids && points == fine_set) {
-      for (std::size_t g = 0; g < grids->radii.size() && g < grids->by_radius.size(); ++g)
-        if (grids->radii[g] == radius && grids->by_radius[g]) ahead = grids->by_radius[g].get();
-      if (!ahead) ahead = &sorted_here.emplace(points, radius, grids->lo, grids->hi);
+    while (g < grids && s.grids->radii[g] != radius) ++g;
+    if (g < grids && s.grids->by_radius[g]) {
+      ahead = s.grids->by_radius[g].get();
+    } else if (g < grids && s.keep == s.grids) {
+      s.keep->by_radius[g] = std::make_unique<BallGridPoints>(points, radius, s.grids->lo, s.grids->hi);
+      ahead = s.keep->by_radius[g].get();
+    } else {
+      ahead = &sorted_here.emplace(points, radius, s.grids->lo, s.grids->hi);
     }
-    std::optional<BallGrid> grid_storage;
-    const BallGrid &grid =
-        ahead ? grid_storage.emplace(*ahead, queries) : grid_storage.emplace(points, queries, radius);
-    // The later rounds hold few queries (HDL-32: 1 578 and 534 of 8 873) with wide footprints, microseconds each:
-    // threads from 32 cells on, and 8 chunks per thread against the uneven cost (2 threads, HDL-32: those rounds
-    // 0.82 -> 0.50 and 0.75 -> 0.51 ms against a thread per 256 cells in 4 chunks each).
-    parallelFor(grid.cellCount(), params.threads, [&](std::size_t b, std::size_t e) {
-      std::vector<double> scratch;
-      grid.visit(b, e, [&](std::size_t t, const BallView &v) { fn(subset[t], v, scratch); });
-    }, /*grain=*/32, /*chunks_per_thread=*/8);
-  };
-  std::vector<std::uint32_t> pending(ids.size());
-  for (std::size_t i = 0; i < ids.size(); ++i) pending[i] = static_cast<std::uint32_t>(i);
-  std::vector<std::uint8_t> again(ids.size(), 0);
-  auto keepPending = [&] {
-    pending.erase(std::remove_if(pending.begin(), pending.end(), [&](std::uint32_t i) { return !again[i]; }),
-                  pending.end());
-  };
-
-  // 1. Footprint at the output level: the radius, or the k-th nearest sample of levels 0..level within it.
-  std::vector<double> rho(ids.size(), params.radius > 0.0 ? params.radius : max_radius);
-  if (params.k > 0) {
-    const std::size_t k = static_cast<std::size_t>(params.k);
-    for (std::size_t g = 0; g < radii.size() && !pending.empty(); ++g) {
-      const bool last = g + 1 == radii.size();
-      sweep(coarse_set, pending, radii[g], [&](std::uint32_t i, const BallView &v, std::vector<double> &d2s) {
-        const bool enough = v.count >= k;
-        again[i] = 0;
-        if (enough) {
-          d2s.assign(v.d2, v.d2 + v.count);
-          std::nth_element(d2s.begin(), d2s.begin() + static_cast<std::ptrdiff_t>(k - 1), d2s.end());
-          // Just past the k-th distance, so that neighbour itself is inside the strict ball.
-          rho[i] = std::min(rho[i], std::sqrt(d2s[k - 1]) * (1.0 + 1e-9) + 1e-12);
-        } else if (params.radius > 0.0 && radii[g] >= params.radius) {
-          rho[i] = std::min(rho[i], radii[g]);
-        } else if (last) {
-          rho[i] = std::min(rho[i], 2.0 * radii[g]);  // every radius tried: the footprint stays the search limit
-        } else {
-          again[i] = 1;
-        }
-      });
-      keepPending();
-    }
-    // Queries outside every search grid (far outliers) saw no callback: their footprint stays as initialised.
-    pending.resize(ids.size());
-    for (std::size_t i = 0; i < ids.size(); ++i) pending[i] = static_cast<std::uint32_t>(i);
   }
+  std::optional<BallGrid> grid_storage;
+  const BallGrid &grid = ahead ? grid_storage.emplace(*ahead, queries) : grid_storage.emplace(points, queries, radius);
+  // The later rounds hold few queries (HDL-32: 1 578 and 534 of 8 873) with wide footprints, microseconds each:
+  // threads from 32 cells on, and 8 chunks per thread against the uneven cost (2 threads, HDL-32: those rounds
+  // 0.82 -> 0.50 and 0.75 -> 0.51 ms against a thread per 256 cells in 4 chunks each).
+  parallelFor(grid.cellCount(), s.params.threads, [&](std::size_t b, std::size_t e) {
+    std::vector<double> scratch;
+    grid.visit(b, e, [&](std::size_t t, const BallView &v) { fn(subset[t], v, scratch); });
+  }, /*grain=*/32, /*chunks_per_thread=*/8);
+}
 
-  // 2. Every sample of levels 0..finest inside the footprint. A line-like result grows the footprint; a grown
-  //    neighbourhood is only taken if it resolves the line and is flat (RMS distance to its plane <=
-  //    max_plane_rms * radius): a ball reaching from a scan line on the ground into a wall would average two
-  //    surfaces, and a longer piece of the same line is no better than the first.
-  std::vector<double> limit(ids.size());
-  for (std::size_t i = 0; i < ids.size(); ++i) limit[i] = std::min(max_radius, rho[i] * growth);
-  std::vector<LocalPca> chosen(ids.size());
-  std::vector<std::uint8_t> have(ids.size(), 0);
+/// Step 2 of the estimator for the queries `pending` (indices into q), footprints starting at rho[i]: every
+/// averaging point inside the footprint; a line-like result grows the footprint; a grown neighbourhood is only
+/// taken if it resolves the line and is flat (RMS distance to its plane <= max_plane_rms * radius): a ball reaching
+/// from a scan line on the ground into a wall would average two surfaces, and a longer piece of the same line is no
+/// better than the first. Each query's outcome depends on its own position and footprint only.
+void growNeighbourhoods(const RefinedSetup &s, const QuerySet &q, std::vector<std::uint32_t> pending,
+                        std::vector<double> &rho, LocalPca *chosen, std::uint8_t *have) {
+  const NormalParams &params = s.params;
+  const double growth = std::max(1.0, params.max_growth);
+  std::vector<double> limit(q.size);
+  for (std::uint32_t i : pending) limit[i] = std::min(s.max_radius, rho[i] * growth);
+  std::vector<std::uint8_t> again(q.size, 0);
   std::vector<std::uint32_t> round;
   while (!pending.empty()) {
-    std::size_t g = radii.size();
-    for (std::uint32_t i : pending) g = std::min(g, gridFor(rho[i]));
+    std::size_t g = s.radii.size();
+    for (std::uint32_t i : pending) g = std::min(g, gridFor(s, rho[i]));
     round.clear();
-    double radius = radii[g];
+    double radius = s.radii[g];
     for (std::uint32_t i : pending)
-      if (gridFor(rho[i]) == g) {
+      if (gridFor(s, rho[i]) == g) {
         round.push_back(i);
         radius = std::max(radius, rho[i]);
         again[i] = 0;
       } else {
         again[i] = 1;  // a later round
       }
-    sweep(fine_set, round, radius, [&](std::uint32_t i, const BallView &v, std::vector<double> &) {
+    sweep(s, s.fine, q, round, radius, [&](std::uint32_t i, const BallView &v, std::vector<double> &) {
       const double r2 = rho[i] * rho[i];
       PcaAccumulator acc(v.q);
       acc.addWithin(v.xyz, v.inside, v.d2, v.count, r2);
@@ -188,8 +147,133 @@ std::vector<SampleNormal> estimateNormalsRefined(const Hierarchy &h, const std::
       rho[i] *= 2.0;
       again[i] = 1;
     });
-    keepPending();
+    pending.erase(std::remove_if(pending.begin(), pending.end(), [&](std::uint32_t i) { return !again[i]; }),
+                  pending.end());
   }
+}
+
+}  // namespace
+
+void refinedNeighbourhoodsOverCentroids(const double *base, const std::uint32_t *index, std::size_t count,
+                                        const NormalParams &params, double cell_size,
+                                        const std::vector<double> &centroids, AveragingGrids &grids,
+                                        LocalPca *chosen, std::uint8_t *have) {
+  if (params.k != 0 || !(params.radius > 0.0))
+    throw std::invalid_argument("refinedNeighbourhoodsOverCentroids: needs a fixed footprint (k 0, radius > 0)");
+  if (count == 0) return;
+  RefinedSetup s;
+  s.params = params;
+  s.params.threads = 1;
+  s.max_radius = 2.0 * cell_size;
+  s.radii = grids.radii;
+  s.fine = PointSet{centroids.data(), nullptr, centroids.size() / 3};
+  s.over_centroids = true;
+  s.grids = &grids;
+  s.keep = &grids;
+  std::vector<double> rho(count, params.radius);
+  std::vector<std::uint32_t> pending(count);
+  for (std::size_t i = 0; i < count; ++i) {
+    pending[i] = static_cast<std::uint32_t>(i);
+    have[i] = 0;
+  }
+  growNeighbourhoods(s, QuerySet{base, index, count}, std::move(pending), rho, chosen, have);
+}
+
+std::vector<SampleNormal> estimateNormalsRefined(const Hierarchy &h, const std::vector<SampleId> &ids,
+                                                 const NormalParams &params, const std::vector<double> *centroids,
+                                                 std::vector<LocalPca> *neighbourhoods, const AveragingGrids *grids,
+                                                 const KnownNeighbourhoods *known) {
+  std::vector<SampleNormal> result(ids.size(), invalidNormal());
+  if (ids.empty()) return result;
+  if (known && (params.k != 0 || !centroids))
+    throw std::invalid_argument("estimateNormalsRefined: known neighbourhoods need centroids and a fixed footprint");
+  const int level = std::min(params.level, h.maxDepth());
+  const int finest = std::min(level + std::max(0, params.neighborhood_level_offset), h.maxDepth());
+  RefinedSetup s;
+  s.params = params;
+  s.max_radius = 2.0 * h.cellSize();
+  s.radii = refinedSearchRadii(h, params);
+  s.over_centroids = centroids != nullptr;
+  s.grids = centroids ? grids : nullptr;
+  const double growth = std::max(1.0, params.max_growth);
+  const double base = params.radius > 0.0 ? params.radius : 2.5 * h.radius(level);
+  const double *hbase = h.position(0);
+  const QuerySet queries{hbase, ids.data(), ids.size()};
+
+  // Points: samples of levels 0..finest near the queried ids (a map may hold far more than a query needs), and
+  // those of levels 0..level for k-NN footprints. Over centroids with a fixed footprint no sample is read.
+  std::vector<SampleId> fine, coarse;
+  if (!centroids || params.k > 0) {
+    const double margin = std::min(s.max_radius, base * growth * 4.0);
+    double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+    for (SampleId id : ids)
+      for (int a = 0; a < 3; ++a) {
+        lo[a] = std::min(lo[a], h.position(id)[a] - margin);
+        hi[a] = std::max(hi[a], h.position(id)[a] + margin);
+      }
+    fine = h.samplesUpTo(centroids ? level : finest);
+    fine.erase(std::remove_if(fine.begin(), fine.end(),
+                              [&](SampleId id) {
+                                const double *p = h.position(id);
+                                return p[0] < lo[0] || p[0] > hi[0] || p[1] < lo[1] || p[1] > hi[1] || p[2] < lo[2] ||
+                                       p[2] > hi[2];
+                              }),
+               fine.end());
+    if (params.k > 0)
+      for (SampleId id : fine)
+        if (h.level(id) <= level) coarse.push_back(id);
+  }
+  const PointSet coarse_set{hbase, coarse.data(), coarse.size()};
+  s.fine = centroids ? PointSet{centroids->data(), nullptr, centroids->size() / 3}
+                     : PointSet{hbase, fine.data(), fine.size()};
+
+  // Search radii: one per doubling of the base radius up to twice the level-0 cell edge. A footprint rho is searched
+  // with the smallest of them >= rho, all queries of one radius at once (BallGrid), round after round: a query
+  // whose footprint doubles waits for the next round. Each query's result depends only on its own neighbourhoods.
+  std::vector<LocalPca> chosen(ids.size());
+  std::vector<std::uint8_t> have(ids.size(), 0);
+  std::vector<std::uint32_t> pending;
+  pending.reserve(ids.size());
+  for (std::size_t i = 0; i < ids.size(); ++i)
+    if (known && known->state[i] != KnownNeighbourhoods::kUnknown) {
+      have[i] = known->state[i] == KnownNeighbourhoods::kChosen;
+      if (have[i]) chosen[i] = known->chosen[i];
+    } else {
+      pending.push_back(static_cast<std::uint32_t>(i));
+    }
+
+  // 1. Footprint at the output level: the radius, or the k-th nearest sample of levels 0..level within it.
+  std::vector<double> rho(ids.size(), params.radius > 0.0 ? params.radius : s.max_radius);
+  if (params.k > 0) {
+    std::vector<std::uint8_t> again(ids.size(), 0);
+    std::vector<std::uint32_t> left = pending;
+    const std::size_t k = static_cast<std::size_t>(params.k);
+    for (std::size_t g = 0; g < s.radii.size() && !left.empty(); ++g) {
+      const bool last = g + 1 == s.radii.size();
+      auto footprint = [&](std::uint32_t i, const BallView &v, std::vector<double> &d2s) {
+        const bool enough = v.count >= k;
+        again[i] = 0;
+        if (enough) {
+          d2s.assign(v.d2, v.d2 + v.count);
+          std::nth_element(d2s.begin(), d2s.begin() + static_cast<std::ptrdiff_t>(k - 1), d2s.end());
+          // Just past the k-th distance, so that neighbour itself is inside the strict ball.
+          rho[i] = std::min(rho[i], std::sqrt(d2s[k - 1]) * (1.0 + 1e-9) + 1e-12);
+        } else if (params.radius > 0.0 && s.radii[g] >= params.radius) {
+          rho[i] = std::min(rho[i], s.radii[g]);
+        } else if (last) {
+          rho[i] = std::min(rho[i], 2.0 * s.radii[g]);  // every radius tried: the footprint stays the search limit
+        } else {
+          again[i] = 1;
+        }
+      };
+      sweep(s, coarse_set, queries, left, s.radii[g], footprint);
+      left.erase(std::remove_if(left.begin(), left.end(), [&](std::uint32_t i) { return !again[i]; }), left.end());
+    }
+    // Queries outside every search grid (far outliers) saw no callback: their footprint stays as initialised.
+  }
+
+  // 2. Every averaging point inside the footprint, grown where line-like (growNeighbourhoods).
+  growNeighbourhoods(s, queries, std::move(pending), rho, chosen.data(), have.data());
   for (std::size_t i = 0; i < ids.size(); ++i)
     if (have[i]) result[i] = unorientedNormal(chosen[i]);
   if (neighbourhoods)

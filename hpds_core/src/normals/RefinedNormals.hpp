@@ -2,6 +2,8 @@
 // hpds/normals/NormalEstimator.hpp), called by estimateNormals, and the pieces both estimators share. Not public API.
 #pragma once
 
+#include <cstddef>
+#include <cstdint>
 #include <memory>
 #include <vector>
 
@@ -26,17 +28,39 @@ struct AveragingGrids {
   [[nodiscard]] std::size_t memUsage() const;
 };
 
+/// Neighbourhoods already chosen for some of the queries (by refinedNeighbourhoodsOverCentroids), parallel to ids.
+struct KnownNeighbourhoods {
+  enum State : std::uint8_t { kUnknown = 0, kChosen = 1, kNone = 2 };
+  const std::uint8_t *state = nullptr;  ///< per id: kUnknown (estimate it), kChosen (chosen[i]), kNone (no normal)
+  const LocalPca *chosen = nullptr;
+};
+
 /// `centroids`: when given, the averaging points of neighborhood_level_offset (3 doubles each, fixed frame: the
 /// centroids of the points of the frame the samples came from per cell of level level + offset, see
 /// CellCentroids.hpp) in place of the samples of levels level+1..level+offset, which then need not exist.
 /// `neighbourhoods`: when given (sized as ids), each entry is set to the PCA of the neighbourhood the normal came from.
 /// `grids`: with `centroids`, their search grids (see AveragingGrids); every queried sample must lie in their box.
+/// `known`: with `centroids` and a fixed footprint (params.k 0), the neighbourhoods of the ids not marked kUnknown,
+/// taken as given; std::invalid_argument otherwise.
 [[nodiscard]] std::vector<SampleNormal> estimateNormalsRefined(const Hierarchy &hierarchy,
                                                                const std::vector<SampleId> &ids,
                                                                const NormalParams &params,
                                                                const std::vector<double> *centroids = nullptr,
                                                                std::vector<LocalPca> *neighbourhoods = nullptr,
-                                                               const AveragingGrids *grids = nullptr);
+                                                               const AveragingGrids *grids = nullptr,
+                                                               const KnownNeighbourhoods *known = nullptr);
+
+/// The neighbourhood estimateNormalsRefined chooses, over `centroids` with `grids` (their radii those of
+/// refinedSearchRadii for a hierarchy of `cell_size` and these params), for queries at positions base + 3 * index[i],
+/// i < count, without a hierarchy: chosen[i] and have[i] = 1, or have[i] = 0 where no normal can be estimated. The
+/// same bits as estimateNormalsRefined for a sample at that position, whatever else is queried or known (a query's
+/// neighbourhoods depend on its position only). Needs params.k 0 and params.radius > 0 (std::invalid_argument
+/// otherwise). Runs on the calling thread; grids it sorts are kept in `grids`, which only this call may touch
+/// meanwhile. The pipeline runs it on the samples a frame's insertion has accepted so far, beside the insertion.
+void refinedNeighbourhoodsOverCentroids(const double *base, const std::uint32_t *index, std::size_t count,
+                                        const NormalParams &params, double cell_size,
+                                        const std::vector<double> &centroids, AveragingGrids &grids,
+                                        LocalPca *chosen, std::uint8_t *have);
 
 /// NaN normal and curvature, valid = false.
 [[nodiscard]] SampleNormal invalidNormal();

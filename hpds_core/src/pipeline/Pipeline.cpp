@@ -24,6 +24,11 @@ namespace {
 
 /// Search radii of the scan-mode normals sorted ahead on the second thread (see addFrame).
 constexpr std::size_t kAheadRadii = 4;
+/// Samples whose neighbourhoods the second thread estimates at once while a frame is inserted: at least a few
+/// hundred (each call sorts its queries into every round's grid), at most a few thousand, so that the insertion
+/// rarely waits for a call to finish when it ends.
+constexpr std::size_t kEarlyMinChunk = 256, kEarlyMaxChunk = 2048;
+constexpr std::chrono::microseconds kEarlyPoll{50};
 double secondsSince(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 }
@@ -99,6 +104,9 @@ FrameResult Pipeline::addFrame(const Frame &frame) {
   if (static_cast<double>(candidates_.capacity()) > 4.0 * recent_points_ + 65536.0) {
     std::vector<double>().swap(xyz_);  // `= {}` would keep the capacity
     std::vector<std::uint32_t>().swap(candidates_);
+    std::vector<std::uint32_t>().swap(early_points_);
+    std::vector<LocalPca>().swap(early_chosen_);
+    std::vector<std::uint8_t>().swap(early_have_);
     hierarchy_.shrink();
   }
 
@@ -121,28 +129,30 @@ FrameResult Pipeline::addFrame(const Frame &frame) {
       c.evicted += hierarchy_.evictToCap(viewpoint, static_cast<std::size_t>(config_.map.max_samples));
   }
 
-  // 4. Insertion order (random, input or feature-sensitive).
-  const double feature_radius = config_.order.feature_radius > 0.0
-                                    ? config_.order.feature_radius
-                                    : 2.0 * poissonRadius(config_.hierarchy.cell_size, output_level_);
-  const std::vector<std::uint32_t> order =
-      insertionOrder(xyz_.data(), candidates_, config_.order.type, config_.order.seed + frames_, feature_radius,
-                     config_.threads);
-  result.seconds_order = secondsSince(t_order);
+  const double seconds_posing = secondsSince(t_order);
 
-  // 5. Scan-mode normals average the frame's points per cell of the fine level instead of that many more levels of
-  //    the hierarchy: those centroids only need the points, so with a second thread they are made during step 6.
-  //    Their search grids of the first radii are sorted there too, until the insertion is done (the normals sort
-  //    the others over the same box, so the output does not depend on how many were ready).
+  // 4. Scan-mode normals average the frame's points per cell of the fine level instead of that many more levels of
+  //    the hierarchy: those centroids only need the points, so with a second thread they are made during steps 5 and 6,
+  //    and so are the search grids of the first radii. Then that thread estimates the neighbourhoods of the
+  //    samples the insertion has accepted so far (a sample's neighbourhood depends on its position only; see
+  //    refinedNeighbourhoodsOverCentroids), sorting another grid ahead when none are waiting, until the insertion is
+  //    done: the normals then only estimate the rest, with the same result as estimating all.
   std::thread fine_worker;
   std::exception_ptr fine_error;
   std::atomic<bool> inserted_all{false};
+  std::atomic<std::size_t> published{0};
   fine_points_.clear();
   fine_grids_.reset();
+  early_done_ = 0;
+  early_slot_.clear();
+  const NormalParams normal_params = normalParamsFor(config_, output_level_);
+  const bool ahead = fine_level_ >= 0 && resolveThreads(config_.threads) > 1;
+  const bool early = ahead && normal_params.k == 0 && normal_params.radius > 0.0;
+  if (early) early_points_.resize(candidates_.size());
   if (fine_level_ >= 0) {
-    const bool ahead = resolveThreads(config_.threads) > 1;
-    std::vector<double> radii = refinedSearchRadii(hierarchy_, normalParamsFor(config_, output_level_));
-    auto centroids = [this, &fine_error, &inserted_all, ahead, radii = std::move(radii)]() mutable {
+    std::vector<double> radii = refinedSearchRadii(hierarchy_, normal_params);
+    auto centroids = [this, &fine_error, &inserted_all, &published, ahead, early, &normal_params,
+                      radii = std::move(radii)]() mutable {
       try {
         double box[6];
         fine_points_ = cellCentroids(xyz_.data(), candidates_.data(), candidates_.size(),
@@ -153,15 +163,42 @@ FrameResult Pipeline::addFrame(const Frame &frame) {
         std::copy(box, box + 3, grids->lo);
         std::copy(box + 3, box + 6, grids->hi);
         grids->by_radius.resize(grids->radii.size());
+        fine_grids_ = grids;
+        if (!ahead) return;
         const PointSet points{fine_points_.data(), nullptr, fine_points_.size() / 3};
         // The first rounds hold most queries; a later round is a few queries over as many points, where sorting ahead
         // saves as much but is less likely to finish in time: at most kAheadRadii of them (every radius ahead, six on
         // HDL-32, took its 2-thread frame path from 10.0-10.4 to 10.6-11.2 ms in alternating runs).
-        for (std::size_t g = 0; ahead && g < std::min(grids->radii.size(), kAheadRadii); ++g) {
-          if (inserted_all.load(std::memory_order_relaxed)) break;
-          grids->by_radius[g] = std::make_unique<BallGridPoints>(points, grids->radii[g], grids->lo, grids->hi);
+        std::size_t next_grid = 0;
+        auto sortAhead = [&] {
+          while (next_grid < std::min(grids->radii.size(), kAheadRadii) && grids->by_radius[next_grid]) ++next_grid;
+          if (next_grid >= std::min(grids->radii.size(), kAheadRadii)) return false;
+          grids->by_radius[next_grid] =
+              std::make_unique<BallGridPoints>(points, grids->radii[next_grid], grids->lo, grids->hi);
+          return true;
+        };
+        if (!early) {
+          while (!inserted_all.load(std::memory_order_relaxed) && sortAhead()) {
+          }
+          return;
         }
-        fine_grids_ = std::move(grids);
+        for (;;) {
+          if (inserted_all.load(std::memory_order_acquire)) break;  // the rest is left to the normals' threads
+          const std::size_t ready = published.load(std::memory_order_acquire);
+          if (ready - early_done_ >= kEarlyMinChunk) {
+            const std::size_t count = std::min(ready - early_done_, kEarlyMaxChunk);
+            early_chosen_.resize(early_done_ + count);
+            early_have_.resize(early_done_ + count);
+            refinedNeighbourhoodsOverCentroids(xyz_.data(), early_points_.data() + early_done_, count, normal_params,
+                                               config_.hierarchy.cell_size, fine_points_, *grids,
+                                               early_chosen_.data() + early_done_, early_have_.data() + early_done_);
+            early_done_ += count;
+          } else if (!sortAhead()) {
+            // Nothing to do until more samples are accepted: sleep rather than spin, so that on a busy machine the
+            // insertion keeps its core (a chunk's worth is ~0.2 ms of insertion on the HDL-32 frame).
+            std::this_thread::sleep_for(kEarlyPoll);
+          }
+        }
       } catch (...) {
         fine_error = std::current_exception();
       }
@@ -171,6 +208,23 @@ FrameResult Pipeline::addFrame(const Frame &frame) {
     else
       centroids();
   }
+
+  // 5. Insertion order (random, input or feature-sensitive).
+  const auto t_shuffle = std::chrono::steady_clock::now();
+  const double feature_radius = config_.order.feature_radius > 0.0
+                                    ? config_.order.feature_radius
+                                    : 2.0 * poissonRadius(config_.hierarchy.cell_size, output_level_);
+  std::vector<std::uint32_t> order;
+  try {
+    order = insertionOrder(xyz_.data(), candidates_, config_.order.type, config_.order.seed + frames_,
+                           feature_radius, config_.threads);
+  } catch (...) {
+    inserted_all = true;
+    if (fine_worker.joinable()) fine_worker.join();
+    early_done_ = 0;
+    throw;
+  }
+  result.seconds_order = seconds_posing + secondsSince(t_shuffle);
 
   // 6. Breadth-first insertion into the hierarchy.
   const auto t_insert = std::chrono::steady_clock::now();
@@ -184,18 +238,34 @@ FrameResult Pipeline::addFrame(const Frame &frame) {
   for (int a = 0; a < 3; ++a) batch.viewpoint[a] = viewpoint[a];
   batch.frame_index = frames_;
   batch.max_level = buildDepth();
+  if (early) {
+    batch.published = early_points_.data();
+    batch.published_count = &published;
+    batch.publish_level = output_level_;
+  }
   InsertResult inserted;
   try {
     inserted = hierarchy_.insert(batch);
   } catch (...) {
     inserted_all = true;
     if (fine_worker.joinable()) fine_worker.join();
+    early_done_ = 0;
     throw;
   }
-  inserted_all = true;
+  inserted_all.store(true, std::memory_order_release);
   result.seconds_insert = secondsSince(t_insert);
   if (fine_worker.joinable()) fine_worker.join();
-  if (fine_error) std::rethrow_exception(fine_error);
+  if (fine_error) {
+    early_done_ = 0;
+    std::rethrow_exception(fine_error);
+  }
+  result.normals_ahead = early_done_;
+  if (early_done_ > 0) {  // which samples the early neighbourhoods belong to: the first ones published
+    early_slot_.assign(hierarchy_.idBound(), kNoSample);
+    std::size_t k = 0;
+    for (SampleId id : inserted.accepted)
+      if (hierarchy_.level(id) <= output_level_ && k < early_done_) early_slot_[id] = static_cast<std::uint32_t>(k++);
+  }
 
   c.out_of_range = inserted.out_of_range;
   c.dropped_depth = inserted.dropped_depth;
@@ -210,7 +280,9 @@ FrameResult Pipeline::addFrame(const Frame &frame) {
 std::size_t Pipeline::memUsage() const {
   return hierarchy_.memUsage() + hierarchy_.scratchBytes() + xyz_.capacity() * sizeof(double) +
          candidates_.capacity() * sizeof(std::uint32_t) + fine_points_.capacity() * sizeof(double) +
-         (fine_grids_ ? fine_grids_->memUsage() : 0);
+         (fine_grids_ ? fine_grids_->memUsage() : 0) + early_points_.capacity() * sizeof(std::uint32_t) +
+         early_chosen_.capacity() * sizeof(LocalPca) + early_have_.capacity() +
+         early_slot_.capacity() * sizeof(SampleId);
 }
 
 void Pipeline::replaceMap(Hierarchy &&map, std::uint32_t next_frame) {
@@ -266,12 +338,30 @@ std::vector<SampleNormal> Pipeline::normals(const std::vector<SampleId> &ids,
   const NormalParams params = normalParamsFor(config_, output_level_);
   if (fine_level_ < 0) return estimateNormals(hierarchy_, ids, params, neighbourhoods);
   if (neighbourhoods) neighbourhoods->assign(ids.size(), LocalPca{});
-  std::vector<SampleNormal> normals =
-      estimateNormalsRefined(hierarchy_, ids, params, &fine_points_, neighbourhoods, fine_grids_.get());
-  // The grids sorted ahead serve the frame's first estimate only (VLS-128: 26 MB held to the next frame otherwise);
-  // a second one sorts over the same box, with the same result.
+  // Neighbourhoods estimated beside the insertion (addFrame) for the samples among ids.
+  std::vector<std::uint8_t> state;
+  std::vector<LocalPca> chosen;
+  KnownNeighbourhoods known;
+  if (early_done_ > 0) {
+    state.assign(ids.size(), KnownNeighbourhoods::kUnknown);
+    chosen.resize(ids.size());
+    for (std::size_t i = 0; i < ids.size(); ++i) {
+      const SampleId id = ids[i];
+      const std::uint32_t k = id < early_slot_.size() ? early_slot_[id] : kNoSample;
+      if (k == kNoSample) continue;
+      state[i] = early_have_[k] ? KnownNeighbourhoods::kChosen : KnownNeighbourhoods::kNone;
+      chosen[i] = early_chosen_[k];
+    }
+    known = KnownNeighbourhoods{state.data(), chosen.data()};
+  }
+  std::vector<SampleNormal> normals = estimateNormalsRefined(hierarchy_, ids, params, &fine_points_, neighbourhoods,
+                                                             fine_grids_.get(), early_done_ > 0 ? &known : nullptr);
+  // The grids sorted ahead and the early neighbourhoods serve the frame's first estimate only (VLS-128: 26 MB of
+  // grids held to the next frame otherwise); a second one estimates everything, with the same result.
   if (fine_grids_)
     for (auto &g : fine_grids_->by_radius) g.reset();
+  early_done_ = 0;
+  std::vector<std::uint32_t>().swap(early_slot_);
   return normals;
 }
 

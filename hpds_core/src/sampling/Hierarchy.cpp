@@ -198,12 +198,17 @@ __attribute__((always_inline)) inline void Hierarchy::store(int d, const InsertB
   ++result.accepted_per_level[d];
   result.accepted.push_back(id);
   accepted_keys_.push_back(finest);
+  if (batch.published && d <= batch.publish_level) {
+    batch.published[result.published++] = pi;
+    if ((result.published & 63) == 0) batch.published_count->store(result.published, std::memory_order_release);
+  }
 }
 
 InsertResult Hierarchy::insert(const InsertBatch &batch) {
   InsertResult result;
   if (batch.records && batch.record_step != record_layout_.point_step)
     throw std::invalid_argument("insert: record_step does not match the record layout");
+  if (batch.published && !batch.published_count) throw std::invalid_argument("insert: published without a count");
 
   // Highest level holding samples from earlier batches: only those need the finer-level check.
   int finest_populated = -1;
@@ -318,6 +323,7 @@ InsertResult Hierarchy::insert(const InsertBatch &batch) {
         schedule(next, rank);
       }
     }
+    if (batch.published_count) batch.published_count->store(result.published, std::memory_order_release);
   }
   // Points still scheduled past the last level tried (at most max_depth + 1) are dropped.
   for (int l = last_level + 1; l <= max_depth_ + 1; ++l)

@@ -11,7 +11,8 @@
 // - Scan mode: every frame is sampled on its own (the hierarchy is cleared first). The normals' finer detail
 //   (normals.neighborhood_level_offset) comes from the frame itself: the centroids of its points per cell of level
 //   output + offset (clamped to max_depth) stand in for the samples of those levels, which are not built for it
-//   (with threads > 1, beside the insertion, and with them the normals' first search grids). Map mode: one persistent
+//   (with threads > 1, beside the insertion, and with them the normals' first search grids and the neighbourhoods
+//   of the samples accepted so far, which the frame's first normals() then takes). Map mode: one persistent
 //   hierarchy in the fixed frame; earlier samples never move or change level; samples farther than
 //   map.evict_distance from the latest sensor position are evicted before the frame is inserted, and the store is
 //   cut back to map.max_samples (farthest first), so memory is bounded by the cap plus one frame.
@@ -57,6 +58,9 @@ struct FrameResult {
   std::vector<SampleId> new_samples;  ///< accepted from this frame, all levels, acceptance order
   double seconds_order = 0.0;         ///< insertion order (features included)
   double seconds_insert = 0.0;
+  /// Scan mode with 2+ threads: output samples whose normal neighbourhood the second thread estimated while the frame
+  /// was inserted (the next normals() only estimates the others; the result is the same either way).
+  std::size_t normals_ahead = 0;
 };
 
 class Pipeline {
@@ -124,6 +128,14 @@ class Pipeline {
   std::vector<double> fine_points_;
   // Their search grids, the first radii sorted while the frame is inserted when a second thread is allowed.
   std::shared_ptr<AveragingGrids> fine_grids_;
+  // With a second thread: the neighbourhoods it estimated while the frame was inserted, for the first early_done_
+  // samples the insertion published (point indices in early_points_), and each sample's entry (early_slot_, by id;
+  // kNoSample: none). The frame's first normals() takes them and lets them go.
+  std::vector<std::uint32_t> early_points_;
+  std::vector<LocalPca> early_chosen_;
+  std::vector<std::uint8_t> early_have_;
+  mutable std::vector<std::uint32_t> early_slot_;
+  mutable std::size_t early_done_ = 0;
   Hierarchy hierarchy_;
   FrameCounters totals_;
   std::uint32_t frames_ = 0;

@@ -19,6 +19,7 @@
 
 #include <algorithm>
 #include <array>
+#include <atomic>
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
@@ -46,10 +47,19 @@ struct InsertBatch {
   /// Deepest level this batch's points may be accepted at; -1 = max_depth. Levels 0..max_level come out exactly as
   /// with max_depth (a pass only looks at coarser and equal levels), points rejected down to it are dropped.
   int max_level = -1;
+  /// Optional, for a reader on another thread while the batch is inserted: the point index (an element of `order`)
+  /// of every sample accepted at a level <= publish_level is written to published[k], k = 0, 1, ... in acceptance
+  /// order, and *published_count is raised (release) to the number written at least every 64 of them and at the end
+  /// of every pass, so that a reader loading it (acquire) may read that many entries. `published` must hold
+  /// order_size entries.
+  std::uint32_t *published = nullptr;
+  std::atomic<std::size_t> *published_count = nullptr;
+  int publish_level = -1;
 };
 
 struct InsertResult {
   std::vector<SampleId> accepted;               ///< new sample ids, in acceptance order
+  std::size_t published = 0;                    ///< entries written to InsertBatch::published
   std::array<std::uint64_t, kMaxDepthLimit + 1> accepted_per_level{};
   std::uint64_t dropped_depth = 0;  ///< rejected at every level down to max_depth (or the batch's max_level)
   std::uint64_t out_of_range = 0;   ///< coordinates beyond the exact-key range (never inserted)
