@@ -342,7 +342,10 @@ TEST(MapFileBytes, HugeRecordsAreSavedInBoundedChunks) {
   Hierarchy h(4.0, 2);
   PointLayout l;
   l.append("x", FieldType::Float32);
-  l.append("blob", FieldType::UInt8, (1u << 24) - 4);  // the largest record the format allows
+  // The largest record the format allows, 16 MiB, in fields of at most kMaxFieldCount elements.
+  for (int i = 0; i < 16; ++i)
+    l.append("blob" + std::to_string(i), FieldType::UInt8, i < 15 ? (1u << 20) : (1u << 20) - 4);
+  ASSERT_EQ(l.point_step, 1u << 24);
   h.setRecordLayout(l);
   std::vector<std::uint8_t> record(l.point_step, 0x5A);
   const float v[3] = {0, 0, 0};

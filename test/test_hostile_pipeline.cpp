@@ -73,8 +73,29 @@ TEST(HostilePipeline, BrokenLayoutsThrowBeforeAnythingChanges) {
     f.points.bytes().assign(3 * l.point_step, 0);
     EXPECT_THROW(p.addFrame(f), std::invalid_argument);
   }
+  // An empty frame whose last field is 4 GB long: every size matches, but its count is no real field's, and the
+  // output layout's 32-bit point_step would wrap around.
+  PointLayout huge;
+  for (const char *axis : {"x", "y", "z"}) huge.append(axis, FieldType::Float32);
+  huge.fields.push_back(PointField{"blob", 12, FieldType::UInt8, 0xFFFFFFE4u});
+  huge.point_step = 0xFFFFFFF0u;
+  Frame empty;
+  empty.points = PointBuffer(huge, 0);
+  EXPECT_THROW(p.addFrame(empty), std::invalid_argument);
   EXPECT_EQ(p.hierarchy().sampleCount(), before);
   EXPECT_EQ(p.framesProcessed(), frames);
+  // Nor can a layout be grown past those limits.
+  PointLayout grow;
+  grow.append("x", FieldType::Float32);
+  EXPECT_THROW(grow.append("descriptor", FieldType::Float32, kMaxFieldCount + 1), std::invalid_argument);
+  EXPECT_THROW(grow.append("none", FieldType::Float32, 0), std::invalid_argument);
+  grow.point_step = 0xFFFFFFFCu;
+  EXPECT_THROW(grow.append("y", FieldType::Float64), std::invalid_argument);
+  EXPECT_EQ(grow.fields.size(), 1u);
+  EXPECT_EQ(grow.point_step, 0xFFFFFFFCu);
+  grow.point_step = 0xFFFFFFFBu;
+  grow.append("y", FieldType::Float32);  // up to the last byte still fits
+  EXPECT_EQ(grow.point_step, 0xFFFFFFFFu);
 }
 
 TEST(HostilePipeline, NanInfInEveryFieldAndPose) {

@@ -25,6 +25,10 @@ CloudError checkLayout(const sensor_msgs::PointCloud2 &msg, hpds::PointLayout &l
       return fail(CloudError::BadDatatype, why,
                   "field '" + f.name + "' has datatype " + std::to_string(int(f.datatype)) + " (valid: 1..8)");
     if (f.count == 0) return fail(CloudError::BadCount, why, "field '" + f.name + "' has count 0");
+    if (f.count > hpds::kMaxFieldCount)
+      return fail(CloudError::BadCount, why,
+                  "field '" + f.name + "' has count " + std::to_string(f.count) + ", more than the " +
+                      std::to_string(hpds::kMaxFieldCount) + " elements a field may have");
     const auto type = static_cast<hpds::FieldType>(f.datatype);
     const std::uint64_t end = std::uint64_t(f.offset) + std::uint64_t(f.count) * hpds::fieldTypeSize(type);
     if (end > msg.point_step)

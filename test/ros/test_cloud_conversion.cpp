@@ -210,7 +210,17 @@ const MalformedCase kMalformed[] = {
     {"field beyond point_step", CloudError::FieldOutsidePoint,
      [](PointCloud2 &m) { m.fields.back().offset = m.point_step - 1; }},
     {"huge offset", CloudError::FieldOutsidePoint, [](PointCloud2 &m) { m.fields[1].offset = 0xFFFFFFFFu; }},
-    {"huge count", CloudError::FieldOutsidePoint, [](PointCloud2 &m) { m.fields[6].count = 0xFFFFFFFFu; }},
+    {"huge count", CloudError::BadCount, [](PointCloud2 &m) { m.fields[6].count = 0xFFFFFFFFu; }},
+    {"count 2^20 + 1", CloudError::BadCount, [](PointCloud2 &m) { m.fields[6].count = hpds::kMaxFieldCount + 1; }},
+    // No points, so every size matches, yet the fields' sizes would wrap a 32-bit output point_step.
+    {"empty cloud, huge count inside a huge point_step", CloudError::BadCount,
+     [](PointCloud2 &m) {
+       m.fields.back().count = 0xFFFFFFE4u;
+       m.point_step = 0xFFFFFFF0u;
+       m.width = 0;
+       m.row_step = 0;
+       m.data.clear();
+     }},
     {"point_step 0", CloudError::FieldOutsidePoint, [](PointCloud2 &m) { m.point_step = 0; }},
     {"duplicate name", CloudError::DuplicateField, [](PointCloud2 &m) { m.fields[4].name = "x"; }},
     {"no z", CloudError::MissingXyz, [](PointCloud2 &m) { m.fields[2].name = "w"; }},

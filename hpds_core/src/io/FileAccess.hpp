@@ -11,13 +11,14 @@
 #include <string>
 
 #include "hpds/io/AtomicFile.hpp"
+#include "hpds/points/PointBuffer.hpp"
 
 namespace hpds::io_detail {
 
 /// A PCD/PLY header longer than this is not a point-cloud header (real ones are a few hundred bytes).
 constexpr std::size_t kMaxHeaderBytes = 1 << 20;
 /// Elements one field may have (PCD COUNT; a PLY writer expands them into this many properties).
-constexpr std::uint32_t kMaxFieldCount = 1 << 20;
+using hpds::kMaxFieldCount;
 /// Properties a PLY header may declare: PCL's header parser takes time quadratic in their number (40 000 took 3 s,
 /// 24 s under the sanitizers), and real files have a few dozen.
 constexpr std::size_t kMaxPlyProperties = 8192;

@@ -56,12 +56,19 @@ const PointField *PointLayout::find(const std::string &name) const {
 }
 
 void PointLayout::append(const std::string &name, FieldType type, std::uint32_t count) {
+  if (count == 0 || count > kMaxFieldCount)
+    throw std::invalid_argument("field '" + name + "' has count " + std::to_string(count) + " (1.." +
+                                std::to_string(kMaxFieldCount) + ")");
   PointField f;
   f.name = name;
   f.offset = point_step;
   f.type = type;
   f.count = count;
-  point_step += static_cast<std::uint32_t>(f.byteSize());
+  const std::uint64_t end = std::uint64_t(point_step) + f.byteSize();
+  if (end > UINT32_MAX)
+    throw std::invalid_argument("field '" + name + "' would end at byte " + std::to_string(end) +
+                                ", beyond the 32-bit point_step");
+  point_step = static_cast<std::uint32_t>(end);
   fields.push_back(std::move(f));
 }
 
@@ -72,6 +79,9 @@ void PointLayout::validate() const {
       throw std::invalid_argument("field '" + f.name + "' has an invalid datatype " +
                                   std::to_string(static_cast<int>(f.type)));
     if (f.count == 0) throw std::invalid_argument("field '" + f.name + "' has count 0");
+    if (f.count > kMaxFieldCount)
+      throw std::invalid_argument("field '" + f.name + "' has count " + std::to_string(f.count) + ", more than the " +
+                                  std::to_string(kMaxFieldCount) + " elements a field may have");
     const std::uint64_t end = std::uint64_t(f.offset) + std::uint64_t(f.count) * fieldTypeSize(f.type);
     if (end > point_step)
       throw std::invalid_argument("field '" + f.name + "' ends at byte " + std::to_string(end) +

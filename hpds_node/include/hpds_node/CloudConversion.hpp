@@ -30,7 +30,7 @@ enum class CloudError {
   None = 0,
   BigEndian,          ///< is_bigendian true
   BadDatatype,        ///< a field's datatype outside 1..8
-  BadCount,           ///< a field with count 0
+  BadCount,           ///< a field with count 0 or above hpds::kMaxFieldCount
   FieldOutsidePoint,  ///< a field ending beyond point_step
   DuplicateField,     ///< a field name appearing twice
   MissingXyz,         ///< no x, y or z field

@@ -50,14 +50,20 @@ struct PointField {
   }
 };
 
+/// Elements one field may have (a PCD COUNT, a PointCloud2 field's count): real fields hold a few (rgb, a
+/// descriptor); a count beyond this is a malformed header, and sums of such counts could wrap a 32-bit point_step.
+inline constexpr std::uint32_t kMaxFieldCount = 1u << 20;
+
 struct PointLayout {
   std::vector<PointField> fields;
   std::uint32_t point_step = 0;  ///< bytes per record (>= end of the last field; may include padding)
 
   [[nodiscard]] const PointField *find(const std::string &name) const;
-  /// Appends a field at the current end of the record and grows point_step.
+  /// Appends a field at the current end of the record and grows point_step. Throws std::invalid_argument for a count
+  /// of 0 or above kMaxFieldCount, or when point_step would pass 2^32 - 1 (nothing is appended then).
   void append(const std::string &name, FieldType type, std::uint32_t count = 1);
-  /// Throws std::invalid_argument when a field overlaps the record end, has a bad type or count 0, or a name repeats.
+  /// Throws std::invalid_argument when a field overlaps the record end, has a bad type, count 0 or above
+  /// kMaxFieldCount, or a name repeats.
   void validate() const;
   bool operator==(const PointLayout &o) const { return fields == o.fields && point_step == o.point_step; }
   bool operator!=(const PointLayout &o) const { return !(*this == o); }
