@@ -267,6 +267,11 @@ TEST(ConfigYaml, InvalidDocumentsNameTheKey) {
       {"map: {keep_depth: -2}", "map.keep_depth", "-1 or in 0..hierarchy.max_depth"},
       {"hierarchy: {max_depth: 6}\nmap: {keep_depth: 7}", "map.keep_depth", "0..hierarchy.max_depth (6)"},
       {"output: {spacing: 1e7}", "output.spacing", "too large"},
+      // cells whose exact keys cannot hold a frame: every point would be out of key range
+      {"output: {spacing: 1e-300}", "output.spacing", "too small"},
+      {"output: {spacing: 1e-8}", "output.spacing", "reach only"},
+      {"hierarchy: {cell_size: 1e-6}", "hierarchy.cell_size", "lower hierarchy.max_depth"},
+      {"hierarchy: {cell_size: 0.01, max_depth: 21}", "hierarchy.cell_size", "too small"},
       {"hierarchy: {cell_size: .nan}", "hierarchy.cell_size", "finite"},
       {"hierarchy: {cell_size: -.inf}", "hierarchy.cell_size", "finite"},
       {"hierarchy: {max_depth: 22}", "hierarchy.max_depth", "0..21"},

@@ -5,6 +5,8 @@
 #include <cstdio>
 #include <stdexcept>
 
+#include "hpds/sampling/CellKey.hpp"
+
 namespace hpds {
 
 namespace {
@@ -52,6 +54,8 @@ Mode parseMode(const std::string &text, const std::string &key) {
 
 namespace {
 constexpr double kMaxCellSize = 1e6;
+/// [m] How far from the origin the finest level's exact cell keys must reach at least: less holds no lidar frame.
+constexpr double kMinKeyReach = 100.0;
 
 // The cell edge of level `level` whose radius is `spacing`, as a level-0 edge: the smallest double whose r_level is
 // not below the spacing (the product may round a bit low).
@@ -161,6 +165,15 @@ void validateConfig(const HpdsConfig &c) {
   if (c.input.max_range > 0.0 && c.input.max_range <= c.input.min_range)
     fail("input.max_range", "must be 0 (off) or > input.min_range");
   if (c.threads < 0 || c.threads > 1024) fail("threads", "must be in 0..1024 (0 = all cores), got " + std::to_string(c.threads));
+  // Cells so small that the finest level's exact keys cannot hold a lidar frame: every point would be counted out
+  // of key range and every output empty.
+  const double finest_edge = cellEdge(resolveOutput(c).cell_size, c.hierarchy.max_depth);
+  const double reach = (kMaxCellCoord - 8.0) * finest_edge;
+  if (!(reach >= kMinKeyReach))
+    fail(c.hierarchy.cell_size == 0.0 ? "output.spacing" : "hierarchy.cell_size",
+         "is too small: level " + std::to_string(c.hierarchy.max_depth) + " (hierarchy.max_depth) gets cells of " +
+             metres(finest_edge) + ", whose exact keys reach only " + metres(reach) + " from the origin (at least " +
+             metres(kMinKeyReach) + " are needed); raise it or lower hierarchy.max_depth");
   validateNeighbourhoods(c);
 }
 

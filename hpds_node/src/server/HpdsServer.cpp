@@ -326,6 +326,14 @@ void HpdsServer::handle(const sensor_msgs::PointCloud2::ConstPtr &msg, std::size
                                                                               << count(frame.drop)
                                                                               << " so far): " << frame.why);
       } else {
+        if (frame.counters.out_of_range > 0)
+          ROS_WARN_STREAM_THROTTLE_NAMED(5.0, "hpds", "hpds: " << frame.counters.out_of_range << " of the frame's "
+                                                                << frame.counters.input
+                                                                << " points lie beyond the exact key range of the "
+                                                                   "finest level (|coordinate| / cell edge >= 2^30) "
+                                                                   "and were not inserted (counted as 'points out of "
+                                                                   "key range'); lower hierarchy.max_depth or raise "
+                                                                   "the spacing or hierarchy.cell_size");
         for (const std::string &name : frame.fields_not_carried) warnFieldNotCarriedOnce(name);
         turns.waitToPublish();
         publish(frame);
