@@ -5,6 +5,8 @@
 // it starts writing) or by SIGXFSZ (the kernel's file size limit, which stops it at an exact byte).
 #include <gtest/gtest.h>
 
+#include <algorithm>
+
 #include <fcntl.h>
 #include <signal.h>
 #include <sys/file.h>
@@ -58,7 +60,8 @@ void writeRandomCloud(const fs::path &path, std::size_t n, std::uint32_t payload
 }
 
 // Starts `hpds args...` (stdout and stderr to `log`), optionally under a file size limit.
-pid_t spawnHpds(const std::vector<std::string> &args, const fs::path &log, rlim_t file_size_limit = RLIM_INFINITY) {
+pid_t spawnHpds(const std::vector<std::string> &args, const fs::path &log, rlim_t file_size_limit = RLIM_INFINITY,
+                bool ignore_sigxfsz = false) {
   std::vector<std::string> argv_strings = {test::cliPath()};
   argv_strings.insert(argv_strings.end(), args.begin(), args.end());
   const pid_t pid = ::fork();
@@ -68,7 +71,7 @@ pid_t spawnHpds(const std::vector<std::string> &args, const fs::path &log, rlim_
     ::dup2(fd, 2);
     const rlimit limit{file_size_limit, file_size_limit};
     ::setrlimit(RLIMIT_FSIZE, &limit);
-    ::signal(SIGXFSZ, SIG_DFL);
+    ::signal(SIGXFSZ, ignore_sigxfsz ? SIG_IGN : SIG_DFL);  // ignored: a write past the limit fails with EFBIG
     std::vector<char *> argv;
     for (std::string &s : argv_strings) argv.push_back(s.data());
     argv.push_back(nullptr);
@@ -115,10 +118,13 @@ TEST_F(OutputSafety, WriteKilledByTheFileSizeLimitLeavesThePreviousOutputsAndThe
                                 dir_ / "log2.txt", 2 << 20));
   ASSERT_TRUE(WIFSIGNALED(status) && WTERMSIG(status) == SIGXFSZ) << test::readText(dir_ / "log2.txt");
   EXPECT_EQ(test::readText(dir_ / "m.hpdsmap"), previous_map) << "the previous map was destroyed";
-  // That run's first write into the folder removed the first run's leftover: only its own is left.
-  const std::vector<fs::path> left = temporariesIn(dir_);
-  ASSERT_EQ(left.size(), 1u);
+  EXPECT_FALSE(fs::exists(small)) << "the cloud of a run whose map was never written was put in place";
+  // That run's first write into the folder removed the first run's leftover: only its own two are left.
+  std::vector<fs::path> left = temporariesIn(dir_);
+  ASSERT_EQ(left.size(), 2u);
+  std::sort(left.begin(), left.end());
   EXPECT_EQ(left[0].filename().string().rfind("m.hpdsmap.hpds-tmp.", 0), 0u) << left[0];
+  EXPECT_EQ(left[1].filename().string().rfind("small.ply.hpds-tmp.", 0), 0u) << left[1];
 
   // 3. The next run into that folder removes the leftover and writes complete files.
   std::string log;
@@ -129,6 +135,29 @@ TEST_F(OutputSafety, WriteKilledByTheFileSizeLimitLeavesThePreviousOutputsAndThe
       << log;
   EXPECT_TRUE(temporariesIn(dir_).empty());
   EXPECT_GT(readPointCloud(out).size(), 190000u) << "complete output expected";
+}
+
+TEST_F(OutputSafety, AFailedWriteOfOneOutputReplacesNoneOfThem) {
+  // A full disk while the map is written, after the cloud: the cloud, the map and the stats of a run all replace
+  // their previous files, or none does. (SIGXFSZ ignored: the write fails with EFBIG and hpds reports it.)
+  writeRandomCloud(dir_ / "in.ply", 200000);
+  const std::string previous_ply = "previous PLY\n", previous_map = "previous map\n", previous_stats = "{}\n";
+  writeText(dir_ / "out.ply", previous_ply);
+  writeText(dir_ / "m.hpdsmap", previous_map);
+  writeText(dir_ / "s.json", previous_stats);
+  writeText(dir_ / "keep.yaml", "map: {keep_depth: 8}\n");
+  const int status = waitStatus(spawnHpds({"sample", (dir_ / "in.ply").string(), "--mode", "map", "--level", "0",
+                                           "--config", (dir_ / "keep.yaml").string(), "-o", (dir_ / "out.ply").string(),
+                                           "--save-map", (dir_ / "m.hpdsmap").string(), "--stats",
+                                           (dir_ / "s.json").string()},
+                                          dir_ / "log.txt", 2 << 20, /*ignore_sigxfsz=*/true));
+  const std::string log = test::readText(dir_ / "log.txt");
+  ASSERT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 1) << log;
+  EXPECT_NE(log.find("m.hpdsmap: write failed"), std::string::npos) << log;
+  EXPECT_EQ(test::readText(dir_ / "out.ply"), previous_ply) << "the cloud was replaced by a run that failed";
+  EXPECT_EQ(test::readText(dir_ / "m.hpdsmap"), previous_map);
+  EXPECT_EQ(test::readText(dir_ / "s.json"), previous_stats);
+  EXPECT_TRUE(temporariesIn(dir_).empty()) << "a failed run removes its temporaries";
 }
 
 TEST_F(OutputSafety, SigkillDuringTheWriteLeavesThePreviousOutput) {

@@ -213,19 +213,35 @@ int runReplay(const ReplayArgs &a) {
   if (!scan)
     for (std::size_t d = 0; d < report.samples_per_level.size(); ++d)
       report.samples_per_level[d] = pipeline.hierarchy().countAtLevel(static_cast<int>(d));
+  // The output and the stats are written and synced under temporary names, then put in place together (see
+  // `hpds sample`): a failure leaves both previous files as they were.
   const auto t_write = std::chrono::steady_clock::now();
+  std::optional<AtomicFile> ply_file;
   if (to_bag) {
     out.close();
-    bag_file->commit();
+    bag_file->finish();
   } else {
     if (!scan) ply = pipeline.makeCloud(pipeline.outputSamples(), false, &report.seconds.normals);
     report.output_points = ply.size();
-    writePly(a.output, ply);
+    ply_file.emplace(a.output);
+    writePly(*ply_file, ply);
+    ply_file->finish();
   }
   report.seconds.write += since(t_write);
   report.frames = processor.stats().processed;
   report.totals = pipeline.totals();
   report.hierarchy_bytes = pipeline.hierarchy().memUsage();
+  std::optional<AtomicFile> stats_file;
+  if (!a.stats.empty()) {
+    // The report of `hpds sample`, plus the message counts only a replay has.
+    report.extra.emplace_back("messages", messagesJson(s, wrong_type));
+    stats_file.emplace(a.stats);
+    stats_file->write(toJson(report));
+    stats_file->finish();
+  }
+  if (bag_file) bag_file->commit();
+  if (ply_file) ply_file->commit();
+  if (stats_file) stats_file->commit();
 
   std::cout << levelSummary(report);
   std::cout << "messages: " << messageSummary(clouds.size(), a.topic, s, wrong_type, target) << "\n";
@@ -233,11 +249,6 @@ int runReplay(const ReplayArgs &a) {
   for (const std::string &name : not_carried)
     std::cerr << "hpds: warning: input field '" << name << "' is not in the output: hpds writes its own '" << name
               << "' or keeps the name for it; rename the field to keep it\n";
-  if (!a.stats.empty()) {
-    // The report of `hpds sample`, plus the message counts only a replay has.
-    report.extra.emplace_back("messages", messagesJson(s, wrong_type));
-    writeJsonFile(a.stats, report);
-  }
   return 0;
 }
 

@@ -10,7 +10,6 @@
 #include <stdexcept>
 
 #include "QualityIo.hpp"
-#include "hpds/io/AtomicFile.hpp"
 
 namespace hpds::cli {
 
@@ -70,7 +69,6 @@ std::string toJson(const RunReport &r) {
   return j.str();
 }
 
-void writeJsonFile(const std::string &path, const RunReport &report) { writeFileAtomically(path, toJson(report)); }
 
 std::string levelSummary(const RunReport &r) {
   std::ostringstream s;

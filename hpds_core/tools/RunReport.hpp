@@ -44,7 +44,6 @@ struct RunReport {
 /// JSON text of the report (per-level counts, skipped/dropped counts, "seconds": {read, insert, normals, write},
 /// peak memory).
 [[nodiscard]] std::string toJson(const RunReport &report);
-void writeJsonFile(const std::string &path, const RunReport &report);
 
 /// The text printed after a run: how the output level was chosen, then a table of level, r_D, samples, cumulative
 /// union count.

@@ -4,12 +4,14 @@
 #include <iostream>
 #include <map>
 #include <mutex>
+#include <optional>
 #include <stdexcept>
 
 #include "CliOptions.hpp"
 #include "Commands.hpp"
 #include "OutputPaths.hpp"
 #include "RunReport.hpp"
+#include "hpds/io/AtomicFile.hpp"
 #include "hpds/io/HierarchyFile.hpp"
 #include "hpds/util/ParallelFor.hpp"
 #include "hpds/pipeline/OutputCloud.hpp"
@@ -169,10 +171,28 @@ int runSample(const SampleArgs &a) {
   report.invalid_normals = countInvalidNormals(output);
   report.hierarchy_bytes = pipeline.hierarchy().memUsage();
 
+  // Every output is written and synced under a temporary name first, then all are put in place together: a
+  // failure on the way (a full disk) leaves every previous output as it was, never a new cloud beside an old map.
   auto t0 = std::chrono::steady_clock::now();
-  writePly(a.output, output);
-  if (!a.save_map.empty()) saveMap(a.save_map, pipeline);
+  AtomicFile ply_file(a.output);
+  writePly(ply_file, output);
+  ply_file.finish();
+  std::optional<AtomicFile> map_file;
+  if (!a.save_map.empty()) {
+    map_file.emplace(a.save_map);
+    saveMap(*map_file, pipeline);
+    map_file->finish();
+  }
   report.seconds.write = since(t0);
+  std::optional<AtomicFile> stats_file;
+  if (!a.stats.empty()) {
+    stats_file.emplace(a.stats);
+    stats_file->write(toJson(report));
+    stats_file->finish();
+  }
+  ply_file.commit();
+  if (map_file) map_file->commit();
+  if (stats_file) stats_file->commit();
 
   std::cout << levelSummary(report);
   std::cout << "wrote " << output.size() << " samples (levels 0.." << report.output_level << ") to " << a.output;
@@ -182,7 +202,6 @@ int runSample(const SampleArgs &a) {
     std::cerr << "hpds: warning: " << report.totals.out_of_range
               << " points lie beyond the exact key range of the finest level (|coordinate| / cell edge >= 2^30) and "
                  "were not inserted; lower hierarchy.max_depth or raise hierarchy.cell_size\n";
-  if (!a.stats.empty()) writeJsonFile(a.stats, report);
   return 0;
 }
 

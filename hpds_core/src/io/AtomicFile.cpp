@@ -189,6 +189,11 @@ void AtomicFile::write(const void *data, std::size_t bytes) {
   }
 }
 
+void AtomicFile::finish() {
+  flushBuffer();
+  if (!in_place_ && ::fsync(fd_) != 0) fail("write failed: fsync: " + errnoText(errno));
+}
+
 void AtomicFile::commit() {
   flushBuffer();
   if (in_place_) {

@@ -292,12 +292,28 @@ LoadedHierarchy parse(Source &src, std::uint64_t total_size, const std::string &
 
 }  // namespace
 
-void saveHierarchy(const std::string &path, const Hierarchy &hierarchy, std::uint32_t next_frame) {
+namespace {
+/// What a map file cannot hold, refused before any file is touched.
+void checkSavable(const std::string &path, const Hierarchy &hierarchy) {
   if (!hostIsLittleEndian()) fail(path, "map files are little-endian; this host is not");
   const PointLayout &layout = hierarchy.recordLayout();
   if (layout.point_step > kMaxPointStep) fail(path, "cannot save: records of more than 16 MiB");
   for (const PointField &f : layout.fields)
     if (f.name.size() > kMaxFieldNameBytes) fail(path, "cannot save: a field name longer than 4096 bytes");
+}
+}  // namespace
+
+void saveHierarchy(const std::string &path, const Hierarchy &hierarchy, std::uint32_t next_frame) {
+  checkSavable(path, hierarchy);
+  // Temporary file, fsync and rename (AtomicFile): a failure or a kill leaves any previous map at `path` untouched.
+  AtomicFile file(path);
+  saveHierarchy(file, hierarchy, next_frame);
+  file.commit();
+}
+
+void saveHierarchy(AtomicFile &file, const Hierarchy &hierarchy, std::uint32_t next_frame) {
+  checkSavable(file.target(), hierarchy);
+  const PointLayout &layout = hierarchy.recordLayout();
 
   ByteWriter h;
   h.putBytes(kMagic, sizeof kMagic);
@@ -320,8 +336,6 @@ void saveHierarchy(const std::string &path, const Hierarchy &hierarchy, std::uin
   std::memcpy(h.bytes.data() + 12, &header_size, 4);
   h.put(crc32(h.bytes.data(), h.bytes.size()));
 
-  // Temporary file, fsync and rename (AtomicFile): a failure or a kill leaves any previous map at `path` untouched.
-  AtomicFile file(path);
   file.write(h.bytes.data(), h.bytes.size());
   const std::size_t step = layout.point_step;
   const std::size_t entry_bytes = kEntryFixedBytes + step;
@@ -351,7 +365,6 @@ void saveHierarchy(const std::string &path, const Hierarchy &hierarchy, std::uin
   std::uint8_t c[4];
   std::memcpy(c, &crc, 4);
   file.write(c, 4);
-  file.commit();
 }
 
 LoadedHierarchy loadHierarchy(const std::string &path, const HierarchyConfig *expected) {
@@ -387,6 +400,10 @@ bool isOtherFormatName(const std::string &path) {
 
 void saveMap(const std::string &path, const Pipeline &pipeline) {
   saveHierarchy(path, pipeline.hierarchy(), pipeline.framesProcessed());
+}
+
+void saveMap(AtomicFile &file, const Pipeline &pipeline) {
+  saveHierarchy(file, pipeline.hierarchy(), pipeline.framesProcessed());
 }
 
 void loadMap(const std::string &path, Pipeline &pipeline) {

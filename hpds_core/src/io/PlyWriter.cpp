@@ -15,7 +15,6 @@ namespace hpds {
 namespace {
 
 using io_detail::fail;
-using io_detail::OutputFile;
 
 // The original PLY type names: every PLY reader knows them, while the sized aliases (int8, float32...) are an
 // extension some readers lack.
@@ -65,9 +64,15 @@ struct Span {
   std::uint32_t bytes;
 };
 
-}  // namespace
+/// The header of `cloud`'s PLY file and the record bytes each row takes (refusing, with `path` in the message,
+/// what no reader accepts before any file is touched).
+struct PlyPlan {
+  std::string header;
+  std::vector<Span> spans;
+  std::size_t out_step = 0;
+};
 
-void writePly(const std::string &path, const PointBuffer &cloud) {
+PlyPlan planPly(const std::string &path, const PointBuffer &cloud) {
   const PointLayout &layout = cloud.layout();
   try {
     layout.validate();
@@ -118,9 +123,14 @@ void writePly(const std::string &path, const PointBuffer &cloud) {
     out_step += bytes;
   }
   header += kEndHeader;
+  return PlyPlan{std::move(header), std::move(spans), out_step};
+}
 
-  OutputFile file(path);
-  file.write(header.data(), header.size());
+void writePlanned(AtomicFile &file, const PlyPlan &plan, const PointBuffer &cloud) {
+  const PointLayout &layout = cloud.layout();
+  const std::vector<Span> &spans = plan.spans;
+  const std::size_t out_step = plan.out_step;
+  file.write(plan.header.data(), plan.header.size());
 
   const std::size_t n = cloud.size();
   if (spans.size() == 1 && spans[0].offset == 0 && spans[0].bytes == layout.point_step) {
@@ -141,7 +151,17 @@ void writePly(const std::string &path, const PointBuffer &cloud) {
       file.write(chunk.data(), chunk.size());
     }
   }
-  file.close();
 }
+
+}  // namespace
+
+void writePly(const std::string &path, const PointBuffer &cloud) {
+  const PlyPlan plan = planPly(path, cloud);
+  AtomicFile file(path);
+  writePlanned(file, plan, cloud);
+  file.commit();
+}
+
+void writePly(AtomicFile &file, const PointBuffer &cloud) { writePlanned(file, planPly(file.target(), cloud), cloud); }
 
 }  // namespace hpds

@@ -36,6 +36,10 @@ class AtomicFile {
 
   void write(const void *data, std::size_t bytes);
   void write(std::string_view text) { write(text.data(), text.size()); }
+  /// Writes what is buffered and fsyncs, so that every write error (a full disk) has been reported, but leaves the
+  /// target as it was: a program with several outputs finishes all of them, then commits them, so that a failure
+  /// changes none. Optional; no write() after it.
+  void finish();
   /// Puts the file in place (see contract); no write() after it.
   void commit();
 

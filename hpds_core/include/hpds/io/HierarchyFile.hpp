@@ -29,6 +29,7 @@
 #include <string>
 
 #include "hpds/config/Config.hpp"
+#include "hpds/io/AtomicFile.hpp"
 #include "hpds/sampling/Hierarchy.hpp"
 
 namespace hpds {
@@ -45,6 +46,8 @@ struct LoadedHierarchy {
 
 /// Writes `hierarchy` to `path` atomically (see contract); `next_frame` is stored for the loader.
 void saveHierarchy(const std::string &path, const Hierarchy &hierarchy, std::uint32_t next_frame = 0);
+/// The same bytes into `file` (its target names the file in messages), without committing it (see writePly).
+void saveHierarchy(AtomicFile &file, const Hierarchy &hierarchy, std::uint32_t next_frame = 0);
 
 /// Reads a file written by saveHierarchy. With `expected`, a file whose cell_size or max_depth differ is refused.
 [[nodiscard]] LoadedHierarchy loadHierarchy(const std::string &path, const HierarchyConfig *expected = nullptr);
@@ -60,6 +63,8 @@ void saveHierarchy(const std::string &path, const Hierarchy &hierarchy, std::uin
 
 /// Saves the pipeline's map and its frame counter (framesProcessed()).
 void saveMap(const std::string &path, const Pipeline &pipeline);
+/// The same into `file`, without committing it.
+void saveMap(AtomicFile &file, const Pipeline &pipeline);
 
 /// Map mode only: loads `path`, checked against the pipeline's hierarchy config, and replaces the pipeline's map with
 /// it (strong guarantee: on any error the pipeline is unchanged). Throws std::runtime_error for file problems and

@@ -19,10 +19,14 @@
 
 #include <string>
 
+#include "hpds/io/AtomicFile.hpp"
 #include "hpds/points/PointBuffer.hpp"
 
 namespace hpds {
 
 void writePly(const std::string &path, const PointBuffer &cloud);
+/// The same bytes into `file` (its target names the file in messages), without committing it: a program writing
+/// several outputs commits them only once all are written, so that a failure leaves every previous output as it was.
+void writePly(AtomicFile &file, const PointBuffer &cloud);
 
 }  // namespace hpds
