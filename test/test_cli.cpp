@@ -149,6 +149,18 @@ TEST(Cli, SyntheticStreamScanModeTagsFramesAndSeedsAreDeterministic) {
   for (std::size_t i = 0; i < a.size(); ++i) frames.insert(readAsDouble(a.record(i), *frame));
   EXPECT_EQ(frames, (std::set<double>{0.0, 1.0}));
   for (const char *name : {"intensity", "ring", "time"}) EXPECT_NE(a.layout().find(name), nullptr) << name;
+  // One sampling per frame (the frames overlap: checked as one they fail), verified frame by frame; coverage with
+  // one frame's input.
+  const std::string verify_a = "verify " + shellQuote(tmp / "a.ply") + " --spacing 0.1";
+  EXPECT_EQ(runHpds(verify_a, &log), 0) << log;
+  EXPECT_NE(log.find("2 frames checked on their own, 0 with violations"), std::string::npos) << log;
+  EXPECT_EQ(runHpds(verify_a + " --frame 1 --input " + shellQuote(tmp / "s" / "frame_000001.pcd"), &log), 0) << log;
+  EXPECT_EQ(runHpds(verify_a + " --frame 1 --input " + shellQuote(tmp / "s" / "frame_000000.pcd"), &log), 1)
+      << "frame 1's samples do not cover frame 0's points\n" << log;
+  EXPECT_EQ(runHpds(verify_a + " --input " + shellQuote(tmp / "s" / "frame_000001.pcd"), &log), 1) << log;
+  EXPECT_NE(log.find("check coverage one frame at a time with --frame K"), std::string::npos) << log;
+  EXPECT_EQ(runHpds(verify_a + " --frame 2", &log), 1) << log;
+  EXPECT_NE(log.find("holds no sample of frame 2"), std::string::npos) << log;
   ASSERT_EQ(runHpds("sample " + inputs + " --mode map --poses " + shellQuote(tmp / "s" / "poses.txt") + " -o " + shellQuote(tmp / "m.ply") +
                      " --order sphericity --normals --threads 2",
                  &log),

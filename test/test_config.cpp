@@ -29,7 +29,7 @@ std::size_t expectSameConfig(const HpdsConfig &a, const HpdsConfig &b) {
   [[maybe_unused]] const auto &[mode, hierarchy, order, output, normals, map, input, threads] = a;
   [[maybe_unused]] const auto &[cell_size, max_depth] = a.hierarchy;
   [[maybe_unused]] const auto &[type, seed, feature_radius] = a.order;
-  [[maybe_unused]] const auto &[level, spacing] = a.output;
+  [[maybe_unused]] const auto &[level, spacing, float64_xyz] = a.output;
   [[maybe_unused]] const auto &[enabled, radius, k, min_neighbors, neighborhood_level_offset, max_growth, covariances,
                                  covariance_epsilon, covariance_line_ratio, covariance_k] = a.normals;
   [[maybe_unused]] const auto &[evict_distance, max_samples, keep_depth] = a.map;
@@ -48,6 +48,7 @@ std::size_t expectSameConfig(const HpdsConfig &a, const HpdsConfig &b) {
   same("order.feature_radius", a.order.feature_radius, b.order.feature_radius);
   same("output.level", a.output.level, b.output.level);
   same("output.spacing", a.output.spacing, b.output.spacing);
+  same("output.float64_xyz", a.output.float64_xyz, b.output.float64_xyz);
   same("normals.enabled", a.normals.enabled, b.normals.enabled);
   same("normals.radius", a.normals.radius, b.normals.radius);
   same("normals.k", a.normals.k, b.normals.k);
@@ -97,6 +98,7 @@ HpdsConfig nonDefaultConfig() {
   c.order.feature_radius = 0.1;  // not exactly representable: the dump must still round-trip it
   c.output.level = 5;
   c.output.spacing = 0.3;
+  c.output.float64_xyz = true;
   c.normals.enabled = false;
   c.normals.radius = 1.0 / 3.0;
   c.normals.k = 20;

@@ -124,7 +124,8 @@ TEST(HostileCli, AnyNumericFieldTypeForXyzIsSampledWithItsValues) {
     ASSERT_EQ(hpds("sample " + q(in) + " -o " + q(tmp / "o.ply") + " --cell-size 2 --max-depth 3", &log), 0) << log;
     const PointBuffer s = readPointCloud((tmp / "o.ply").string());
     ASSERT_GT(s.size(), 10u);
-    EXPECT_EQ(s.layout().find("x")->type, FieldType::Float32);
+    // float64 input keeps its digits; any other type fits float32 exactly.
+    EXPECT_EQ(s.layout().find("x")->type, t == FieldType::Float64 ? FieldType::Float64 : FieldType::Float32);
     std::set<std::array<double, 3>> input(pts.begin(), pts.end());
     for (std::size_t i = 0; i < s.size(); ++i) {
       std::array<double, 3> p;
@@ -141,6 +142,49 @@ TEST(HostileCli, AnyNumericFieldTypeForXyzIsSampledWithItsValues) {
   std::set<double> xs = {readAsDouble(neg.record(0), neg.layout().fields[0]),
                          readAsDouble(neg.record(1), neg.layout().fields[0])};
   EXPECT_EQ(xs, (std::set<double>{-100.0, 100.0}));
+}
+
+TEST(HostileCli, GeoreferencedCoordinatesKeepTheirPrecisionOrAreSaidToLoseIt) {
+  // Found by sampling a frame at UTM coordinates (x ~ 5e6 m): float32 output positions were off by up to 0.25 m,
+  // samples came out closer than r_D, and verify's float32 tolerance (1.2 m there) let it pass.
+  const auto tmp = test::scratchDir("hostile_utm");
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> u(0.0, 20.0);
+  std::vector<std::array<double, 3>> pts;
+  for (int i = 0; i < 20000; ++i) pts.push_back({5e6 + u(rng), 4e6 + u(rng), 100.0 + 0.05 * u(rng)});
+  const fs::path f8 = tmp / "utm_f8.pcd", f4 = tmp / "local_f4.pcd", poses = tmp / "poses.txt";
+  writePcd(f8.string(), typedCloud(FieldType::Float64, pts));
+  // 1. float64 input: float64 output, every sample bit for bit an input point, verified to float64 precision.
+  std::string log;
+  ASSERT_EQ(hpds("sample " + q(f8) + " -o " + q(tmp / "f8.ply") + " --spacing 0.1 --no-normals", &log), 0) << log;
+  EXPECT_EQ(log.find("float64_xyz"), std::string::npos) << log;
+  const PointBuffer s = readPointCloud((tmp / "f8.ply").string());
+  ASSERT_GT(s.size(), 1000u);
+  ASSERT_EQ(s.layout().find("x")->type, FieldType::Float64);
+  const std::set<std::array<double, 3>> input(pts.begin(), pts.end());
+  for (std::size_t i = 0; i < s.size(); ++i) {
+    std::array<double, 3> p;
+    for (int a = 0; a < 3; ++a) p[a] = readAsDouble(s.record(i), s.layout().fields[a]);
+    ASSERT_TRUE(input.count(p)) << "sample " << i << " is no input point";
+  }
+  ASSERT_EQ(hpds("verify " + q(tmp / "f8.ply") + " --spacing 0.1 --input " + q(f8), &log), 0) << log;
+  // 2. float32 points posed into UTM coordinates: float32 output is said to round them, and verify refuses to call
+  //    levels it cannot resolve valid; with output.float64_xyz the output is exact again.
+  std::vector<std::array<double, 3>> local;
+  for (const auto &p : pts) local.push_back({p[0] - 5e6, p[1] - 4e6, p[2] - 100.0});
+  writePcd(f4.string(), typedCloud(FieldType::Float32, local));
+  writeText(poses, "1 0 0 5000000 0 1 0 4000000 0 0 1 100\n");
+  const std::string posed = "sample " + q(f4) + " --poses " + q(poses) + " --mode map --spacing 0.1 --no-normals";
+  ASSERT_EQ(hpds(posed + " -o " + q(tmp / "f4.ply"), &log), 0) << log;
+  EXPECT_NE(log.find("set output.float64_xyz: true"), std::string::npos) << log;
+  EXPECT_EQ(readPointCloud((tmp / "f4.ply").string()).layout().find("x")->type, FieldType::Float32);
+  EXPECT_EQ(hpds("verify " + q(tmp / "f4.ply") + " --spacing 0.1", &log), 1) << log;
+  EXPECT_NE(log.find("cannot be checked"), std::string::npos) << log;
+  writeText(tmp / "f64.yaml", "output: {float64_xyz: true}\n");
+  ASSERT_EQ(hpds(posed + " --config " + q(tmp / "f64.yaml") + " -o " + q(tmp / "f64.ply"), &log), 0) << log;
+  EXPECT_EQ(log.find("float64_xyz"), std::string::npos) << log;
+  EXPECT_EQ(readPointCloud((tmp / "f64.ply").string()).layout().find("x")->type, FieldType::Float64);
+  EXPECT_EQ(hpds("verify " + q(tmp / "f64.ply") + " --spacing 0.1", &log), 0) << log;
 }
 
 TEST(HostileCli, MissingXyzAndUnrepresentableFieldsAreRefused) {

@@ -18,14 +18,14 @@ namespace {
 constexpr FieldType kTypes[] = {FieldType::Int8,   FieldType::UInt8,  FieldType::Int16,   FieldType::UInt16,
                                 FieldType::Int32,  FieldType::UInt32, FieldType::Float32, FieldType::Float64};
 
-// Independent check of the alignment rules, byte by byte.
-void expectAligned(const PointLayout &out) {
+// Independent check of the alignment rules, byte by byte; x y z first, of type `xyz`.
+void expectAligned(const PointLayout &out, FieldType xyz = FieldType::Float32) {
   ASSERT_GE(out.fields.size(), 3u);
   const char *axes[] = {"x", "y", "z"};
   for (int a = 0; a < 3; ++a) {
     EXPECT_EQ(out.fields[a].name, axes[a]);
-    EXPECT_EQ(out.fields[a].type, FieldType::Float32);
-    EXPECT_EQ(out.fields[a].offset, 4u * a);
+    EXPECT_EQ(out.fields[a].type, xyz);
+    EXPECT_EQ(out.fields[a].offset, static_cast<std::uint32_t>(fieldTypeSize(xyz)) * a);
   }
   EXPECT_EQ(out.point_step % 4, 0u) << "point_step " << out.point_step;
   std::vector<int> owner(out.point_step, -1);
@@ -69,13 +69,16 @@ TEST(OutputCloud, LayoutIsAlignedForPackedInputs) {
     ASSERT_NO_THROW(in.validate());
     for (const bool normals : {false, true})
       for (const bool frame : {false, true})
-        for (const bool covariances : {false, true}) {
+        for (const bool covariances : {false, true})
+        for (const bool float64_xyz : {false, true}) {
           if (covariances && !normals) continue;  // covariances come with normals
           SCOPED_TRACE("trial " + std::to_string(trial) + (normals ? " normals" : "") + (frame ? " frame" : "") +
-                       (covariances ? " covariances" : ""));
-          const PointLayout out = outputLayout(in, normals, frame, covariances);
+                       (covariances ? " covariances" : "") + (float64_xyz ? " float64_xyz" : ""));
+          const PointLayout out = outputLayout(in, normals, frame, covariances, float64_xyz);
           ASSERT_NO_THROW(out.validate());
-          expectAligned(out);
+          // x y z float64 when asked for or when the input's are: never fewer digits than the input had.
+          const bool input_doubles = in.find("x")->type == FieldType::Float64;
+          expectAligned(out, float64_xyz || input_doubles ? FieldType::Float64 : FieldType::Float32);
           // Every field is there with its type and count: ours, and each input field not replaced by one of ours.
           std::set<std::string> expected = {"x", "y", "z", "level"};
           if (normals) expected.insert({"normal_x", "normal_y", "normal_z", "curvature"});

@@ -1,6 +1,7 @@
 // The sampling verifier against hand-built samplings and an O(n^2) oracle that applies the three rules literally.
 // Samplings are stored as float32 like the real output, so the tolerance is exercised everywhere.
 #include <gtest/gtest.h>
+#include <sys/resource.h>
 
 #include <array>
 #include <chrono>
@@ -385,12 +386,52 @@ TEST(SamplingVerifier, ToleranceAbsorbsFloatRoundingButNotRealViolations) {
     const VerifyReport rep = verifySampling(makeSampling(pairAt(0.99 * r0)), 1.0, nullptr);
     EXPECT_EQ(rep.levels[0].spacing_violations, 2u);
   }
-  // In float64 storage the threshold r - tol itself is visible: the tolerance is not wider than documented.
-  const double tol = 4.0 * std::pow(2.0, -24) * (100.7 + r0);
-  EXPECT_EQ(verifySampling(makeSampling(pairAt(r0 - 0.5 * tol), FieldType::Float64), 1.0, nullptr).total_violations(),
+  // In float64 storage the tolerance is float64's, and the threshold r - tol itself is visible: a pair a float32
+  // rounding too close is a violation there.
+  const double tol32 = 4.0 * std::pow(2.0, -24) * (100.7 + r0), tol64 = 4.0 * std::pow(2.0, -53) * (100.7 + r0);
+  EXPECT_NEAR(verifySampling(makeSampling(pairAt(r0), FieldType::Float64), 1.0, nullptr).tolerance, tol64, 1e-20);
+  EXPECT_EQ(verifySampling(makeSampling(pairAt(r0 - 0.25 * tol64), FieldType::Float64), 1.0, nullptr)
+                .total_violations(),
             0u);
-  EXPECT_EQ(verifySampling(makeSampling(pairAt(r0 - 2.0 * tol), FieldType::Float64), 1.0, nullptr).total_violations(),
+  EXPECT_EQ(verifySampling(makeSampling(pairAt(r0 - 3.0 * tol64), FieldType::Float64), 1.0, nullptr)
+                .total_violations(),
             2u);
+  EXPECT_EQ(verifySampling(makeSampling(pairAt(r0 - 0.5 * tol32), FieldType::Float64), 1.0, nullptr)
+                .total_violations(),
+            2u);
+}
+
+TEST(SamplingVerifier, LevelsFloat32CannotResolveAreViolationsNotPasses) {
+  // At 5e6 m a float32 is exact to 0.25 m: tol = 4 * 2^-24 * M = 1.19 m, more than a tenth of every radius from
+  // level 0 (0.87 m at cell 1 m) down. Those levels are reported unresolved, one violation each, not passed.
+  const std::vector<Sample> far = {{5e6 + 0.5, 0.5, 0.5, 0}, {5e6 + 2.5, 0.5, 0.5, 1}};
+  const VerifyReport f32rep = verifySampling(makeSampling(far), 1.0, nullptr);
+  ASSERT_EQ(f32rep.levels.size(), 2u);
+  EXPECT_TRUE(f32rep.levels[0].unresolved && f32rep.levels[1].unresolved);
+  EXPECT_EQ(f32rep.total_violations(), 2u);
+  EXPECT_NE(formatReport(f32rep).find("levels 0 and finer cannot be checked"), std::string::npos);
+  const VerifyReport f64rep = verifySampling(makeSampling(far, FieldType::Float64), 1.0, nullptr);
+  EXPECT_FALSE(f64rep.levels[0].unresolved || f64rep.levels[1].unresolved);
+  EXPECT_EQ(f64rep.total_violations(), 0u) << formatReport(f64rep);
+  // Near the origin float32 resolves every level a sampling reaches.
+  const VerifyReport near = verifySampling(makeSampling({{0.5, 0.5, 0.5, 0}, {2.5, 0.5, 0.5, 1}}), 1.0, nullptr);
+  EXPECT_FALSE(near.levels[1].unresolved);
+}
+
+TEST(SamplingVerifier, AWrongCellSizeCostsTimeNotMemory) {
+  // Found with --cell-size far too large: every pair of samples was then a close pair, all held at once (memory
+  // quadratic in the samples: 1.1 GB for 47 k, then bad_alloc). 4 000 samples on each of two levels within 1 m,
+  // checked with 1 km cells: 16 M close pairs, 256 MB as held before. ctest runs this test in its own process, so
+  // the peak resident size is this test's.
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  std::vector<Sample> samples;
+  for (int i = 0; i < 8000; ++i) samples.push_back({u(rng), u(rng), u(rng), i % 2});
+  const VerifyReport rep = verifySampling(makeSampling(samples), 1000.0, nullptr, 2);
+  EXPECT_EQ(rep.levels[1].spacing_violations, 8000u);
+  rusage usage{};
+  ASSERT_EQ(getrusage(RUSAGE_SELF, &usage), 0);
+  EXPECT_LT(usage.ru_maxrss, 150 * 1024) << "peak resident size " << usage.ru_maxrss / 1024 << " MB";
 }
 
 TEST(SamplingVerifier, InvalidInputsThrow) {

@@ -12,6 +12,7 @@
 #include <exception>
 #include <limits>
 #include <memory>
+#include <mutex>
 #include <stdexcept>
 #include <thread>
 #include <utility>
@@ -164,9 +165,15 @@ std::size_t countCellViolations(const Vec3 *pts, std::size_t n, double cell, dou
 
 }  // namespace
 
+/// Close pairs a chunk holds before applying them to the older points.
+constexpr std::size_t kPairBatch = std::size_t(1) << 16;
+/// A level is checked only while the tolerance stays within this fraction of its radius.
+constexpr double kResolvedFraction = 0.1;
+
 std::size_t VerifyReport::total_violations() const {
   std::size_t total = 0;
-  for (const auto &l : levels) total += l.spacing_violations + l.cell_violations + l.coverage_violations;
+  for (const auto &l : levels)
+    total += l.spacing_violations + l.cell_violations + l.coverage_violations + (l.unresolved ? 1 : 0);
   return total;
 }
 
@@ -218,7 +225,11 @@ VerifyReport verifySampling(const PointBuffer &sampling, double cell_size, const
 
   VerifyReport report;
   report.cell_size = cell_size;
-  report.tolerance = 4.0 * std::ldexp(1.0, -24) * max_abs;
+  // Half an ulp of the stored type: float64 when x, y and z all are, else float32 (integers are exact but a sampling
+  // stored as such is not hpds's; the float32 bound covers them).
+  bool doubles = true;
+  for (const PointField *f : sxyz.f) doubles &= f->type == FieldType::Float64;
+  report.tolerance = 4.0 * std::ldexp(1.0, doubles ? -53 : -24) * max_abs;
   const double tol = report.tolerance;
 
   // Coverage candidates: sensor no-returns (non-finite or exactly the origin) are not points of the scene.
@@ -265,10 +276,17 @@ VerifyReport verifySampling(const PointBuffer &sampling, double cell_size, const
     const std::size_t n_new = end - begin;
     const std::size_t nc = chunkCount(n_new, threads);
     std::vector<double> chunk_min(nc, kInf);
-    std::vector<std::vector<std::pair<std::uint32_t, double>>> chunk_pairs(nc);
+    // The close pairs are applied to the older points in batches under a lock (a min, so in any order): with a
+    // wrong --cell-size nearly every pair is close, and holding them all took memory quadratic in the samples.
+    std::mutex older_mutex;
+    auto applyToOlder = [&](std::vector<std::pair<std::uint32_t, double>> &pairs) {
+      const std::lock_guard<std::mutex> lock(older_mutex);
+      for (const auto &[p, dist] : pairs) nn[p] = std::min(nn[p], dist);
+      pairs.clear();
+    };
     if (n_new > 0) {
       forChunks(n_new, threads, [&](std::size_t c, std::size_t b, std::size_t e) {
-        std::vector<std::pair<std::uint32_t, double>> found;
+        std::vector<std::pair<std::uint32_t, double>> found, pairs;
         for (std::size_t k = begin + b; k < begin + e; ++k) {
           NearestExcept res{kInf, static_cast<std::uint32_t>(k)};
           tree->findNeighbors(res, pts[k].data(), params);
@@ -280,21 +298,21 @@ VerifyReport verifySampling(const PointBuffer &sampling, double cell_size, const
             CollectWithin within{thr * thr * (1.0 + 1e-9), &found};
             tree->findNeighbors(within, pts[k].data(), params);
             for (const auto &[p, d_sq] : found)
-              if (p < begin) chunk_pairs[c].emplace_back(p, std::sqrt(d_sq));
+              if (p < begin) pairs.emplace_back(p, std::sqrt(d_sq));
+            if (pairs.size() >= kPairBatch) applyToOlder(pairs);
           }
         }
+        applyToOlder(pairs);
       });
     }
-    for (std::size_t c = 0; c < nc; ++c) {
-      min_nn = std::min(min_nn, chunk_min[c]);
-      for (const auto &[p, dist] : chunk_pairs[c]) nn[p] = std::min(nn[p], dist);
-    }
+    for (std::size_t c = 0; c < nc; ++c) min_nn = std::min(min_nn, chunk_min[c]);
     lr.min_nn_over_r = min_nn / r;
     lr.spacing_violations = nonfinite_union;
     for (std::size_t k = 0; k < end; ++k)
       if (nn[k] < thr) ++lr.spacing_violations;
 
     lr.cell_violations = countCellViolations(pts.data() + begin, n_new, cell, tol);
+    lr.unresolved = !(tol <= kResolvedFraction * r);
 
     lr.max_coverage_over_r = std::numeric_limits<double>::quiet_NaN();
     if (have_probes) {
@@ -332,6 +350,16 @@ std::string formatReport(const VerifyReport &report) {
   std::snprintf(line, sizeof line, "cell size %.6g m, tolerance %.3g m, violations %zu\n", report.cell_size,
                 report.tolerance, report.total_violations());
   out += line;
+  for (const auto &l : report.levels)
+    if (l.unresolved) {
+      std::snprintf(line, sizeof line,
+                    "levels %d and finer cannot be checked: the stored positions are only exact to %.3g m, more "
+                    "than a tenth of r_%d (float32 x y z at coordinates up to %.3g m; write them as float64, "
+                    "output.float64_xyz), one violation each\n",
+                    l.level, report.tolerance, l.level, report.tolerance / 4.0 * std::ldexp(1.0, 24));
+      out += line;
+      break;
+    }
   std::snprintf(line, sizeof line, "%5s %12s %10s %10s %9s %8s %8s %9s %8s\n", "level", "r_D", "count", "union",
                 "min_nn/r", "viol", "cells", "cover/r", "uncov");
   out += line;

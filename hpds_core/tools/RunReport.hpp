@@ -5,6 +5,7 @@
 #include <string>
 #include <vector>
 
+#include "hpds/pipeline/OutputCloud.hpp"
 #include "hpds/pipeline/Pipeline.hpp"
 
 namespace hpds::cli {
@@ -40,6 +41,10 @@ struct RunReport {
 
 /// Peak resident set size of this process in bytes (getrusage), 0 if unknown.
 [[nodiscard]] std::uint64_t peakMemoryBytes();
+
+/// A warning line (empty when there is nothing to say) when `cloud`'s float32 x y z round its positions by more than
+/// 1 % of the output radius: georeferenced coordinates, which want output.float64_xyz.
+[[nodiscard]] std::string roundingWarning(const PointBuffer &cloud, double output_radius);
 
 /// JSON text of the report (per-level counts, skipped/dropped counts, "seconds": {read, insert, normals, write},
 /// peak memory).

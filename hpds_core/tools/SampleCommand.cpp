@@ -198,6 +198,7 @@ int runSample(const SampleArgs &a) {
   std::cout << "wrote " << output.size() << " samples (levels 0.." << report.output_level << ") to " << a.output;
   if (config.normals.enabled) std::cout << ", " << report.invalid_normals << " without a valid normal";
   std::cout << "\n";
+  if (const std::string w = roundingWarning(output, report.output_radius); !w.empty()) std::cerr << w << "\n";
   if (report.totals.out_of_range > 0)
     std::cerr << "hpds: warning: " << report.totals.out_of_range
               << " points lie beyond the exact key range of the finest level (|coordinate| / cell edge >= 2^30) and "

@@ -1,6 +1,11 @@
-// `hpds verify SAMPLING.ply --cell-size C | --spacing S [--input INPUT]`: an independent check of a written sampling (k-d trees,
-// not the sampler's grids). Prints a per-level table; exit code 1 on any violation.
+// `hpds verify SAMPLING.ply --cell-size C | --spacing S [--input INPUT] [--frame K]`: an independent check of a
+// written sampling (k-d trees, not the sampler's grids). Prints a per-level table; exit code 1 on any violation. A
+// scan-mode output of several frames is checked frame by frame.
+#include <cmath>
+#include <cstdint>
 #include <iostream>
+#include <map>
+#include <utility>
 #include <stdexcept>
 
 #include "CliOptions.hpp"
@@ -15,8 +20,29 @@ struct VerifyArgs {
   std::string sampling;
   CellSizeOptions cell;
   std::string input;
+  long long frame = -1;  // -1: every frame
   int threads = 1;
 };
+
+/// The samples of a scan-mode output of several frames (field `frame`) by frame value, in increasing order; the
+/// whole sampling as one entry when it has no such field.
+std::map<std::uint64_t, PointBuffer> byFrame(PointBuffer sampling) {
+  std::map<std::uint64_t, PointBuffer> frames;
+  const PointField *f = sampling.layout().find("frame");
+  if (!f) {
+    frames.emplace(0, std::move(sampling));
+    return frames;
+  }
+  for (std::size_t i = 0; i < sampling.size(); ++i) {
+    const double v = readAsDouble(sampling.record(i), *f);
+    if (!(v >= 0.0 && v < 18446744073709551616.0 && v == std::floor(v)))
+      throw std::invalid_argument("sample " + std::to_string(i) + " has frame " + std::to_string(v) +
+                                  ", expected a non-negative integer");
+    auto it = frames.try_emplace(static_cast<std::uint64_t>(v), sampling.layout(), 0).first;
+    it->second.pushBack(sampling.record(i));
+  }
+  return frames;
+}
 }  // namespace
 
 void addVerifyCommand(CLI::App &app) {
@@ -25,15 +51,49 @@ void addVerifyCommand(CLI::App &app) {
   cmd->add_option("sampling", a->sampling, "sampling written by hpds sample (needs x y z level)")->required();
   addCellSizeOptions(*cmd, a->cell);
   cmd->add_option("--input", a->input, "input cloud, same frame as the sampling: also check coverage <= 2 r_D");
+  cmd->add_option("--frame", a->frame,
+                  "a scan-mode output of several frames (field 'frame'): check only this frame (-1 = each frame "
+                  "on its own; --input needs one frame)")
+      ->capture_default_str();
   cmd->add_option("--threads", a->threads, "worker threads, 0 = all cores")->capture_default_str()->check(integerIn(0, 1024));
   cmd->callback([a] {
     const double cell_size = resolveCellSize(a->cell);
-    const PointBuffer sampling = readPointCloud(a->sampling);
+    // A scan-mode output of several frames holds one sampling per frame (each frame sampled on its own): each is
+    // checked on its own, as the sampler made it.
+    PointBuffer all = readPointCloud(a->sampling);
+    const bool several = all.layout().find("frame") != nullptr;
+    std::map<std::uint64_t, PointBuffer> frames = byFrame(std::move(all));
+    if (a->frame >= 0) {
+      if (!several) throw std::invalid_argument("--frame: '" + a->sampling + "' has no 'frame' field");
+      const auto it = frames.find(static_cast<std::uint64_t>(a->frame));
+      if (it == frames.end())
+        throw std::invalid_argument("--frame: '" + a->sampling + "' holds no sample of frame " +
+                                    std::to_string(a->frame));
+      PointBuffer one = std::move(it->second);
+      frames.clear();
+      frames.emplace(static_cast<std::uint64_t>(a->frame), std::move(one));
+    } else if (frames.size() > 1 && !a->input.empty()) {
+      throw std::invalid_argument("--input: '" + a->sampling + "' holds " + std::to_string(frames.size()) +
+                                  " scan-mode frames (field 'frame'), each sampled from its own input: check "
+                                  "coverage one frame at a time with --frame K");
+    }
     PointBuffer input;
     if (!a->input.empty()) input = readPointCloud(a->input);
-    const VerifyReport report = verifySampling(sampling, cell_size, a->input.empty() ? nullptr : &input, a->threads);
-    std::cout << formatReport(report);
-    const std::size_t bad = report.total_violations();
+    std::size_t bad = 0, bad_frames = 0;
+    for (const auto &[frame, sampling] : frames) {
+      const VerifyReport report =
+          verifySampling(sampling, cell_size, a->input.empty() ? nullptr : &input, a->threads);
+      const std::size_t v = report.total_violations();
+      // One frame's table, or each failing frame's when there are several.
+      if (frames.size() == 1 || v > 0) {
+        if (several) std::cout << "frame " << frame << ":\n";
+        std::cout << formatReport(report);
+      }
+      bad += v;
+      bad_frames += v > 0 ? 1 : 0;
+    }
+    if (frames.size() > 1)
+      std::cout << frames.size() << " frames checked on their own, " << bad_frames << " with violations\n";
     if (bad > 0) {
       std::cout << "FAILED: " << bad << " violations\n";
       throw CLI::RuntimeError(1);

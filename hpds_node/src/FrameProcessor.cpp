@@ -175,11 +175,11 @@ ProcessedFrame FrameProcessor::process(const sensor_msgs::PointCloud2 &msg, cons
   if (wants.output) {
     const auto ids = map_mode ? samplesHit(0, L, 2.0 * h.radius(L))
                               : pipeline_.outputSamples();
-    toMsg(ids, header, r.output);
+    toMsg(ids, header, r.output, &r.position_rounding);
     r.has_output = true;
   }
   if (map_mode && wants.new_samples) {
-    toMsg(pipeline_.atOutputLevels(inserted.new_samples), header, r.new_samples);
+    toMsg(pipeline_.atOutputLevels(inserted.new_samples), header, r.new_samples, &r.position_rounding);
     r.has_new_samples = true;
   }
   for (std::size_t i = 0; i < config_.ros.publish_levels.size(); ++i) {
@@ -193,7 +193,7 @@ ProcessedFrame FrameProcessor::process(const sensor_msgs::PointCloud2 &msg, cons
         if (h.level(id) == d) ids.push_back(id);
     }
     r.levels.emplace_back(d, sensor_msgs::PointCloud2());
-    toMsg(ids, header, r.levels.back().second);
+    toMsg(ids, header, r.levels.back().second, &r.position_rounding);
   }
   if (map_mode && config_.ros.local_map_rate > 0.0) {
     // Driven by frame stamps, not a wall/ROS timer, so that the replay emits exactly what the node does; the map
@@ -203,7 +203,8 @@ ProcessedFrame FrameProcessor::process(const sensor_msgs::PointCloud2 &msg, cons
     if (due && wants.local_map) {
       const Eigen::Vector3d c = frame.sensor_to_fixed.translation();
       const double center[3] = {c.x(), c.y(), c.z()};
-      toMsg(pipeline_.outputSamplesNear(center, config_.ros.local_map_radius), header, r.local_map);
+      toMsg(pipeline_.outputSamplesNear(center, config_.ros.local_map_radius), header, r.local_map,
+            &r.position_rounding);
       r.has_local_map = true;
     }
     if (due) {
@@ -222,8 +223,10 @@ ProcessedFrame FrameProcessor::process(const sensor_msgs::PointCloud2 &msg, cons
 }
 
 void FrameProcessor::toMsg(const std::vector<hpds::SampleId> &ids, const std_msgs::Header &header,
-                           sensor_msgs::PointCloud2 &out) const {
-  toRosCloud(pipeline_.makeCloud(ids, /*with_frame_field=*/false), header, out);
+                           sensor_msgs::PointCloud2 &out, double *rounding) const {
+  const hpds::PointBuffer cloud = pipeline_.makeCloud(ids, /*with_frame_field=*/false);
+  *rounding = std::max(*rounding, hpds::positionRounding(cloud));
+  toRosCloud(cloud, header, out);
 }
 
 std::vector<hpds::SampleId> FrameProcessor::samplesHit(int min_level, int max_level, double hit_radius) const {

@@ -144,13 +144,14 @@ std::size_t DiagnosticsReader::updates() const {
   return updates_;
 }
 
-void expectAlignedFields(const sensor_msgs::PointCloud2 &cloud) {
+void expectAlignedFields(const sensor_msgs::PointCloud2 &cloud, std::uint8_t xyz_datatype) {
   ASSERT_GE(cloud.fields.size(), 3u);
   const char *axes[] = {"x", "y", "z"};
+  const std::uint32_t xyz_size = xyz_datatype == sensor_msgs::PointField::FLOAT64 ? 8 : 4;
   for (std::size_t a = 0; a < 3; ++a) {
     EXPECT_EQ(cloud.fields[a].name, axes[a]);
-    EXPECT_EQ(cloud.fields[a].offset, 4 * a) << cloud.fields[a].name;
-    EXPECT_EQ(int(cloud.fields[a].datatype), int(sensor_msgs::PointField::FLOAT32)) << cloud.fields[a].name;
+    EXPECT_EQ(cloud.fields[a].offset, xyz_size * a) << cloud.fields[a].name;
+    EXPECT_EQ(int(cloud.fields[a].datatype), int(xyz_datatype)) << cloud.fields[a].name;
   }
   EXPECT_EQ(cloud.point_step % 4, 0u) << "point_step " << cloud.point_step;
   std::vector<bool> used(cloud.point_step, false);

@@ -100,7 +100,8 @@ class DiagnosticsReader {
 
 /// Checks that x y z are float32 at offsets 0, 4, 8, every field sits at a multiple of its element size without
 /// overlapping another, and point_step is a multiple of 4 and of every element size.
-void expectAlignedFields(const sensor_msgs::PointCloud2 &cloud);
+void expectAlignedFields(const sensor_msgs::PointCloud2 &cloud,
+                         std::uint8_t xyz_datatype = sensor_msgs::PointField::FLOAT32);
 
 /// Checks the layout of an hpds output cloud: x y z float32, level uint8, normals when `normals`, every field of
 /// `input` except x/y/z (and PCL padding "_") with the same name, datatype and count, nothing else, all aligned (expectAlignedFields).

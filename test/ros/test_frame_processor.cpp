@@ -179,8 +179,9 @@ TEST(FrameProcessor, Float64AndOrganizedNanInput) {
   const auto r = processor.process(toMsg(cloud, 1.0), Eigen::Isometry3d::Identity(), OutputRequest::all());
   ASSERT_TRUE(r.processed);
   EXPECT_EQ(r.counters.skipped_invalid, (cloud.size() + 6) / 7);
-  EXPECT_EQ(r.output.fields[0].datatype, sensor_msgs::PointField::FLOAT32);
-  hpds_test::expectAlignedFields(r.output);
+  // float64 in, float64 out: the samples keep the input's digits.
+  EXPECT_EQ(r.output.fields[0].datatype, sensor_msgs::PointField::FLOAT64);
+  hpds_test::expectAlignedFields(r.output, sensor_msgs::PointField::FLOAT64);
   const hpds::PointBuffer out = hpds_test::toBuffer(r.output);
   const hpds::PointField *tag = out.layout().find("tag");
   ASSERT_NE(tag, nullptr);

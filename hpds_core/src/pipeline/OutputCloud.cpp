@@ -1,6 +1,7 @@
 #include "hpds/pipeline/OutputCloud.hpp"
 
 #include <algorithm>
+#include <cmath>
 #include <cstring>
 #include <stdexcept>
 
@@ -24,7 +25,8 @@ std::vector<std::string> fieldsNotCarried(const PointLayout &input) {
   return names;
 }
 
-PointLayout outputLayout(const PointLayout &input, bool with_normals, bool with_frame, bool with_covariances) {
+PointLayout outputLayout(const PointLayout &input, bool with_normals, bool with_frame, bool with_covariances,
+                         bool float64_xyz) {
   // x y z first, then the other fields by decreasing element size (stable: listed order within a size), each at the
   // next offset that is a multiple of its element size: readers may then load any field as an aligned value, and
   // the size order leaves at most one gap (before the first 8-byte field).
@@ -53,7 +55,13 @@ PointLayout outputLayout(const PointLayout &input, bool with_normals, bool with_
     out.point_step = (out.point_step + size - 1) / size * size;
     out.append(f.name, f.type, f.count);
   };
-  for (const char *axis : {"x", "y", "z"}) place(PointField{axis, 0, FieldType::Float32, 1});
+  bool input_float64 = true;
+  for (const char *axis : {"x", "y", "z"}) {
+    const PointField *f = input.find(axis);
+    input_float64 &= f != nullptr && f->type == FieldType::Float64;
+  }
+  const FieldType xyz_type = float64_xyz || input_float64 ? FieldType::Float64 : FieldType::Float32;
+  for (const char *axis : {"x", "y", "z"}) place(PointField{axis, 0, xyz_type, 1});
   for (const PointField &f : rest) place(f);
   out.point_step = (out.point_step + alignment - 1) / alignment * alignment;
   return out;
@@ -61,18 +69,20 @@ PointLayout outputLayout(const PointLayout &input, bool with_normals, bool with_
 
 PointBuffer buildOutputCloud(const Hierarchy &h, const std::vector<SampleId> &ids,
                              const std::vector<SampleNormal> *normals, bool with_frame,
-                             const std::vector<SampleCovariance> *covariances) {
+                             const std::vector<SampleCovariance> *covariances, bool float64_xyz) {
   if (normals && normals->size() != ids.size()) throw std::invalid_argument("buildOutputCloud: one normal per id");
   if (covariances && covariances->size() != ids.size())
     throw std::invalid_argument("buildOutputCloud: one covariance per id");
   const PointLayout &in = h.recordLayout();
-  PointBuffer cloud(outputLayout(in, normals != nullptr, with_frame, covariances != nullptr), ids.size());
+  PointBuffer cloud(outputLayout(in, normals != nullptr, with_frame, covariances != nullptr, float64_xyz),
+                    ids.size());
   const PointLayout &out = cloud.layout();
   // Field pairs resolved once, so the per-sample loop only copies bytes.
   std::vector<std::pair<const PointField *, const PointField *>> carried;
   for (const auto &f : in.fields)
     if (!isOwnName(f.name)) carried.emplace_back(out.find(f.name), &f);
   const PointField *fx = out.find("x"), *fy = out.find("y"), *fz = out.find("z"), *fl = out.find("level");
+  const bool doubles = fx->type == FieldType::Float64;
   const PointField *fnx = out.find("normal_x"), *fny = out.find("normal_y"), *fnz = out.find("normal_z"),
                    *fc = out.find("curvature"), *ff = out.find("frame");
   const PointField *fcov[6] = {};
@@ -81,10 +91,16 @@ PointBuffer buildOutputCloud(const Hierarchy &h, const std::vector<SampleId> &id
     std::uint8_t *rec = cloud.record(i);
     const SampleId id = ids[i];
     const double *p = h.position(id);
-    const float xyz[3] = {static_cast<float>(p[0]), static_cast<float>(p[1]), static_cast<float>(p[2])};
-    std::memcpy(rec + fx->offset, &xyz[0], 4);
-    std::memcpy(rec + fy->offset, &xyz[1], 4);
-    std::memcpy(rec + fz->offset, &xyz[2], 4);
+    if (doubles) {
+      std::memcpy(rec + fx->offset, &p[0], 8);
+      std::memcpy(rec + fy->offset, &p[1], 8);
+      std::memcpy(rec + fz->offset, &p[2], 8);
+    } else {
+      const float xyz[3] = {static_cast<float>(p[0]), static_cast<float>(p[1]), static_cast<float>(p[2])};
+      std::memcpy(rec + fx->offset, &xyz[0], 4);
+      std::memcpy(rec + fy->offset, &xyz[1], 4);
+      std::memcpy(rec + fz->offset, &xyz[2], 4);
+    }
     rec[fl->offset] = static_cast<std::uint8_t>(h.level(id));
     if (normals) {
       const SampleNormal &n = (*normals)[i];
@@ -103,6 +119,21 @@ PointBuffer buildOutputCloud(const Hierarchy &h, const std::vector<SampleId> &id
       for (const auto &[dst_field, src_field] : carried) copyFieldBytes(rec, *dst_field, src, *src_field);
   }
   return cloud;
+}
+
+double positionRounding(const PointBuffer &cloud) {
+  const PointLayout &l = cloud.layout();
+  const PointField *f[3] = {l.find("x"), l.find("y"), l.find("z")};
+  double largest = 0.0;
+  for (const PointField *axis : f) {
+    if (!axis || axis->type != FieldType::Float32) continue;
+    for (std::size_t i = 0; i < cloud.size(); ++i) {
+      float v;
+      std::memcpy(&v, cloud.record(i) + axis->offset, 4);
+      if (std::isfinite(v)) largest = std::max(largest, static_cast<double>(std::fabs(v)));
+    }
+  }
+  return std::ldexp(largest, -24);
 }
 
 }  // namespace hpds

@@ -366,7 +366,9 @@ std::vector<SampleNormal> Pipeline::normals(const std::vector<SampleId> &ids,
 }
 
 PointBuffer Pipeline::makeCloud(const std::vector<SampleId> &ids, bool with_frame_field, double *seconds_normals) const {
-  if (!config_.normals.enabled) return buildOutputCloud(hierarchy_, ids, nullptr, with_frame_field);
+  const bool float64_xyz = config_.output.float64_xyz;
+  if (!config_.normals.enabled)
+    return buildOutputCloud(hierarchy_, ids, nullptr, with_frame_field, nullptr, float64_xyz);
   const auto t0 = std::chrono::steady_clock::now();
   const bool with_covariances = config_.normals.covariances;
   std::vector<LocalPca> neighbourhoods;
@@ -375,7 +377,8 @@ PointBuffer Pipeline::makeCloud(const std::vector<SampleId> &ids, bool with_fram
   if (with_covariances)
     covariances = estimateCovariances(hierarchy_, ids, output_level_, normals, neighbourhoods, config_);
   if (seconds_normals) *seconds_normals = secondsSince(t0);
-  return buildOutputCloud(hierarchy_, ids, &normals, with_frame_field, with_covariances ? &covariances : nullptr);
+  return buildOutputCloud(hierarchy_, ids, &normals, with_frame_field, with_covariances ? &covariances : nullptr,
+                          float64_xyz);
 }
 
 }  // namespace hpds

@@ -178,7 +178,8 @@ TileFinishStats finishTile(const HpdsConfig &given, const TileGrid &grid, const 
     if (config.normals.covariances) covariances = estimateCovariances(h, ids, level, normals, neighbourhoods, config);
   }
   const PointBuffer cloud = buildOutputCloud(h, ids, config.normals.enabled ? &normals : nullptr, false,
-                                             config.normals.covariances ? &covariances : nullptr);
+                                             config.normals.covariances ? &covariances : nullptr,
+                                             config.output.float64_xyz);
 
   const double nan = std::numeric_limits<double>::quiet_NaN();
   stats.bounds = {nan, nan, nan, nan, nan, nan};

@@ -75,6 +75,8 @@ struct ProcessedFrame {
   sensor_msgs::PointCloud2 output, new_samples, local_map;
   std::vector<std::pair<int, sensor_msgs::PointCloud2>> levels;  ///< (D, cloud) for the requested levels
   double seconds = 0.0;                                          ///< conversion + pipeline + outputs
+  /// [m] How far the outputs' float32 x y z may round positions (hpds::positionRounding; 0: float64).
+  double position_rounding = 0.0;
 };
 
 /// Running totals for diagnostics and --stats.
@@ -132,8 +134,9 @@ class FrameProcessor {
 
  private:
   [[nodiscard]] std::vector<hpds::SampleId> samplesHit(int min_level, int max_level, double hit_radius) const;
-  void toMsg(const std::vector<hpds::SampleId> &ids, const std_msgs::Header &header,
-             sensor_msgs::PointCloud2 &out) const;
+  /// The output cloud of ids into `out`; raises *rounding to its position rounding.
+  void toMsg(const std::vector<hpds::SampleId> &ids, const std_msgs::Header &header, sensor_msgs::PointCloud2 &out,
+             double *rounding) const;
 
   NodeConfig config_;
   hpds::Pipeline pipeline_;

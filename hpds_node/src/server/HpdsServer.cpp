@@ -335,6 +335,12 @@ void HpdsServer::handle(const sensor_msgs::PointCloud2::ConstPtr &msg, std::size
                                                                    "key range'); lower hierarchy.max_depth or raise "
                                                                    "the spacing or hierarchy.cell_size");
         for (const std::string &name : frame.fields_not_carried) warnFieldNotCarriedOnce(name);
+        const double radius = processor.pipeline().outputResolution().radius;
+        if (frame.position_rounding > 0.01 * radius)
+          ROS_WARN_STREAM_ONCE_NAMED("hpds", "hpds: the outputs' float32 x y z round positions by up to "
+                                                 << frame.position_rounding << " m, more than 1 % of the output "
+                                                 << "radius " << radius << " m: samples may come out closer than it; "
+                                                 << "set output/float64_xyz true (or use a local fixed frame)");
         turns.waitToPublish();
         publish(frame);
         seconds = frame.seconds;

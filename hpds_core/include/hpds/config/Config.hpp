@@ -42,6 +42,7 @@ struct OrderConfig {
 struct OutputConfig {
   int level = -1;        ///< output level D (levels 0..D are output); -1 = derive from `spacing`, else max_depth
   double spacing = 0.1;  ///< [m] with level = -1: the output's Poisson radius (see resolveOutput); 0 = unused
+  bool float64_xyz = false;  ///< output x y z as float64 (always so when the input's x y z are float64)
 };
 
 struct NormalConfig {

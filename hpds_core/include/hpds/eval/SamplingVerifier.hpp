@@ -11,11 +11,14 @@
 //     (3) coverage: every input point lies within 2 r_D of U_D (only when an input cloud is given).
 // - Tolerance: samplings are usually stored as float32, which moves each coordinate by at most 2^-24 * |coordinate|
 //   (half an ulp); a distance between two rounded points moves by at most 2 * sqrt(3) * 2^-24 * M < 4 * 2^-24 * M,
-//   M = max |coordinate| over the finite sample coordinates. So tol = 4 * 2^-24 * M and
+//   M = max |coordinate| over the finite sample coordinates. So tol = 4 * 2^-24 * M (4 * 2^-53 * M when x, y and z
+//   are all float64) and
 //     a pair is a spacing violation only if its distance < r_D - tol,
 //     a cell holds a duplicate only if two of its level-D samples are both farther than tol from every face,
 //     an input point is uncovered only if its distance to U_D > 2 r_D + tol.
-//   The tolerance depends on the sampling only, so adding an input cloud never changes (1) or (2).
+//   The tolerance depends on the sampling only, so adding an input cloud never changes (1) or (2). A level whose
+//   r_D is below 10 tol cannot be checked (float32 positions far from the origin): it is `unresolved` and counts as
+//   one violation, rather than passing a check that could not fail.
 // - Samples with a NaN/Inf coordinate cannot be valid: each counts as one spacing violation in every U_D holding it.
 //   Input points with a NaN/Inf coordinate or exactly at (0,0,0) (sensor no-returns) are ignored for coverage.
 // - Throws std::invalid_argument when the sampling lacks x/y/z or `level` (or the input lacks x/y/z), when C is not
@@ -43,6 +46,7 @@ struct LevelReport {
   std::size_t cell_violations = 0;     ///< per level-D cell: (samples farther than tol from every face) - 1, if > 0
   double max_coverage_over_r = 0.0;    ///< max over input points of dist to U_D / r_D; NaN without usable input
   std::size_t coverage_violations = 0; ///< input points farther than 2 r_D + tol from U_D
+  bool unresolved = false;             ///< tol > r_D / 10: the stored positions are too coarse to check this level
 };
 
 struct VerifyReport {

@@ -22,13 +22,21 @@ namespace hpds {
 /// silently. Rename such a field to keep it.
 [[nodiscard]] std::vector<std::string> fieldsNotCarried(const PointLayout &input);
 
+/// x y z are float32, or float64 when `float64_xyz` or when the input's x, y and z are all float64 (a float32 keeps
+/// about 7 digits: 0.5 m at 5e6 m, so georeferenced coordinates need float64).
 [[nodiscard]] PointLayout outputLayout(const PointLayout &input, bool with_normals, bool with_frame,
-                                       bool with_covariances = false);
+                                       bool with_covariances = false, bool float64_xyz = false);
 
 /// `normals`, `covariances`: null, or one entry per id (std::invalid_argument otherwise). Samples are written in the
-/// order of `ids`.
+/// order of `ids`; x y z as outputLayout says.
 [[nodiscard]] PointBuffer buildOutputCloud(const Hierarchy &hierarchy, const std::vector<SampleId> &ids,
                                            const std::vector<SampleNormal> *normals, bool with_frame,
-                                           const std::vector<SampleCovariance> *covariances = nullptr);
+                                           const std::vector<SampleCovariance> *covariances = nullptr,
+                                           bool float64_xyz = false);
+
+/// [m] How far `cloud`'s x y z may lie from the positions they were written from: half a float32 unit in the last
+/// place at its largest |coordinate| (2^-24 of it), 0 when they are float64 (or the cloud is empty). Programs
+/// compare it with the output radius and say when it is not small against it.
+[[nodiscard]] double positionRounding(const PointBuffer &cloud);
 
 }  // namespace hpds
