@@ -58,10 +58,14 @@ std::string KeepUpCheck::dropped() {
 }
 
 std::string KeepUpCheck::warning(bool on_drop) const {
-  std::string text = "hpds: cannot keep up with the input: ";
-  if (on_drop) text += "a frame was dropped because the frames before it were still being processed; ";
   const std::string workers = std::to_string(workers_) + (workers_ == 1 ? " worker" : " workers");
-  if (!gaps_.empty() && !costs_.empty()) {
+  const bool measured = !gaps_.empty() && !costs_.empty();
+  // A drop while the usual rate keeps up: a burst of messages (their zero gaps give no period) or one slow frame.
+  const bool keeps_up = measured && !(median(costs_) > double(workers_) * median(gaps_));
+  std::string text = on_drop && keeps_up ? "hpds: fell behind the input for a moment: "
+                                         : "hpds: cannot keep up with the input: ";
+  if (on_drop) text += "a frame was dropped because the frames before it were still being processed; ";
+  if (measured) {
     const double period = median(gaps_), cost = median(costs_);
     const double worst = *std::max_element(costs_.begin(), costs_.end());
     const double capacity = double(workers_) * period;
@@ -69,6 +73,9 @@ std::string KeepUpCheck::warning(bool on_drop) const {
             (on_drop ? " and take " : " but take ") + format("%.0f ms each", 1e3 * cost) + " (median of " +
             std::to_string(costs_.size()) + " frames, " + format("%.0f ms at most", 1e3 * worst) + ", " + workers + ")";
     if (cost > capacity) text += ", so about " + format("%.0f%%", 100.0 * (1.0 - capacity / cost)) + " of the frames will be dropped";
+    if (on_drop && keeps_up)
+      text += ", which keeps up: frames came faster than that (a burst) or one took longer. A larger ros/queue_size "
+              "absorbs bursts";
   } else {
     text += "no processing time measured yet (" + workers + ")";
   }

@@ -35,7 +35,9 @@ Collector<rosgraph_msgs::Log> &rosout() {
 std::vector<std::string> keepUpWarnings(const std::string &node) {
   std::vector<std::string> found;
   for (const auto &m : rosout().messages())
-    if (m->name == node && hpds_test::contains(m->msg, "cannot keep up")) found.push_back(m->msg);
+    if (m->name == node && (hpds_test::contains(m->msg, "cannot keep up") ||
+                            hpds_test::contains(m->msg, "fell behind the input for a moment")))
+      found.push_back(m->msg);
   return found;
 }
 

@@ -357,6 +357,29 @@ TEST(NodeParameters, DiagnosticPeriodIsBounded) {
   ros::param::del(ns);
 }
 
+TEST(NodeParameters, SeedsBeyondXmlRpcIntegersArriveExactly) {
+  // XML-RPC integers are 32-bit, so `_order/seed:=5000000000` reaches the parameter server as a double; it was
+  // refused as "expected a non-negative integer, got '5e+09'". Integral doubles up to 2^53 are the integer typed.
+  const std::string ns = "/hpds_big_seed";
+  for (const double seed : {5000000000.0, 9007199254740992.0, 2147483648.0}) {
+    ros::param::set(ns + "/order/seed", seed);
+    const hpds_node::NodeConfig config = hpds_node::loadNodeConfigFromParams(ros::NodeHandle(ns));
+    EXPECT_EQ(config.hpds.order.seed, static_cast<std::uint64_t>(seed));
+  }
+  // A fraction or a negative value is still no seed, and a double for a double key still is that double.
+  for (const double bad : {5000000000.5, -5000000000.0}) {
+    ros::param::set(ns + "/order/seed", bad);
+    EXPECT_THROW((void)hpds_node::loadNodeConfigFromParams(ros::NodeHandle(ns)), std::invalid_argument) << bad;
+  }
+  ros::param::del(ns + "/order/seed");
+  ros::param::set(ns + "/output/spacing", 3000000000.0);
+  EXPECT_THROW((void)hpds_node::loadNodeConfigFromParams(ros::NodeHandle(ns)), std::invalid_argument)
+      << "a 3e9 m spacing is too large, whatever its text";
+  ros::param::set(ns + "/output/spacing", 0.25);
+  EXPECT_EQ(hpds_node::loadNodeConfigFromParams(ros::NodeHandle(ns)).hpds.output.spacing, 0.25);
+  ros::param::del(ns);
+}
+
 // ros/load_map_on_start + ros/save_map_on_shutdown: three lives of one node (HpdsServers created here, on the
 // private namespace `ns`), each continuing the previous one's map exactly.
 TEST(NodePersistenceRestart, ARestartLosesNothing) {

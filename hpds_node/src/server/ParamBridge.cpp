@@ -3,6 +3,7 @@
 #include <yaml-cpp/yaml.h>
 
 #include <algorithm>
+#include <cmath>
 #include <string>
 
 #include "hpds/config/YamlScalar.hpp"
@@ -30,10 +31,17 @@ void emitParam(YAML::Emitter &out, XmlRpc::XmlRpcValue &v) {
     case XmlRpc::XmlRpcValue::TypeInt:
       out << static_cast<int>(v);
       break;
-    case XmlRpc::XmlRpcValue::TypeDouble:
-      // Shortest round-trip text, so the value the loader sees is the double rosparam holds.
-      out << hpds::yaml::formatNumber(static_cast<double>(v));
+    case XmlRpc::XmlRpcValue::TypeDouble: {
+      // Shortest round-trip text, so the value the loader sees is the double rosparam holds. XML-RPC integers are
+      // 32-bit: rosparam turns a larger one (order/seed 5000000000) into a double, which is written back as the
+      // integer it was while a double holds it exactly (up to 2^53).
+      const double d = static_cast<double>(v);
+      if (std::fabs(d) >= 2147483648.0 && std::fabs(d) <= 9007199254740992.0 && d == std::floor(d))
+        out << std::to_string(static_cast<long long>(d));
+      else
+        out << hpds::yaml::formatNumber(d);
       break;
+    }
     case XmlRpc::XmlRpcValue::TypeBoolean:
       out << (static_cast<bool>(v) ? "true" : "false");
       break;
