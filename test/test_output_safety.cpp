@@ -366,8 +366,11 @@ TEST_F(OutputSafety, UnwritableOrMisnamedOutputsAreRefusedBeforeAnyWork) {
       {"render" + q("a.ply") + " -o" + q("plain/pictures"), "is not a folder"},
       {"analyze" + q("a.ply") + " --cell-size 4 -o" + q("plain"), "exists and is not a folder"},
       {"synth -o" + q("plain/frames"), "is not a folder"},
+      // A symbolic link into a missing folder: refused before the work, not when the temporary is created after it.
+      {sample + " -o" + q("dangling.ply"), "is in folder '" + (dir_ / "gone").string() + "', which does not exist"},
   };
   fs::create_directory(dir_ / "dir.ply");
+  fs::create_symlink(dir_ / "gone" / "out.ply", dir_ / "dangling.ply");
   for (const Refusal &c : cases) {
     std::string log;
     EXPECT_EQ(test::runHpds(c.args, &log), 1) << c.args << "\n" << log;

@@ -113,6 +113,13 @@ TEST_F(QualityCli, RenderWritesEveryColourAndView) {
   // A crop with nothing inside is an error, not an empty picture.
   EXPECT_EQ(runHpds("render " + shellQuote(*dir_ / "map.ply") + " -o " + shellQuote(out) + " --crop 900,900,900,901,901,901", &log), 1);
   EXPECT_NE(log.find("no points to render"), std::string::npos) << log;
+  // One point: no spacing to derive a feature radius from (it was refused naming order.feature_radius, a key render
+  // does not have); drawn without a feature.
+  std::ofstream(*dir_ / "one.pcd") << "VERSION .7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 1\n"
+                                      "HEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS 1\nDATA ascii\n1 2 3\n";
+  ASSERT_EQ(runHpds("render " + shellQuote(*dir_ / "one.pcd") + " -o " + shellQuote(*dir_ / "one_render"), &log), 0)
+      << log;
+  EXPECT_TRUE(isPng(*dir_ / "one_render" / "render_feature_top.png"));
 }
 
 TEST_F(QualityCli, BadInputGivesClearErrors) {

@@ -92,7 +92,8 @@ void checkPaths(const std::vector<InputPath> &inputs, const std::vector<OutputPa
     // Devices and FIFOs are written in place and hold nothing to lose: any name, no folder to write into.
     if (!exists || S_ISREG(st.st_mode)) {
       checkExtension(o);
-      requireWritableFolder(o.flag, o.path, folderOf(o.path));
+      // The folder the file lands in: a symbolic link's target's (AtomicFile follows links, even a dangling one).
+      requireWritableFolder(o.flag, o.path, folderOf(followLinks(o.path)));
       if (exists && ::access(o.path.c_str(), W_OK) != 0)
         refuse(o.flag, o.path, "exists and is read-only; hpds does not replace files it may not write");
     }

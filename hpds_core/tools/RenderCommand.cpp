@@ -64,6 +64,8 @@ std::vector<double> featureValues(const SamplingCloud &c, const RenderArgs &a, d
     if (a.feature != "sphericity" && a.feature != "surface_variation" && a.feature != "curvature")
       throw std::invalid_argument("--feature: expected curvature, surface_variation or sphericity");
     const double radius = a.feature_radius > 0.0 ? a.feature_radius : 3.0 * spacing;
+    // One point, or all at one spot: no spacing to derive a radius from, and no neighbourhood to have a feature.
+    if (!(radius > 0.0)) return f;
     std::vector<double> xyz(3 * c.xyz.size());
     for (std::size_t i = 0; i < c.xyz.size(); ++i)
       for (int k = 0; k < 3; ++k) xyz[3 * i + static_cast<std::size_t>(k)] = c.xyz[i][k];
