@@ -215,7 +215,10 @@ ProcessedFrame FrameProcessor::process(const sensor_msgs::PointCloud2 &msg, cons
 
   r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   ++stats_.processed;
-  if (frame.points.empty()) ++stats_.empty;
+  // Empty: none of its points could be inserted (zero-size, or every point NaN/Inf, a no-return, outside the range
+  // limits or the exact key range), so its outputs hold nothing new.
+  const hpds::FrameCounters &c = r.counters;
+  if (c.skipped_invalid + c.skipped_zero + c.skipped_range + c.out_of_range >= c.input) ++stats_.empty;
   stats_.seconds_sum += r.seconds;
   stats_.seconds_max = std::max(stats_.seconds_max, r.seconds);
   stats_.points += r.counters;

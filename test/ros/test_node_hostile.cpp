@@ -8,6 +8,7 @@
 #include <rosgraph_msgs/Log.h>
 #include <topic_tools/shape_shifter.h>
 
+#include <algorithm>
 #include <cstring>
 #include <limits>
 #include <random>
@@ -161,7 +162,17 @@ TEST_F(HostileTest, MalformedAndFuzzedMessagesAreCountedAndTheNodeSurvives) {
     send(m);
   }
 
-  // 4. Still alive: a valid frame gives output.
+  // 4. A frame whose every point is NaN is processed, and counted as empty like a zero-size one.
+  ASSERT_TRUE(hpds_test::waitFor(
+      [&] { return diag.value("frames processed") + diag.value("dropped malformed") == double(sent); }, 30.0));
+  const double empty_before = diag.value("frames empty");
+  auto all_nan = validCloud(500, 3, next());
+  std::fill(all_nan->data.begin(), all_nan->data.end(), std::uint8_t(0xFF));  // x, y, z all NaN
+  send(all_nan);
+  EXPECT_TRUE(hpds_test::waitFor([&] { return diag.value("frames empty") == empty_before + 1.0; }, 30.0))
+      << "frames empty " << diag.value("frames empty") << " after " << empty_before;
+
+  // 5. Still alive: a valid frame gives output.
   output.clear();
   const ros::Time last = next();
   send(validCloud(5000, 9, last));
@@ -303,9 +314,15 @@ TEST_F(HostileTest, DropsAreLoggedNotOnlyCounted) {
   ASSERT_TRUE(hpds_test::waitFor(
       [&] { return pub.getNumSubscribers() > 0 && output.connected() && logs.connected() && diag.updates() > 0; },
       30.0));
+  // Two malformed frames of different reasons within the 5 s throttle (0.1 s apart, so that queue_size 1 keeps
+  // both): each reason has its own throttle, so both are logged.
   auto bad = validCloud(100, 1, ros::Time(200, 0));
   bad->row_step = 7;
   pub.publish(bad);
+  ros::WallDuration(0.1).sleep();
+  auto bad2 = validCloud(100, 2, ros::Time(200, 50000000));
+  bad2->is_bigendian = true;
+  pub.publish(bad2);
   ros::WallDuration(0.1).sleep();
   const int burst = 10;
   for (int i = 0; i < burst; ++i) pub.publish(validCloud(100, 400 + i, ros::Time(201 + i, 0)));
@@ -313,7 +330,7 @@ TEST_F(HostileTest, DropsAreLoggedNotOnlyCounted) {
       [&] {
         return diag.value("dropped malformed") + diag.value("dropped no_transform") + diag.value("dropped overload") +
                    diag.value("dropped lost_upstream") ==
-               double(burst + 1);
+               double(burst + 2);
       },
       60.0))
       << "malformed " << diag.value("dropped malformed") << ", no_transform " << diag.value("dropped no_transform")
@@ -322,6 +339,7 @@ TEST_F(HostileTest, DropsAreLoggedNotOnlyCounted) {
   EXPECT_TRUE(hpds_test::waitFor(
       [&] {
         return logs.has(rosgraph_msgs::Log::ERROR, {"dropped malformed PointCloud2", "bad_row_step"}) &&
+               logs.has(rosgraph_msgs::Log::ERROR, {"dropped malformed PointCloud2", "big_endian"}) &&
                logs.has(rosgraph_msgs::Log::WARN, {"no transform", "counted as no_transform"}) &&
                logs.has(rosgraph_msgs::Log::WARN, {"counted as overload", "ros.queue_size 1"});
       },

@@ -357,6 +357,30 @@ TEST(NodeParameters, DiagnosticPeriodIsBounded) {
   ros::param::del(ns);
 }
 
+TEST(NodeParameters, AMapThatCouldNotBeSavedAtShutdownIsRefusedAtStart) {
+  // Found mapping into ros/map_file in a missing folder: the node ran, and said so only at shutdown, with the map lost.
+  const std::string ns = "/hpds_map_folder";
+  ros::param::set(ns + "/mode", std::string("map"));
+  ros::param::set(ns + "/ros/fixed_frame", kFixed);
+  ros::param::set(ns + "/ros/save_map_on_shutdown", true);
+  const std::string missing = (mapDir() / "no_such_folder" / "m.hpdsmap").string();
+  ros::param::set(ns + "/ros/map_file", missing);
+  ros::NodeHandle nh;
+  try {
+    hpds_node::HpdsServer server(nh, ros::NodeHandle(ns), "hpds_map_folder");
+    ADD_FAILURE() << "started with a map file in a missing folder";
+  } catch (const std::invalid_argument &e) {
+    EXPECT_TRUE(contains(e.what(), ns + "/ros/map_file: '" + missing + "' is in folder")) << e.what();
+    EXPECT_TRUE(contains(e.what(), "which does not exist")) << e.what();
+  }
+  // The folder there: the node starts.
+  fs::create_directories(mapDir());
+  ros::param::set(ns + "/ros/map_file", (mapDir() / "m_folder_ok.hpdsmap").string());
+  EXPECT_NO_THROW(hpds_node::HpdsServer(nh, ros::NodeHandle(ns), "hpds_map_folder"));
+  fs::remove(mapDir() / "m_folder_ok.hpdsmap");  // saved by that server's shutdown
+  ros::param::del(ns);
+}
+
 TEST(NodeParameters, SeedsBeyondXmlRpcIntegersArriveExactly) {
   // XML-RPC integers are 32-bit, so `_order/seed:=5000000000` reaches the parameter server as a double; it was
   // refused as "expected a non-negative integer, got '5e+09'". Integral doubles up to 2^53 are the integer typed.

@@ -153,8 +153,14 @@ TEST_F(NodeShutdown, RosnodeKillSavesTheMapAndSaysSo) {
 }
 
 TEST_F(NodeShutdown, AFailedSaveIsAnErrorLineAndExitStatusOne) {
-  const std::string file = (dir_ / "no_such_dir" / "m.hpdsmap").string();
-  const auto [status, log] = runAndStop("hpds_shutdown_fail", file, [](pid_t pid) { ::kill(pid, SIGINT); });
+  // The folder is there when the node starts (a missing one is refused at start) and gone when it stops.
+  const fs::path folder = dir_ / "vanishing";
+  fs::create_directories(folder);
+  const std::string file = (folder / "m.hpdsmap").string();
+  const auto [status, log] = runAndStop("hpds_shutdown_fail", file, [&](pid_t pid) {
+    fs::remove_all(folder);
+    ::kill(pid, SIGINT);
+  });
   EXPECT_EQ(status, 1) << log;
   EXPECT_TRUE(contains(log, "[ERROR]") && contains(log, "hpds: shutdown: the map was not saved: saving the map failed: " +
                                                             file + ": cannot create a temporary file beside it"))

@@ -83,7 +83,7 @@ struct ProcessedFrame {
 struct ProcessorStats {
   std::uint64_t received = 0;   ///< messages offered to the processor (or the node's queue)
   std::uint64_t processed = 0;  ///< frames inserted
-  std::uint64_t empty = 0;      ///< processed frames with zero points
+  std::uint64_t empty = 0;      ///< processed frames none of whose points could be inserted (zero-size, all skipped)
   std::array<std::uint64_t, kCloudErrorCount> malformed{};  ///< indexed by CloudError
   std::array<std::uint64_t, kDropReasonCount> dropped{};    ///< indexed by DropReason
   double seconds_sum = 0.0, seconds_max = 0.0;              ///< processing time of processed frames

@@ -45,6 +45,7 @@
 #include <ros/callback_queue.h>
 #include <ros/spinner.h>
 
+#include <map>
 #include <memory>
 #include <mutex>
 #include <set>
@@ -91,6 +92,11 @@ class HpdsServer {
   /// On the worker (or when no worker runs): performs the save or load.
   [[nodiscard]] std::pair<bool, std::string> runMapCommand(bool save);
   void loadMapOnStart();
+  /// ros/map_file's folder exists and is writable (std::invalid_argument naming the parameter otherwise).
+  void requireMapFolder() const;
+  /// False when a line with this key was logged less than 5 s ago: each drop reason gets its own throttle (ROS's
+  /// throttles are per call site, so one reason would hide the others).
+  bool logAllowed(const std::string &key);
   /// What the parameter server holds for ros/map_file now, when it differs from what the node started with.
   [[nodiscard]] std::string mapFileSetSinceStart() const;
 
@@ -115,6 +121,9 @@ class HpdsServer {
   std::uint64_t received_ = 0, overload_ = 0, lost_upstream_ = 0;
   SequenceGaps sequence_gaps_;
   std::set<std::string> fields_not_carried_;  // already warned about
+  std::mutex log_mutex_;
+  std::map<std::string, double> last_logged_;  // logAllowed: wall time [s] of the last line per key
+  static constexpr double kLogThrottleSeconds = 5.0;
 
   // Whether the workers keep up with the input: said once, within the first frames.
   std::mutex keep_up_mutex_;

@@ -6,6 +6,9 @@
 #include <sstream>
 #include <system_error>
 
+#include <unistd.h>
+
+#include "hpds/io/AtomicFile.hpp"
 #include "hpds/util/ParallelFor.hpp"
 
 namespace hpds_node {
@@ -47,8 +50,10 @@ HpdsServer::HpdsServer(ros::NodeHandle nh, ros::NodeHandle private_nh, const std
   keep_up_ = std::make_unique<KeepUpCheck>(config_.hpds, workers);
   target_frame_ = processors_.front()->targetFrame();
   const bool map_mode = config_.hpds.mode == hpds::Mode::Map;
-  // Before anything is advertised: a node that cannot load its map does not appear at all.
+  // Before anything is advertised: a node that cannot load its map, or could not save it at the end of a run,
+  // does not appear at all.
   if (config_.ros.load_map_on_start) loadMapOnStart();
+  if (config_.ros.save_map_on_shutdown && map_mode) requireMapFolder();
   if (!target_frame_.empty()) tf_listener_ = std::make_unique<tf2_ros::TransformListener>(tf_buffer_, nh_);
 
   pub_output_ = pnh_.advertise<sensor_msgs::PointCloud2>("output", 4);
@@ -130,6 +135,30 @@ bool HpdsServer::shutdown() {
     }
   }
   return shutdown_ok_;
+}
+
+bool HpdsServer::logAllowed(const std::string &key) {
+  const double now = ros::WallTime::now().toSec();
+  std::lock_guard<std::mutex> lock(log_mutex_);
+  auto [it, fresh] = last_logged_.try_emplace(key, now);
+  if (!fresh && now - it->second < kLogThrottleSeconds) return false;
+  it->second = now;
+  return true;
+}
+
+void HpdsServer::requireMapFolder() const {
+  // Found saving into a missing folder: the error came at shutdown, after all the mapping.
+  const std::string target = hpds::followLinks(config_.ros.map_file);
+  const std::filesystem::path parent = std::filesystem::path(target).parent_path();
+  const std::string folder = parent.empty() ? std::string(".") : parent.string();
+  std::error_code ec;
+  const std::string param = "parameter " + pnh_.getNamespace() + "/ros/map_file: '" + config_.ros.map_file + "'";
+  if (!std::filesystem::is_directory(folder, ec))
+    throw std::invalid_argument(param + " is in folder '" + folder + "', which does not exist (ros/save_map_on_shutdown "
+                                "would fail at the end of the run)");
+  if (::access(folder.c_str(), W_OK | X_OK) != 0)
+    throw std::invalid_argument(param + " is in folder '" + folder + "', which is not writable (ros/save_map_on_shutdown "
+                                "would fail at the end of the run)");
 }
 
 void HpdsServer::loadMapOnStart() {
@@ -299,9 +328,10 @@ void HpdsServer::handle(const sensor_msgs::PointCloud2::ConstPtr &msg, std::size
   std::string why;
   const CloudError error = processor.check(*msg, &why);
   if (error != CloudError::None) {
-    ROS_ERROR_STREAM_THROTTLE_NAMED(5.0, "hpds", "hpds: dropped malformed PointCloud2 ("
-                                                      << toString(error) << ", " << processor.stats().malformedTotal()
-                                                      << " malformed so far): " << why);
+    if (logAllowed(std::string("malformed ") + toString(error)))
+      ROS_ERROR_STREAM_NAMED("hpds", "hpds: dropped malformed PointCloud2 ("
+                                         << toString(error) << ", " << processor.stats().malformedTotal()
+                                         << " malformed so far): " << why);
   } else if (config_.hpds.mode == hpds::Mode::Scan && !wants.any()) {
     // 2. Nobody listening: scan mode has nothing to keep (map mode still has to grow the map).
     processor.countDrop(DropReason::NoSubscribers);
@@ -322,9 +352,9 @@ void HpdsServer::handle(const sensor_msgs::PointCloud2::ConstPtr &msg, std::size
       if (processors_.size() > 1) processor.setNextFrameIndex(index);
       ProcessedFrame frame = processor.process(*msg, pose, wants);
       if (!frame.processed) {
-        ROS_ERROR_STREAM_THROTTLE_NAMED(5.0, "hpds", "hpds: dropped frame (" << toString(frame.drop) << ", "
-                                                                              << count(frame.drop)
-                                                                              << " so far): " << frame.why);
+        if (logAllowed(std::string("dropped ") + toString(frame.drop)))
+          ROS_ERROR_STREAM_NAMED("hpds", "hpds: dropped frame (" << toString(frame.drop) << ", " << count(frame.drop)
+                                                                 << " so far): " << frame.why);
       } else {
         if (frame.counters.out_of_range > 0)
           ROS_WARN_STREAM_THROTTLE_NAMED(5.0, "hpds", "hpds: " << frame.counters.out_of_range << " of the frame's "
