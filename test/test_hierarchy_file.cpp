@@ -359,6 +359,17 @@ TEST(MapFileBytes, HugeRecordsAreSavedInBoundedChunks) {
   expectIdentical(h, back.hierarchy);
 }
 
+TEST(MapFileBytes, AMapIsNeverSavedUnderAnotherFormatsName) {
+  // The library's saveMap/saveHierarchy refuse it themselves (the CLI and the node checked; a program did not).
+  const auto dir = test::scratchDir("map_names");
+  Hierarchy h(4.0, 2);
+  for (const char *name : {"scan.pcd", "cloud.PLY", "drive.bag", "config.yaml"}) {
+    EXPECT_THROW(saveHierarchy((dir / name).string(), h), std::runtime_error) << name;
+    EXPECT_FALSE(std::filesystem::exists(dir / name)) << name;
+  }
+  EXPECT_NO_THROW(saveHierarchy((dir / "map.hpdsmap").string(), h));
+}
+
 TEST(MapFileBytes, Crc32MatchesTheStandardCheckValue) {
   const char *s = "123456789";
   EXPECT_EQ(crc32(s, 9), 0xCBF43926u);
@@ -398,6 +409,25 @@ TEST(MapFileCli, SaveThenLoadContinuesTheMap) {
                  &log),
             0)
       << log;
+  EXPECT_EQ(log.find("the loaded map holds levels"), std::string::npos) << "continued at its own spacing\n" << log;
+  // Continued at a finer spacing than the map was built to (levels 0..5 without normals; 0.05 m derives the same
+  // cell at level 6): said, with what to set.
+  ASSERT_EQ(runHpds("sample " + frame(0) + " --poses " + posesFile(tmp / "p0.txt", 0, 1) + common +
+                        " --no-normals -o " + shellQuote(tmp / "coarse.ply") + " --save-map " +
+                        shellQuote(tmp / "coarse.hpdsmap"),
+                    &log),
+            0)
+      << log;
+  ASSERT_EQ(runHpds("sample " + frame(2) + " --poses " + posesFile(tmp / "p2.txt", 2, 3) + common +
+                        " --no-normals --spacing 0.05 -o " + shellQuote(tmp / "finer.ply") + " --load-map " +
+                        shellQuote(tmp / "coarse.hpdsmap"),
+                    &log),
+            0)
+      << log;
+  EXPECT_NE(log.find("hpds: warning: the loaded map holds levels 0..5 only, and this run builds down to level 6"),
+            std::string::npos)
+      << log;
+  EXPECT_NE(log.find("map.keep_depth 6"), std::string::npos) << log;
   // Same samples, compared as (x, y, z, level) records.
   const PointBuffer whole = readPointCloud((tmp / "whole.ply").string());
   const PointBuffer cont = readPointCloud((tmp / "cont.ply").string());

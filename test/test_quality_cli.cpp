@@ -122,6 +122,27 @@ TEST_F(QualityCli, RenderWritesEveryColourAndView) {
   EXPECT_TRUE(isPng(*dir_ / "one_render" / "render_feature_top.png"));
 }
 
+TEST_F(QualityCli, InputsOutsideThePatchAndFrameOnAMapAreSaidNotCrashed) {
+  // Found analysing a map with its frames but without --poses: the baselines had no point in the patch and drawing
+  // their (empty) periodograms crashed. And --frame on a map output (no 'frame' field) was silently ignored.
+  std::ofstream(*dir_ / "far.pcd") << "VERSION .7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 2\n"
+                                      "HEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS 2\nDATA ascii\n900 900 0\n901 900 0\n";
+  std::string log;
+  EXPECT_EQ(runHpds("analyze " + shellQuote(*dir_ / "map.ply") + " --cell-size 4 -o " + shellQuote(*dir_ / "far_an") +
+                        " --no-plots --input " + shellQuote(*dir_ / "far.pcd"),
+                    &log),
+            0)
+      << log;
+  EXPECT_NE(log.find("are the --input clouds in the sampling's frame (map mode needs --poses)?"), std::string::npos)
+      << log;
+  for (const std::string &cmd : {"render " + shellQuote(*dir_ / "map.ply") + " -o " + shellQuote(*dir_ / "fr"),
+                                "analyze " + shellQuote(*dir_ / "map.ply") + " --cell-size 4 -o " +
+                                    shellQuote(*dir_ / "fa")}) {
+    EXPECT_EQ(runHpds(cmd + " --frame 2", &log), 1) << cmd << "\n" << log;
+    EXPECT_NE(log.find("has no 'frame' field"), std::string::npos) << log;
+  }
+}
+
 TEST_F(QualityCli, BadInputGivesClearErrors) {
   std::string log;
   // A plain cloud has no level field.

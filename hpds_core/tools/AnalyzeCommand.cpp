@@ -215,7 +215,10 @@ void runAnalyze(const AnalyzeArgs &a) {
   const double cell_size = resolveCellSize(a.cell);
   if (!a.patch.empty() && a.patch.size() != 3) throw std::invalid_argument("--patch: expected cx,cy,size");
   SamplingCloud cloud = loadSampling(a.sampling);
-  if (cloud.level.empty()) throw std::invalid_argument(a.sampling + ": no `level` field (not an hpds sampling?)");
+  if (!cloud.has_level) throw std::invalid_argument(a.sampling + ": no `level` field (not an hpds sampling?)");
+  if (a.frame >= 0 && !cloud.has_frame)
+    throw std::invalid_argument("--frame: '" + a.sampling + "' has no 'frame' field (only a scan-mode output of several "
+                                "frames has one)");
   std::optional<std::uint32_t> frame;
   if (!cloud.frame.empty()) {
     // Scan-mode files of several inputs stack one sampling per frame; mixing them would break the spacing.
@@ -346,7 +349,13 @@ void runAnalyze(const AnalyzeArgs &a) {
     }
     std::cout << "method           count      cell  min_nn/r  mean_nn/r  P(low f)  P max\n";
     for (SetResult &s : compare) {
-      if (s.method != "hpds") {
+      // A baseline with fewer than two points in the patch has no statistics (its inputs are not where the sampling
+      // is: a map analysed without --poses); the hpds set's own count was checked above.
+      if (s.method != "hpds" && !s.analysed)
+        std::cerr << "hpds: warning: only " << s.count << " point(s) of the " << s.method
+                  << " baseline fall in the patch: are the --input clouds in the sampling's frame (map mode needs "
+                     "--poses)?\n";
+      if (s.method != "hpds" && s.analysed) {
         writeSetCsvRows(rdf_csv, spec_csv, s);
         writePeriodogramPng((out / ("periodogram_" + setName(s) + ".png")).string(), s.spectrum);
       }

@@ -22,6 +22,8 @@ SamplingCloud loadSampling(const std::string &path) {
   const PointField *fl = l.find("level"), *fc = l.find("curvature"), *ff = l.find("frame");
   const PointField *nx = l.find("normal_x"), *ny = l.find("normal_y"), *nz = l.find("normal_z");
   SamplingCloud c;
+  c.has_level = fl != nullptr;
+  c.has_frame = ff != nullptr;
   c.xyz.resize(buf.size());
   if (fl) c.level.resize(buf.size());
   if (nx && ny && nz) c.normal.resize(buf.size());

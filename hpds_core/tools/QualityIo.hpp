@@ -25,6 +25,7 @@ struct SamplingCloud {
   std::vector<Eigen::Vector3d> normal;  ///< empty without normal_x/y/z
   std::vector<float> curvature;         ///< empty without `curvature`
   std::vector<std::uint32_t> frame;     ///< empty without `frame`
+  bool has_level = false, has_frame = false;  ///< the file has the field (a sampling of 0 points has it too)
 
   [[nodiscard]] int maxLevel() const;
 };

@@ -101,7 +101,14 @@ void runRender(const RenderArgs &a) {
                                   "xyz"[k] + "1 = " + std::to_string(a.crop[k + 3]) +
                                   " (the box is x0,y0,z0 of its lower corner, then x1,y1,z1 of its upper one)");
   SamplingCloud c = loadSampling(a.cloud);
-  if (!c.frame.empty() && a.frame >= 0) c = keepFrame(c, static_cast<std::uint32_t>(a.frame));
+  if (a.frame >= 0) {
+    if (!c.has_frame)
+      throw std::invalid_argument("--frame: '" + a.cloud + "' has no 'frame' field (only a scan-mode output of several "
+                                  "frames has one)");
+    c = keepFrame(c, static_cast<std::uint32_t>(a.frame));
+    if (c.xyz.empty())
+      throw std::invalid_argument("--frame: '" + a.cloud + "' holds no sample of frame " + std::to_string(a.frame));
+  }
   // Keep what will be drawn, so spacing and features describe the picture, not the whole file.
   Eigen::AlignedBox3d box;
   if (!a.crop.empty()) box = Eigen::AlignedBox3d(Eigen::Vector3d(a.crop[0], a.crop[1], a.crop[2]),

@@ -84,7 +84,10 @@ int runSample(const SampleArgs &a) {
   if ((!a.load_map.empty() || !a.save_map.empty()) && config.mode != Mode::Map)
     throw std::invalid_argument("--load-map/--save-map need --mode map (scan mode keeps no map)");
   Pipeline pipeline(config);
-  if (!a.load_map.empty()) loadMap(a.load_map, pipeline);
+  if (!a.load_map.empty()) {
+    loadMap(a.load_map, pipeline);
+    if (const std::string w = shallowMapWarning(pipeline); !w.empty()) std::cerr << "hpds: warning: " << w << "\n";
+  }
   RunReport report = reportFor("sample", pipeline);
 
   const bool scan = config.mode == Mode::Scan;

@@ -295,6 +295,9 @@ LoadedHierarchy parse(Source &src, std::uint64_t total_size, const std::string &
 namespace {
 /// What a map file cannot hold, refused before any file is touched.
 void checkSavable(const std::string &path, const Hierarchy &hierarchy) {
+  if (isOtherFormatName(path))
+    fail(path, "cannot save a map under another format's extension (it could replace a point cloud, a bag or a "
+               "config): name it e.g. map.hpdsmap");
   if (!hostIsLittleEndian()) fail(path, "map files are little-endian; this host is not");
   const PointLayout &layout = hierarchy.recordLayout();
   if (layout.point_step > kMaxPointStep) fail(path, "cannot save: records of more than 16 MiB");
@@ -404,6 +407,21 @@ void saveMap(const std::string &path, const Pipeline &pipeline) {
 
 void saveMap(AtomicFile &file, const Pipeline &pipeline) {
   saveHierarchy(file, pipeline.hierarchy(), pipeline.framesProcessed());
+}
+
+std::string shallowMapWarning(const Pipeline &pipeline) {
+  const Hierarchy &h = pipeline.hierarchy();
+  if (h.sampleCount() == 0) return {};
+  int deepest = 0;
+  for (int l = 0; l <= h.maxDepth(); ++l)
+    if (h.countAtLevel(l) > 0) deepest = l;
+  if (deepest >= pipeline.buildDepth()) return {};
+  return "the loaded map holds levels 0.." + std::to_string(deepest) + " only, and this run builds down to level " +
+         std::to_string(pipeline.buildDepth()) + ": levels " + std::to_string(deepest + 1) + ".." +
+         std::to_string(pipeline.buildDepth()) +
+         " will hold only the new frames' samples, so their coverage does not reach the earlier frames' points; build "
+         "the map with map.keep_depth " + std::to_string(pipeline.buildDepth()) +
+         " to continue it at this spacing, or continue at its own";
 }
 
 void loadMap(const std::string &path, Pipeline &pipeline) {

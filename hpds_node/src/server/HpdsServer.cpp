@@ -9,6 +9,7 @@
 #include <unistd.h>
 
 #include "hpds/io/AtomicFile.hpp"
+#include "hpds/io/HierarchyFile.hpp"
 #include "hpds/util/ParallelFor.hpp"
 
 namespace hpds_node {
@@ -186,6 +187,8 @@ std::pair<bool, std::string> HpdsServer::runMapCommand(bool save) {
           << pipeline.framesProcessed() << ") to '" << path << "'";
     } else {
       processor.loadMap(path);
+      if (const std::string w = hpds::shallowMapWarning(processor.pipeline()); !w.empty())
+        ROS_WARN_STREAM_NAMED("hpds", "hpds: " << w);
       msg << "loaded " << pipeline.hierarchy().sampleCount() << " samples (next frame index "
           << pipeline.framesProcessed() << ") from '" << path << "'";
     }

@@ -66,6 +66,11 @@ void saveMap(const std::string &path, const Pipeline &pipeline);
 /// The same into `file`, without committing it.
 void saveMap(AtomicFile &file, const Pipeline &pipeline);
 
+/// After loadMap: a warning (empty when there is nothing to say) when the map holds no sample below a level that
+/// `pipeline` builds (a map made at a coarser spacing continued at a finer one): the finer levels then hold only the
+/// new frames' samples, so their coverage does not reach the earlier frames' points (map.keep_depth keeps them).
+[[nodiscard]] std::string shallowMapWarning(const Pipeline &pipeline);
+
 /// Map mode only: loads `path`, checked against the pipeline's hierarchy config, and replaces the pipeline's map with
 /// it (strong guarantee: on any error the pipeline is unchanged). Throws std::runtime_error for file problems and
 /// std::invalid_argument when the pipeline is not in map mode.
