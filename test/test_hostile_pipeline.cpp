@@ -96,6 +96,42 @@ TEST(HostilePipeline, BrokenLayoutsThrowBeforeAnythingChanges) {
   grow.point_step = 0xFFFFFFFBu;
   grow.append("y", FieldType::Float32);  // up to the last byte still fits
   EXPECT_EQ(grow.point_step, 0xFFFFFFFFu);
+  // width * height = size() also for a layout without bytes and for a moved-from buffer (a PLY written from one had
+  // obj_info 5 x 2 over 0 vertices, which no reader accepts).
+  const PointBuffer no_bytes(PointLayout{}, 100);
+  EXPECT_EQ(std::uint64_t(no_bytes.width()) * no_bytes.height(), no_bytes.size());
+  PointBuffer organised(typedCloud(FieldType::Float32, gridPoints(4, 1.0)));
+  organised.resize(10);
+  organised.setOrganization(5, 2);
+  PointBuffer taken(std::move(organised));
+  EXPECT_EQ(taken.width(), 5u);
+  EXPECT_EQ(std::uint64_t(organised.width()) * organised.height(), organised.size());  // NOLINT(bugprone-use-after-move)
+  PointBuffer assigned;
+  assigned = std::move(taken);
+  EXPECT_EQ(assigned.size(), 10u);
+  EXPECT_EQ(std::uint64_t(taken.width()) * taken.height(), taken.size());  // NOLINT(bugprone-use-after-move)
+}
+
+TEST(HostilePipeline, IdsThatAreNoLiveSampleAreRefusedNotRead) {
+  // Found using the library: makeCloud of ids from an earlier scan-mode frame returned the records of dead samples
+  // (read past the hierarchy's arrays), and an id never issued crashed the normals.
+  HpdsConfig c;
+  Pipeline p(c);
+  EXPECT_THROW((void)p.makeCloud({0, 1, 2}, false), std::invalid_argument) << "no frame yet";
+  EXPECT_THROW((void)p.normals({0}), std::invalid_argument);
+  p.addFrame(frameOf(typedCloud(FieldType::Float32, gridPoints(40, 0.3))));
+  const std::vector<SampleId> first = p.outputSamples();
+  ASSERT_GT(first.size(), 100u);
+  EXPECT_EQ(p.makeCloud(first, false).size(), first.size());
+  p.addFrame(frameOf(typedCloud(FieldType::Float32, gridPoints(5, 0.3))));  // scan mode: a new, smaller hierarchy
+  try {
+    (void)p.makeCloud(first, false);
+    ADD_FAILURE() << "ids of the previous frame accepted";
+  } catch (const std::invalid_argument &e) {
+    EXPECT_NE(std::string(e.what()).find("is no sample of the hierarchy"), std::string::npos) << e.what();
+  }
+  EXPECT_THROW((void)p.makeCloud({1000000u}, false), std::invalid_argument);
+  EXPECT_EQ(p.makeCloud(p.outputSamples(), false).size(), p.outputSamples().size());
 }
 
 TEST(HostilePipeline, NanInfInEveryFieldAndPose) {
@@ -282,6 +318,9 @@ TEST(HostilePipeline, InvalidConfigsAreRefusedByTheConstructor) {
       EXPECT_EQ(std::string(e.what()).rfind(key, 0), 0u) << e.what();
     }
   };
+  // Enumerations out of range, only reachable by a cast: they ran as scan mode / input order.
+  refused([](HpdsConfig &c) { c.mode = static_cast<Mode>(5); }, "mode");
+  refused([](HpdsConfig &c) { c.order.type = static_cast<InsertionOrder>(7); }, "order.type");
   refused([](HpdsConfig &c) { c.hierarchy.cell_size = NAN; }, "hierarchy.cell_size");
   refused([](HpdsConfig &c) { c.hierarchy.cell_size = -INFINITY; }, "hierarchy.cell_size");
   refused([](HpdsConfig &c) { c.hierarchy.max_depth = 99; }, "hierarchy.max_depth");

@@ -116,6 +116,13 @@ void validateNeighbourhoods(const HpdsConfig &c) {
 }  // namespace
 
 void validateConfig(const HpdsConfig &c) {
+  // Only reachable through a cast (a config the caller decoded itself), which would otherwise run as some default.
+  if (c.mode != Mode::Scan && c.mode != Mode::Map)
+    fail("mode", "is no mode (" + std::to_string(static_cast<int>(c.mode)) + "): expected scan or map");
+  if (c.order.type != InsertionOrder::Random && c.order.type != InsertionOrder::Input &&
+      c.order.type != InsertionOrder::Sphericity && c.order.type != InsertionOrder::SurfaceVariation)
+    fail("order.type", "is no insertion order (" + std::to_string(static_cast<int>(c.order.type)) +
+                           "): expected random, input, sphericity or surface_variation");
   requireFinite("hierarchy.cell_size", c.hierarchy.cell_size);
   if (c.hierarchy.cell_size < 0.0)
     fail("hierarchy.cell_size", "must be > 0, or 0 = derived from output.spacing, got " + std::to_string(c.hierarchy.cell_size));

@@ -333,8 +333,17 @@ std::vector<SampleId> Pipeline::samplesHitByLastFrame(int min_level, int max_lev
   return hit;
 }
 
+void Pipeline::requireLiveIds(const std::vector<SampleId> &ids, const char *what) const {
+  for (SampleId id : ids)
+    if (!hierarchy_.isLive(id))
+      throw std::invalid_argument(std::string(what) + ": id " + std::to_string(id) +
+                                  " is no sample of the hierarchy (evicted, or from a frame before the last in scan "
+                                  "mode: ids do not outlive the next addFrame there)");
+}
+
 std::vector<SampleNormal> Pipeline::normals(const std::vector<SampleId> &ids,
                                              std::vector<LocalPca> *neighbourhoods) const {
+  requireLiveIds(ids, "normals");
   const NormalParams params = normalParamsFor(config_, output_level_);
   if (fine_level_ < 0) return estimateNormals(hierarchy_, ids, params, neighbourhoods);
   if (neighbourhoods) neighbourhoods->assign(ids.size(), LocalPca{});
@@ -366,6 +375,7 @@ std::vector<SampleNormal> Pipeline::normals(const std::vector<SampleId> &ids,
 }
 
 PointBuffer Pipeline::makeCloud(const std::vector<SampleId> &ids, bool with_frame_field, double *seconds_normals) const {
+  requireLiveIds(ids, "makeCloud");
   const bool float64_xyz = config_.output.float64_xyz;
   if (!config_.normals.enabled)
     return buildOutputCloud(hierarchy_, ids, nullptr, with_frame_field, nullptr, float64_xyz);

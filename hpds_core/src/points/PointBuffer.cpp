@@ -100,7 +100,7 @@ void PointBuffer::setOrganization(std::uint32_t width, std::uint32_t height) {
 
 void PointBuffer::resize(std::size_t n) {
   data_.resize(n * layout_.point_step, 0);
-  width_ = static_cast<std::uint32_t>(n);
+  width_ = layout_.point_step ? static_cast<std::uint32_t>(n) : 0;
   height_ = 1;
 }
 

@@ -21,7 +21,9 @@
 // - A frame without x/y/z fields, or (map mode) whose field layout differs from the first frame's, throws
 //   std::invalid_argument before anything changes.
 // - Same config (seed) and same frames give identical samples, whatever `threads` is.
-// - Not thread-safe: one thread drives a Pipeline.
+// - normals() and makeCloud() take ids of live samples (outputSamples(), FrameResult::new_samples of the last frame, ...);
+//   any other id (evicted, from an earlier scan-mode frame, never issued) throws std::invalid_argument.
+// - Not thread-safe: one thread drives a Pipeline. A moved-from Pipeline may only be assigned to or destroyed.
 #pragma once
 
 #include <array>
@@ -118,6 +120,8 @@ class Pipeline {
   void replaceMap(Hierarchy &&map, std::uint32_t next_frame);
 
  private:
+  void requireLiveIds(const std::vector<SampleId> &ids, const char *what) const;
+
   OutputResolution resolution_;
   HpdsConfig config_;
   int output_level_;

@@ -73,6 +73,23 @@ class PointBuffer {
  public:
   PointBuffer() = default;
   explicit PointBuffer(PointLayout layout, std::size_t n = 0) : layout_(std::move(layout)) { resize(n); }
+  PointBuffer(const PointBuffer &) = default;
+  PointBuffer &operator=(const PointBuffer &) = default;
+  /// The moved-from buffer is left empty and unorganised (no layout, 0 x 1), so width * height = size() holds.
+  PointBuffer(PointBuffer &&o) noexcept
+      : layout_(std::move(o.layout_)), data_(std::move(o.data_)), width_(o.width_), height_(o.height_) {
+    o.reset();
+  }
+  PointBuffer &operator=(PointBuffer &&o) noexcept {
+    if (this != &o) {
+      layout_ = std::move(o.layout_);
+      data_ = std::move(o.data_);
+      width_ = o.width_;
+      height_ = o.height_;
+      o.reset();
+    }
+    return *this;
+  }
 
   [[nodiscard]] const PointLayout &layout() const { return layout_; }
   [[nodiscard]] std::size_t size() const { return layout_.point_step ? data_.size() / layout_.point_step : 0; }
@@ -82,7 +99,8 @@ class PointBuffer {
   /// Sets the organisation; width*height must equal size().
   void setOrganization(std::uint32_t width, std::uint32_t height);
 
-  /// Resizes to n records (new bytes zeroed); organisation becomes n x 1.
+  /// Resizes to n records (new bytes zeroed); organisation becomes n x 1. A layout of point_step 0 holds no record:
+  /// the buffer stays 0 x 1.
   void resize(std::size_t n);
   void reserve(std::size_t n) { data_.reserve(n * layout_.point_step); }
   /// Appends one record copied from `record` (point_step bytes); organisation becomes size() x 1.
@@ -94,6 +112,13 @@ class PointBuffer {
   [[nodiscard]] const std::vector<std::uint8_t> &bytes() const { return data_; }
 
  private:
+  void reset() noexcept {
+    layout_ = PointLayout{};
+    data_.clear();
+    width_ = 0;
+    height_ = 1;
+  }
+
   PointLayout layout_;
   std::vector<std::uint8_t> data_;
   std::uint32_t width_ = 0;

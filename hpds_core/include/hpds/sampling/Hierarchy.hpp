@@ -14,7 +14,8 @@
 // - Samples keep a copy of their input record (the bytes of every input field), the frame index that contributed
 //   them and the direction from sample to that frame's viewpoint (for normal orientation; 4 bytes, ViewDirection).
 // - Sample ids are stable until the sample is evicted; evicted ids are reused by later insertions.
-// - Not thread-safe for mutation; const queries may run concurrently.
+// - Not thread-safe for mutation; const queries may run concurrently. A moved-from Hierarchy may only be assigned to
+//   or destroyed.
 #pragma once
 
 #include <algorithm>
