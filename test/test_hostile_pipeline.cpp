@@ -174,6 +174,20 @@ TEST(HostilePipeline, AllPointsAtOneSpotAndAtTheOrigin) {
     const PointBuffer out = p.makeCloud(p.outputSamples(), false);
     for (std::size_t i = 0; i < out.size(); ++i) EXPECT_TRUE(std::isnan(readAsDouble(out.record(i), *out.layout().find("normal_x"))));
   }
+  // Points exactly on one line: every neighbourhood is that line, which pins no normal (found: 702 of 861 samples got
+  // an arbitrary one, with curvature 0).
+  {
+    HpdsConfig c;
+    c.normals.enabled = true;
+    Pipeline line(c);
+    std::vector<std::array<double, 3>> pts;
+    for (int i = 0; i < 2000; ++i) pts.push_back({0.01 * i, 2.0, 0.5});
+    line.addFrame(frameOf(typedCloud(FieldType::Float64, pts)));
+    const PointBuffer out = line.makeCloud(line.outputSamples(), false);
+    ASSERT_GT(out.size(), 100u);
+    for (std::size_t i = 0; i < out.size(); ++i)
+      ASSERT_TRUE(std::isnan(readAsDouble(out.record(i), *out.layout().find("normal_x")))) << "sample " << i;
+  }
   Pipeline p(HpdsConfig{});
   const FrameResult r = p.addFrame(frameOf(typedCloud(FieldType::Float32, std::vector<std::array<double, 3>>(5000, {3, -2, 1}))));
   EXPECT_EQ(r.counters.accepted, 1u);

@@ -58,6 +58,10 @@ SampleNormal invalidNormal() {
 
 SampleNormal unorientedNormal(const LocalPca &pca) {
   if (!pca.valid) return invalidNormal();
+  // Points exactly on one line leave the normal's direction about the line undetermined: no normal, rather than an
+  // arbitrary one. The closed-form solver puts such a line's middle eigenvalue at ~4e-9 of the largest; a real scan
+  // line's range noise keeps it orders of magnitude above 1e-7 (a width of 3e-4 of its length).
+  if (!(pca.l1 > 1e-7 * pca.l2)) return invalidNormal();
   return SampleNormal{{static_cast<float>(pca.normal[0]), static_cast<float>(pca.normal[1]),
                        static_cast<float>(pca.normal[2])},
                       static_cast<float>(pca.surfaceVariation()), true};
