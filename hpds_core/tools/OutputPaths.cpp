@@ -52,14 +52,6 @@ std::optional<Identity> identify(const std::string &given) {
   return std::nullopt;
 }
 
-void requireWritableFolder(const std::string &flag, const std::string &path, const std::string &folder) {
-  struct stat st {};
-  if (::stat(folder.c_str(), &st) != 0) refuse(flag, path, "is in folder " + inQuotes(folder) + ", which does not exist");
-  if (!S_ISDIR(st.st_mode)) refuse(flag, path, "is in " + inQuotes(folder) + ", which is not a folder");
-  if (::access(folder.c_str(), W_OK | X_OK) != 0)
-    refuse(flag, path, "is in folder " + inQuotes(folder) + ", which is not writable");
-}
-
 void checkExtension(const OutputPath &o) {
   const std::string ext = lowerExtension(o.path);
   if (!o.extensions.empty()) {
@@ -93,7 +85,7 @@ void checkPaths(const std::vector<InputPath> &inputs, const std::vector<OutputPa
     if (!exists || S_ISREG(st.st_mode)) {
       checkExtension(o);
       // The folder the file lands in: a symbolic link's target's (AtomicFile follows links, even a dangling one).
-      requireWritableFolder(o.flag, o.path, folderOf(followLinks(o.path)));
+      if (const std::string why = folderProblem(o.path); !why.empty()) refuse(o.flag, o.path, why);
       if (exists && ::access(o.path.c_str(), W_OK) != 0)
         refuse(o.flag, o.path, "exists and is read-only; hpds does not replace files it may not write");
     }

@@ -218,6 +218,15 @@ void AtomicFile::commit() {
   }
 }
 
+std::string folderProblem(const std::string &path) {
+  const std::string folder = folderOf(followLinks(path));
+  struct stat st {};
+  if (::stat(folder.c_str(), &st) != 0) return "is in folder '" + folder + "', which does not exist";
+  if (!S_ISDIR(st.st_mode)) return "is in '" + folder + "', which is not a folder";
+  if (::access(folder.c_str(), W_OK | X_OK) != 0) return "is in folder '" + folder + "', which is not writable";
+  return {};
+}
+
 void writeFileAtomically(const std::string &target, std::string_view bytes) {
   AtomicFile file(target);
   file.write(bytes);

@@ -6,8 +6,6 @@
 #include <sstream>
 #include <system_error>
 
-#include <unistd.h>
-
 #include "hpds/io/AtomicFile.hpp"
 #include "hpds/io/HierarchyFile.hpp"
 #include "hpds/util/ParallelFor.hpp"
@@ -149,17 +147,10 @@ bool HpdsServer::logAllowed(const std::string &key) {
 
 void HpdsServer::requireMapFolder() const {
   // Found saving into a missing folder: the error came at shutdown, after all the mapping.
-  const std::string target = hpds::followLinks(config_.ros.map_file);
-  const std::filesystem::path parent = std::filesystem::path(target).parent_path();
-  const std::string folder = parent.empty() ? std::string(".") : parent.string();
-  std::error_code ec;
-  const std::string param = "parameter " + pnh_.getNamespace() + "/ros/map_file: '" + config_.ros.map_file + "'";
-  if (!std::filesystem::is_directory(folder, ec))
-    throw std::invalid_argument(param + " is in folder '" + folder + "', which does not exist (ros/save_map_on_shutdown "
-                                "would fail at the end of the run)");
-  if (::access(folder.c_str(), W_OK | X_OK) != 0)
-    throw std::invalid_argument(param + " is in folder '" + folder + "', which is not writable (ros/save_map_on_shutdown "
-                                "would fail at the end of the run)");
+  const std::string why = hpds::folderProblem(config_.ros.map_file);
+  if (!why.empty())
+    throw std::invalid_argument("parameter " + pnh_.getNamespace() + "/ros/map_file: '" + config_.ros.map_file + "' " +
+                                why + " (ros/save_map_on_shutdown would fail at the end of the run)");
 }
 
 void HpdsServer::loadMapOnStart() {

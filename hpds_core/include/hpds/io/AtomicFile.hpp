@@ -68,6 +68,11 @@ void writeFileAtomically(const std::string &target, std::string_view bytes);
 /// The file a write to `path` replaces: `path` with symbolic links followed (the last one kept when it dangles).
 [[nodiscard]] std::string followLinks(const std::string &path);
 
+/// Why an AtomicFile for `path` could not be created in its folder (links followed: the folder of followLinks), as
+/// "is in folder 'F', which does not exist", "is in 'F', which is not a folder" or "is in folder 'F', which is not
+/// writable"; empty when the folder takes it. For programs that check outputs before the work.
+[[nodiscard]] std::string folderProblem(const std::string &path);
+
 /// Removes the hpds temporaries in `folder` whose writer is gone (see contract) and returns how many. AtomicFile
 /// calls it once per folder and process; a long-running program may call it again.
 std::size_t removeStaleTemporaries(const std::string &folder);
