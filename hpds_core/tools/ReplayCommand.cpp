@@ -231,14 +231,10 @@ int runReplay(const ReplayArgs &a) {
   report.frames = processor.stats().processed;
   report.totals = pipeline.totals();
   report.hierarchy_bytes = pipeline.hierarchy().memUsage();
+  // The report of `hpds sample`, plus the message counts only a replay has.
+  if (!a.stats.empty()) report.extra.emplace_back("messages", messagesJson(s, wrong_type));
   std::optional<AtomicFile> stats_file;
-  if (!a.stats.empty()) {
-    // The report of `hpds sample`, plus the message counts only a replay has.
-    report.extra.emplace_back("messages", messagesJson(s, wrong_type));
-    stats_file.emplace(a.stats);
-    stats_file->write(toJson(report));
-    stats_file->finish();
-  }
+  stageJsonFile(stats_file, a.stats, report);
   if (bag_file) bag_file->commit();
   if (ply_file) ply_file->commit();
   if (stats_file) stats_file->commit();

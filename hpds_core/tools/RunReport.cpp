@@ -23,6 +23,13 @@ std::string roundingWarning(const PointBuffer &cloud, double output_radius) {
   return out.str();
 }
 
+void stageJsonFile(std::optional<AtomicFile> &file, const std::string &path, const RunReport &report) {
+  if (path.empty()) return;
+  file.emplace(path);
+  file->write(toJson(report));
+  file->finish();
+}
+
 RunReport reportFor(const std::string &command, const Pipeline &pipeline) {
   RunReport r;
   r.command = command;

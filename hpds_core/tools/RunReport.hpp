@@ -2,9 +2,11 @@
 #pragma once
 
 #include <cstdint>
+#include <optional>
 #include <string>
 #include <vector>
 
+#include "hpds/io/AtomicFile.hpp"
 #include "hpds/pipeline/OutputCloud.hpp"
 #include "hpds/pipeline/Pipeline.hpp"
 
@@ -45,6 +47,10 @@ struct RunReport {
 /// A warning line (empty when there is nothing to say) when `cloud`'s float32 x y z round its positions by more than
 /// 1 % of the output radius: georeferenced coordinates, which want output.float64_xyz.
 [[nodiscard]] std::string roundingWarning(const PointBuffer &cloud, double output_radius);
+
+/// With `path` set: `file` holds the report's JSON (toJson) written and synced under its temporary name, to be
+/// committed with the run's other outputs once all are written; with `path` empty, `file` stays empty.
+void stageJsonFile(std::optional<AtomicFile> &file, const std::string &path, const RunReport &report);
 
 /// JSON text of the report (per-level counts, skipped/dropped counts, "seconds": {read, insert, normals, write},
 /// peak memory).

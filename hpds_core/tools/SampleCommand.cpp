@@ -188,11 +188,7 @@ int runSample(const SampleArgs &a) {
   }
   report.seconds.write = since(t0);
   std::optional<AtomicFile> stats_file;
-  if (!a.stats.empty()) {
-    stats_file.emplace(a.stats);
-    stats_file->write(toJson(report));
-    stats_file->finish();
-  }
+  stageJsonFile(stats_file, a.stats, report);
   ply_file.commit();
   if (map_file) map_file->commit();
   if (stats_file) stats_file->commit();

@@ -344,6 +344,11 @@ void Pipeline::requireLiveIds(const std::vector<SampleId> &ids, const char *what
 std::vector<SampleNormal> Pipeline::normals(const std::vector<SampleId> &ids,
                                              std::vector<LocalPca> *neighbourhoods) const {
   requireLiveIds(ids, "normals");
+  return normalsOfLive(ids, neighbourhoods);
+}
+
+std::vector<SampleNormal> Pipeline::normalsOfLive(const std::vector<SampleId> &ids,
+                                                  std::vector<LocalPca> *neighbourhoods) const {
   const NormalParams params = normalParamsFor(config_, output_level_);
   if (fine_level_ < 0) return estimateNormals(hierarchy_, ids, params, neighbourhoods);
   if (neighbourhoods) neighbourhoods->assign(ids.size(), LocalPca{});
@@ -382,7 +387,7 @@ PointBuffer Pipeline::makeCloud(const std::vector<SampleId> &ids, bool with_fram
   const auto t0 = std::chrono::steady_clock::now();
   const bool with_covariances = config_.normals.covariances;
   std::vector<LocalPca> neighbourhoods;
-  const std::vector<SampleNormal> normals = this->normals(ids, with_covariances ? &neighbourhoods : nullptr);
+  const std::vector<SampleNormal> normals = normalsOfLive(ids, with_covariances ? &neighbourhoods : nullptr);
   std::vector<SampleCovariance> covariances;
   if (with_covariances)
     covariances = estimateCovariances(hierarchy_, ids, output_level_, normals, neighbourhoods, config_);

@@ -121,6 +121,9 @@ class Pipeline {
 
  private:
   void requireLiveIds(const std::vector<SampleId> &ids, const char *what) const;
+  /// normals() for ids already checked by requireLiveIds.
+  [[nodiscard]] std::vector<SampleNormal> normalsOfLive(const std::vector<SampleId> &ids,
+                                                        std::vector<LocalPca> *neighbourhoods) const;
 
   OutputResolution resolution_;
   HpdsConfig config_;
