@@ -251,21 +251,40 @@ TEST(CellCentroids, BoxHoldsEveryKeptPoint) {
   for (double v : box) EXPECT_TRUE(std::isnan(v));
 }
 
-TEST(RefinedNormals, AveragingGridsSortedAheadDoNotChangeTheNormals) {
-  // The pipeline sorts the averaging points for the first search radii while a frame is inserted, as many as are
-  // ready when the insertion ends; the rest are sorted over the same box when needed. However many were ready, and
-  // whatever the thread count, the normals and their neighbourhoods are the same bits.
-  std::mt19937_64 rng(8);
+/// 20 000 points: a floor with sparse scan lines far out (footprints grow over several radii) and a wall.
+std::vector<double> floorLinesAndWall(std::uint64_t seed) {
+  std::mt19937_64 rng(seed);
   std::uniform_real_distribution<double> u(0.0, 4.0);
   std::normal_distribution<double> noise(0.0, 0.01);
   std::vector<double> xyz;
   for (int i = 0; i < 20000; ++i) {
     const double x = u(rng), y = u(rng);
-    // A floor with sparse scan lines far out (footprints grow over several radii) and a wall.
     if (i % 5 == 0) xyz.insert(xyz.end(), {4.0 + 0.5 * x, std::floor(y * 2.0) * 0.7, noise(rng)});
     else if (i % 5 == 1) xyz.insert(xyz.end(), {x, 4.0 + noise(rng), y});
     else xyz.insert(xyz.end(), {x, y, noise(rng)});
   }
+  return xyz;
+}
+
+/// The refined search grids of (h, p) over `centroids` in `box`, the first `built` radii sorted ahead.
+AveragingGrids averagingGrids(const Hierarchy &h, const NormalParams &p, const std::vector<double> &centroids,
+                              const double box[6], std::size_t built) {
+  AveragingGrids g;
+  g.radii = refinedSearchRadii(h, p);
+  std::copy(box, box + 3, g.lo);
+  std::copy(box + 3, box + 6, g.hi);
+  g.by_radius.resize(g.radii.size());
+  const PointSet points{centroids.data(), nullptr, centroids.size() / 3};
+  for (std::size_t r = 0; r < std::min(built, g.radii.size()); ++r)
+    g.by_radius[r] = std::make_unique<BallGridPoints>(points, g.radii[r], g.lo, g.hi);
+  return g;
+}
+
+TEST(RefinedNormals, AveragingGridsSortedAheadDoNotChangeTheNormals) {
+  // The pipeline sorts the averaging points for the first search radii while a frame is inserted, as many as are
+  // ready when the insertion ends; the rest are sorted over the same box when needed. However many were ready, and
+  // whatever the thread count, the normals and their neighbourhoods are the same bits.
+  const std::vector<double> xyz = floorLinesAndWall(8);
   const Hierarchy h = build(xyz, 4, 3);
   const std::vector<SampleId> ids = h.samplesUpTo(3);
   NormalParams p = params(3, 10, 0.0);
@@ -275,17 +294,7 @@ TEST(RefinedNormals, AveragingGridsSortedAheadDoNotChangeTheNormals) {
   std::iota(all.begin(), all.end(), 0u);
   double box[6];
   const std::vector<double> centroids = cellCentroids(xyz.data(), all.data(), all.size(), h.edge(3) / 4.0, box);
-  auto gridsWith = [&](std::size_t built) {
-    AveragingGrids g;
-    g.radii = refinedSearchRadii(h, p);
-    std::copy(box, box + 3, g.lo);
-    std::copy(box + 3, box + 6, g.hi);
-    g.by_radius.resize(g.radii.size());
-    const PointSet points{centroids.data(), nullptr, centroids.size() / 3};
-    for (std::size_t r = 0; r < std::min(built, g.radii.size()); ++r)
-      g.by_radius[r] = std::make_unique<BallGridPoints>(points, g.radii[r], g.lo, g.hi);
-    return g;
-  };
+  auto gridsWith = [&](std::size_t built) { return averagingGrids(h, p, centroids, box, built); };
   std::vector<LocalPca> ref_pca(ids.size());
   const AveragingGrids none = gridsWith(0);
   ASSERT_GE(none.radii.size(), 3u);
@@ -315,16 +324,7 @@ TEST(RefinedNormals, NeighbourhoodsEstimatedInPiecesWithoutTheHierarchyAreTheSam
   // The pipeline's second thread estimates the neighbourhoods of samples as the insertion accepts them, in pieces,
   // from the frame's points (no hierarchy yet), sorting the grids it needs into the shared AveragingGrids; the
   // normals then take those as known and estimate the rest. Whatever the split, the same bits as estimating all.
-  std::mt19937_64 rng(11);
-  std::uniform_real_distribution<double> u(0.0, 4.0);
-  std::normal_distribution<double> noise(0.0, 0.01);
-  std::vector<double> xyz;
-  for (int i = 0; i < 20000; ++i) {
-    const double x = u(rng), y = u(rng);
-    if (i % 5 == 0) xyz.insert(xyz.end(), {4.0 + 0.5 * x, std::floor(y * 2.0) * 0.7, noise(rng)});  // sparse lines
-    else if (i % 5 == 1) xyz.insert(xyz.end(), {x, 4.0 + noise(rng), y});
-    else xyz.insert(xyz.end(), {x, y, noise(rng)});
-  }
+  std::vector<double> xyz = floorLinesAndWall(11);
   for (int i = 0; i < 4; ++i) xyz.insert(xyz.end(), {20.0 + 10.0 * i, 20.0, 1.0});  // alone: no normal
   const Hierarchy h = build(xyz, 4, 3);
   const std::vector<SampleId> ids = h.samplesUpTo(3);
@@ -335,15 +335,7 @@ TEST(RefinedNormals, NeighbourhoodsEstimatedInPiecesWithoutTheHierarchyAreTheSam
   std::iota(all.begin(), all.end(), 0u);
   double box[6];
   const std::vector<double> centroids = cellCentroids(xyz.data(), all.data(), all.size(), h.edge(3) / 4.0, box);
-  auto emptyGrids = [&] {
-    AveragingGrids g;
-    g.radii = refinedSearchRadii(h, p);
-    std::copy(box, box + 3, g.lo);
-    std::copy(box + 3, box + 6, g.hi);
-    g.by_radius.resize(g.radii.size());
-    return g;
-  };
-  const AveragingGrids none = emptyGrids();
+  const AveragingGrids none = averagingGrids(h, p, centroids, box, 0);
   std::vector<LocalPca> ref_pca(ids.size());
   const std::vector<SampleNormal> ref = estimateNormalsRefined(h, ids, p, &centroids, &ref_pca, &none);
   std::size_t valid = 0;
@@ -361,13 +353,12 @@ TEST(RefinedNormals, NeighbourhoodsEstimatedInPiecesWithoutTheHierarchyAreTheSam
   // Pieces of 1, 7, 300 and the rest of the first two thirds, in a shuffled order; the last third left unknown.
   std::vector<std::uint32_t> order(ids.size());
   std::iota(order.begin(), order.end(), 0u);
+  std::mt19937_64 rng(12);
   std::shuffle(order.begin(), order.end(), rng);
   const std::size_t known_count = ids.size() * 2 / 3;
   std::vector<std::uint32_t> piece_points(known_count);
   for (std::size_t t = 0; t < known_count; ++t) piece_points[t] = point_of[order[t]];
-  AveragingGrids grids = emptyGrids();
-  grids.by_radius[0] = std::make_unique<BallGridPoints>(PointSet{centroids.data(), nullptr, centroids.size() / 3},
-                                                        grids.radii[0], grids.lo, grids.hi);
+  AveragingGrids grids = averagingGrids(h, p, centroids, box, 1);
   std::vector<LocalPca> piece_pca(known_count);
   std::vector<std::uint8_t> piece_have(known_count, 7);
   std::size_t done = 0;
