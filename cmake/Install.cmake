@@ -20,6 +20,11 @@ if(NOT HPDS_WITH_PCL)
 endif()
 install(DIRECTORY hpds_core/include/hpds DESTINATION ${CMAKE_INSTALL_INCLUDEDIR} ${HPDS_HEADER_EXCLUDES})
 install(EXPORT hpdsTargets NAMESPACE hpds:: DESTINATION ${HPDS_CMAKE_DIR})
+if(BUILD_SHARED_LIBS)
+  set(HPDS_STATIC_LIBS FALSE)
+else()
+  set(HPDS_STATIC_LIBS TRUE)
+endif()
 configure_package_config_file(cmake/hpdsConfig.cmake.in ${CMAKE_CURRENT_BINARY_DIR}/hpdsConfig.cmake
   INSTALL_DESTINATION ${HPDS_CMAKE_DIR})
 write_basic_package_version_file(${CMAKE_CURRENT_BINARY_DIR}/hpdsConfigVersion.cmake

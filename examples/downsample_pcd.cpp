@@ -1,6 +1,7 @@
 // Downsamples a PCD file with hpds's two one-call APIs and writes the samples, with normals, to a new PCD.
 //   downsample_pcd IN.pcd OUT.pcd [CONFIG.yaml]
 // The PCL call keeps every field of the input points; the plain call gives indices into the input. Both must agree.
+#include <pcl/PCLPointCloud2.h>
 #include <pcl/common/io.h>
 #include <pcl/io/pcd_io.h>
 #include <pcl/point_types.h>
@@ -28,8 +29,24 @@ int main(int argc, char **argv) {
   try {
     const hpds::HpdsConfig config = argc == 4 ? hpds::loadConfig(argv[3]) : hpds::HpdsConfig{};
 
+    // Files without intensity are read as x y z (intensity 0): loading them straight into PointXYZI works too, but
+    // PCL then warns about the missing field on every file.
+    pcl::PCLPointCloud2 header;
+    pcl::PCDReader reader;
+    if (reader.readHeader(in.string(), header) != 0) {
+      std::cerr << "downsample_pcd: cannot read " << in << "\n";
+      return 1;
+    }
     pcl::PointCloud<pcl::PointXYZI> cloud;
-    if (pcl::io::loadPCDFile(in.string(), cloud) != 0) {
+    int read = 0;
+    if (pcl::getFieldIndex(header, "intensity") >= 0) {
+      read = reader.read(in.string(), cloud);
+    } else {
+      pcl::PointCloud<pcl::PointXYZ> xyz_only;
+      read = reader.read(in.string(), xyz_only);
+      pcl::copyPointCloud(xyz_only, cloud);
+    }
+    if (read != 0) {
       std::cerr << "downsample_pcd: cannot read " << in << "\n";
       return 1;
     }

@@ -76,7 +76,18 @@ fi
 read -r points _ _ samples _ < "$work/run.log"
 [ -s "$work/out.pcd" ] || fail "no output PCD"
 [ "$samples" -gt 0 ] && [ "$samples" -lt "$points" ] || fail "expected 0 < samples < points, got $samples of $points"
+# A file without intensity is read quietly (PCL warns about a missing field when asked to fill one).
+xyz_only=$src/../shared/data/lidar/velodyne_vlp32.pcd
+if [ -f "$xyz_only" ]; then
+  "$work/example/downsample_pcd" "$xyz_only" "$work/out_xyz.pcd" > /dev/null 2> "$work/xyz_only.err" ||
+    fail "the example failed on $xyz_only: $(cat "$work/xyz_only.err")"
+  if grep -q "Failed to find match" "$work/xyz_only.err"; then fail "PCL warned on an x y z file: $(cat "$work/xyz_only.err")"; fi
+fi
 # The output must not be the input: the example refuses it.
 if "$work/example/downsample_pcd" "$work/out.pcd" "$work/out.pcd" 2> /dev/null; then fail "the example overwrote its input"; fi
+
+# A project that asks for hpds::core alone: C++ only (no C for VTK's MPI), and PCL is not looked up for it.
+"$src/test/package/use_core_only.sh" "$src" "$prefix" "$work/core_example" "${example_flags[@]}" ||
+  fail "the core-only example failed against the prefix"
 echo "install_and_use: OK ($samples samples of $points points)"
 rm -rf "$work"
