@@ -2,8 +2,14 @@
 // (the node's queue holds them all); every ~output must arrive in sending order and equal, byte for byte, what one
 // FrameProcessor on one thread makes of the same messages in the same order.
 //
+// A drop logged by one worker counts the drops of both: a burst of malformed messages, one of each kind (each kind
+// has its own log throttle), split between the workers, ends in a line that counts (nearly) all of them.
+//
 // Parameters: ~target (the node), ~input (its input topic), ~frames (how many to send).
 #include <gtest/gtest.h>
+#include <rosgraph_msgs/Log.h>
+
+#include <regex>
 
 #include "RosTestUtil.hpp"
 #include "hpds/eval/SyntheticLidar.hpp"
@@ -67,6 +73,52 @@ TEST(HpdsNodeWorkers, FramesInParallelGiveTheSingleWorkerOutputInOrder) {
     EXPECT_EQ(got[i]->width, r.output.width);
     EXPECT_TRUE(got[i]->data == r.output.data) << "~output differs from the single-worker reference";
   }
+}
+
+TEST(HpdsNodeWorkers, DropLogsCountTheDropsOfEveryWorker) {
+  ros::NodeHandle nh, pnh("~");
+  const std::string target = pnh.param<std::string>("target", "/hpds_workers");
+  const std::string input = pnh.param<std::string>("input", "/workers_points");
+  Collector<rosgraph_msgs::Log> rosout(nh, "/rosout");
+  hpds_test::DiagnosticsReader diag(nh, target.substr(1));
+  ros::Publisher pub = nh.advertise<PointCloud2>(input, 16);
+  ASSERT_TRUE(hpds_test::waitFor(
+      [&] { return rosout.connected() && pub.getNumSubscribers() > 0 && diag.updates() > 0; }, 30.0));
+  const double malformed_before = diag.value("dropped malformed");
+
+  hpds::SyntheticLidarConfig lc;
+  lc.beams = 8;
+  lc.azimuth_steps = 200;
+  const PointCloud2 good = hpds_test::toMsg(hpds::SyntheticLidar(lc).frame(0).frame.points, "lidar", ros::Time(900, 0));
+  std::vector<PointCloud2> bad(6, good);
+  bad[0].is_bigendian = true;
+  bad[1].fields[0].datatype = 0;
+  bad[2].fields[1].count = 0;
+  bad[3].fields[2].offset = bad[3].point_step;
+  bad[4].row_step = 7;
+  bad[5].data.resize(bad[5].data.size() - 1);
+  for (const PointCloud2 &m : bad) pub.publish(m);
+  ASSERT_TRUE(hpds_test::waitFor([&] { return diag.value("dropped malformed") == malformed_before + 6.0; }, 30.0))
+      << "dropped malformed: " << diag.value("dropped malformed");
+
+  // "(<reason>, N malformed so far)": with two workers at most one other drop is in flight when a line is written,
+  // so the last line counts at least all but one. A worker counting only its own would stop near half.
+  const std::regex so_far(R"(, ([0-9]+) malformed so far\))");
+  std::size_t lines = 0, most = 0;
+  EXPECT_TRUE(hpds_test::waitFor(
+      [&] {
+        lines = most = 0;
+        for (const auto &m : rosout.messages()) {
+          std::smatch match;
+          if (m->name != target || !std::regex_search(m->msg, match, so_far)) continue;
+          ++lines;
+          most = std::max<std::size_t>(most, std::stoul(match[1]));
+        }
+        return lines >= 6;
+      },
+      10.0))
+      << lines << " malformed-drop lines logged";
+  EXPECT_GE(most + 1, std::size_t(malformed_before) + 6) << "largest count logged: " << most;
 }
 
 }  // namespace

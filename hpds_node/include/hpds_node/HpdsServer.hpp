@@ -83,6 +83,9 @@ class HpdsServer {
   void publish(ProcessedFrame &frame);
   // ServerDiagnostics.cpp
   void takeSnapshot(std::size_t worker, double frame_seconds);
+  /// The node's counts so far, for a log line written on `worker`: its own processor's live counts plus the other
+  /// workers' as of their last frame (each worker counts only the frames it handled).
+  [[nodiscard]] ProcessorStats statsSoFar(std::size_t worker) const;
   /// Feeds a processed frame's time to keep_up_ and logs its one warning, if any.
   void checkKeepUp(double frame_seconds);
   void diagnose(diagnostic_updater::DiagnosticStatusWrapper &status);
@@ -137,7 +140,7 @@ class HpdsServer {
     std::size_t samples_total = 0;
     double seconds_max_window = 0.0;  // reset by each diagnostics report
   };
-  std::mutex snapshot_mutex_;
+  mutable std::mutex snapshot_mutex_;
   Snapshot snapshot_;
   // Diagnostics window (diagnostics callback only).
   ros::WallTime window_start_;

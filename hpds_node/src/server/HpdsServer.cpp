@@ -274,7 +274,7 @@ void HpdsServer::onInternalError(std::size_t worker, const std::string &what) {
   // A bug or an exhausted resource must not take the node down with it; the frame is lost, counted and said so.
   processors_[worker]->countDrop(DropReason::InternalError);
   ROS_ERROR_STREAM_THROTTLE_NAMED(5.0, "hpds", "hpds: frame dropped by an internal error ("
-                                                   << processors_[worker]->stats().dropped[int(DropReason::InternalError)]
+                                                   << statsSoFar(worker).dropped[int(DropReason::InternalError)]
                                                    << " so far, counted as internal_error): " << what);
   takeSnapshot(worker, 0.0);
 }
@@ -315,7 +315,7 @@ bool HpdsServer::waitForPose(const std::string &target, const std_msgs::Header &
 void HpdsServer::handle(const sensor_msgs::PointCloud2::ConstPtr &msg, std::size_t worker,
                         OrderedWorkerPool::Turns &turns) {
   FrameProcessor &processor = *processors_[worker];
-  const auto count = [&](DropReason r) { return processor.stats().dropped[int(r)]; };
+  const auto count = [&](DropReason r) { return statsSoFar(worker).dropped[int(r)]; };
   const OutputRequest wants = subscribedOutputs();
   double seconds = 0.0;
   // 1. Validate before any work.
@@ -324,7 +324,7 @@ void HpdsServer::handle(const sensor_msgs::PointCloud2::ConstPtr &msg, std::size
   if (error != CloudError::None) {
     if (logAllowed(std::string("malformed ") + toString(error)))
       ROS_ERROR_STREAM_NAMED("hpds", "hpds: dropped malformed PointCloud2 ("
-                                         << toString(error) << ", " << processor.stats().malformedTotal()
+                                         << toString(error) << ", " << statsSoFar(worker).malformedTotal()
                                          << " malformed so far): " << why);
   } else if (config_.hpds.mode == hpds::Mode::Scan && !wants.any()) {
     // 2. Nobody listening: scan mode has nothing to keep (map mode still has to grow the map).

@@ -27,6 +27,14 @@ void HpdsServer::takeSnapshot(std::size_t worker, double frame_seconds) {
   snapshot_.seconds_max_window = std::max(snapshot_.seconds_max_window, frame_seconds);
 }
 
+ProcessorStats HpdsServer::statsSoFar(std::size_t worker) const {
+  ProcessorStats total = processors_[worker]->stats();
+  std::lock_guard<std::mutex> lock(snapshot_mutex_);
+  for (std::size_t w = 0; w < snapshot_.stats.size(); ++w)
+    if (w != worker) total += snapshot_.stats[w];
+  return total;
+}
+
 void HpdsServer::diagnose(diagnostic_updater::DiagnosticStatusWrapper &status) {
   Snapshot s;
   {
