@@ -271,10 +271,12 @@ TEST(BadInput, PcdAsciiAndCompressedBodies) {
         {"truncated"});
   check("lzf_implausible.pcd", xyzPcdHeader(100000, "binary_compressed") + u32le(1) + u32le(1200000) + "x",
         {"corrupt"});
-  // Sizes consistent but the stream itself is not valid LZF: PCL's decoder must report it, not overrun.
+  // Sizes consistent but the stream itself is not valid LZF (a back reference before the start): named as such, not
+  // as PCL's bare "error -1", and no overrun.
   std::string bad_stream(packed.size(), '\xff');
   check("lzf_bad_stream.pcd",
-        head + u32le(std::uint32_t(bad_stream.size())) + u32le(std::uint32_t(raw.size())) + bad_stream, {"PCL"});
+        head + u32le(std::uint32_t(bad_stream.size())) + u32le(std::uint32_t(raw.size())) + bad_stream,
+        {"corrupt binary_compressed data", "LZF stream", "does not decode"});
 }
 
 // fuzz_pcd found x with COUNT 2 accepted by the reader (the pipeline sampled its first element and the PLY written

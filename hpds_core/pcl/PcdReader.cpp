@@ -1,4 +1,6 @@
 // PCD files: the header and body checks that make PCL's PCDReader safe to run (see ReaderSupport.hpp), then PCL.
+#include <pcl/io/lzf.h>
+
 #include <array>
 #include <cerrno>
 #include <cstring>
@@ -326,13 +328,35 @@ void checkPcdBody(const std::string &path, const FileBytes &file, const PcdHeade
   }
 }
 
+// Called only after PCL refused a binary_compressed file whose sizes checkPcdBody accepted: PCL then reports just
+// "error -1", and the cause left is the LZF stream itself. Decoding it here names that cause.
+void checkLzfStream(const std::string &path, const PcdHeader &h) {
+  std::ifstream in(path, std::ios::binary);
+  in.seekg(static_cast<std::streamoff>(h.data_offset));
+  std::uint32_t sizes[2] = {0, 0};
+  if (!in.read(reinterpret_cast<char *>(sizes), sizeof sizes)) return;
+  std::vector<char> packed(sizes[0]), unpacked(sizes[1]);
+  if (!in.read(packed.data(), static_cast<std::streamsize>(packed.size()))) return;
+  const unsigned got = packed.empty() ? 0u : pcl::lzfDecompress(packed.data(), sizes[0], unpacked.data(), sizes[1]);
+  if (got != sizes[1])
+    fail(path, "corrupt binary_compressed data: its LZF stream of " + std::to_string(sizes[0]) +
+                   " bytes does not decode to the " + std::to_string(sizes[1]) + " bytes of the header's " +
+                   std::to_string(h.points) + " points");
+}
+
 }  // namespace
 
 PointBuffer readPcd(const std::string &path) {
   const FileBytes file = openForReading(path);
   const PcdHeader header = parsePcdHeader(path, file);
   checkPcdBody(path, file, header);
-  return readWithPcl(path, PclFormat::Pcd);
+  if (header.data != PcdData::BinaryCompressed) return readWithPcl(path, PclFormat::Pcd);
+  try {
+    return readWithPcl(path, PclFormat::Pcd);
+  } catch (const std::runtime_error &) {
+    checkLzfStream(path, header);
+    throw;
+  }
 }
 
 }  // namespace hpds::pcl_detail
