@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <map>
 #include <numeric>
 #include <random>
@@ -136,6 +137,22 @@ TEST(ViewDirection, RoundTripsExactlyAndKeepsTheDirection) {
   const std::array<float, 3> zero = decodeViewDirection(encodeViewDirection(0.0, 0.0, 0.0));
   EXPECT_EQ(zero, (std::array<float, 3>{0.0f, 0.0f, 0.0f}));
   EXPECT_EQ(encodeViewDirection(NAN, 1.0, 0.0), encodeViewDirection(0.0, 0.0, 0.0));
+
+  // The fold's edge (one coordinate at +-32767, the lower hemisphere): two codes decode to one direction; both must
+  // give the same bits (a -0.0 there made a loaded map save back with different bytes), stable under re-encoding.
+  const auto bits = [](const std::array<float, 3> &d) {
+    std::array<std::uint32_t, 3> b;
+    std::memcpy(b.data(), d.data(), sizeof b);
+    return b;
+  };
+  for (int c = -32767; c <= 32767; ++c)
+    for (const std::uint32_t edge : {std::uint32_t(32767), std::uint32_t(std::uint16_t(-32767))})
+      for (const std::uint32_t code : {std::uint32_t(std::uint16_t(c)) | edge << 16, edge | std::uint32_t(std::uint16_t(c)) << 16}) {
+        const std::array<float, 3> d = decodeViewDirection(code);
+        const std::array<float, 3> again = decodeViewDirection(encodeViewDirection(d[0], d[1], d[2]));
+        ASSERT_EQ(bits(again), bits(d)) << "code " << std::hex << code;
+        for (const float v : d) ASSERT_FALSE(v == 0.0f && std::signbit(v)) << "-0.0 from code " << std::hex << code;
+      }
 }
 
 // ---------------------------------------------------------------- brute-force reference of the greedy rule

@@ -36,8 +36,10 @@ std::array<float, 3> decodeViewDirection(std::uint32_t code) {
     x = fx;
     y = fy;
   }
+  // "+ 0.0" turns -0.0 into +0.0: the fold gives a signed zero on its edge (|y| = 1 takes x's sign), which encodes
+  // back to the code of the other sign; without a signed zero both codes decode to the same bits.
   const double n = std::sqrt(x * x + y * y + z * z);
-  return {static_cast<float>(x / n), static_cast<float>(y / n), static_cast<float>(z / n)};
+  return {static_cast<float>(x / n + 0.0), static_cast<float>(y / n + 0.0), static_cast<float>(z / n + 0.0)};
 }
 
 }  // namespace hpds

@@ -4,7 +4,8 @@
 // - Only the direction is kept (normal orientation needs the sign of a dot product, not the distance): an
 //   octahedral map of the unit sphere, two int16 coordinates, worst-case angular error below 5e-4 rad (0.03 degrees).
 // - The zero vector (a sample at its viewpoint) has its own code and decodes to (0, 0, 0).
-// - Decoding then encoding returns the same code, so saved maps reload bit-identically.
+// - Decoding then encoding gives a code that decodes to the same bits (the same code, except on the fold's edge,
+//   where two codes decode to one direction), so saved maps reload and save again bit-identically.
 #pragma once
 
 #include <array>
