@@ -46,12 +46,17 @@ TEST(TileGrid, TileSizeMustBeAWholeMultipleOfTheCellSize) {
   EXPECT_EQ(TileGrid(hier(4.0, 8), 32.0).cellsPerTile(), 8);
   EXPECT_EQ(TileGrid(hier(0.3, 8), 0.9 * (1 + 1e-12)).cellsPerTile(), 3);
   EXPECT_DOUBLE_EQ(TileGrid(hier(0.3, 8), 0.9).tileSize(), 3 * 0.3);
-  for (double bad : {0.0, -4.0, 2.0, 6.0, 4.1, double(NAN), double(INFINITY), 4.0 * (1 << 21)}) {
+  for (double bad : {0.0, -4.0, 2.0, 6.0, 4.1, double(NAN), double(INFINITY), 4.0 * (1 << 21), 1e300, 1e-7}) {
     try {
       (void)TileGrid(hier(4.0, 8), bad);
       ADD_FAILURE() << "tile size " << bad << " accepted";
     } catch (const std::invalid_argument &e) {
-      EXPECT_NE(std::string(e.what()).find("tile size"), std::string::npos) << e.what();
+      const std::string what = e.what();
+      EXPECT_NE(what.find("tile size"), std::string::npos) << what;
+      // The size as given, in a few digits (not 301 of them, nor 0.000000 for 1e-7).
+      EXPECT_LT(what.size(), 200u) << what;
+      if (bad == 1e300) EXPECT_NE(what.find("got 1e+300 m"), std::string::npos) << what;
+      if (bad == 1e-7) EXPECT_NE(what.find("got 1e-07 m"), std::string::npos) << what;
     }
   }
   // The shipped defaults derive the cell from output.spacing (3.69504 m for 0.1 m): the error names valid sizes,

@@ -14,13 +14,8 @@
 namespace hpds::cli {
 
 std::string roundingWarning(const PointBuffer &cloud, double output_radius) {
-  const double rounding = positionRounding(cloud);
-  if (!(rounding > 0.01 * output_radius)) return {};
-  std::ostringstream out;
-  out << "hpds: warning: the output's float32 x y z round positions by up to " << rounding << " m (coordinates up to "
-      << std::ldexp(rounding, 24) << " m), more than 1 % of the output radius " << output_radius
-      << " m: samples may come out closer than it; set output.float64_xyz: true (or work in a local frame)";
-  return out.str();
+  const std::string w = positionRoundingWarning(positionRounding(cloud), output_radius, "output.float64_xyz: true");
+  return w.empty() ? w : "hpds: warning: " + w;
 }
 
 void stageJsonFile(std::optional<AtomicFile> &file, const std::string &path, const RunReport &report) {

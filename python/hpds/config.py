@@ -16,6 +16,8 @@ def _scalar(value, key):
     if isinstance(value, bool):
         return "true" if value else "false"
     if hasattr(value, "item") and not isinstance(value, (str, bytes)):  # NumPy scalars
+        if getattr(value, "size", 1) != 1:
+            raise TypeError("config: %s: expected one value, got an array of %d" % (key or "(document)", value.size))
         value = value.item()
         if isinstance(value, bool):
             return "true" if value else "false"
@@ -34,6 +36,8 @@ def _scalar(value, key):
 
 
 def _node(value, key, indent):
+    if type(value).__module__ == "numpy" and hasattr(value, "tolist"):
+        value = value.tolist()  # an array becomes a (nested) list, a NumPy scalar a Python one
     if isinstance(value, dict):
         if not value:
             return " {}\n"
@@ -44,6 +48,9 @@ def _node(value, key, indent):
             lines.append("%s%s:%s" % ("  " * indent, json.dumps(k), _node(v, key + "." + k if key else k, indent + 1)))
         return "".join(lines)
     if isinstance(value, (list, tuple)):
+        for v in value:
+            if isinstance(v, (list, tuple, dict)):
+                raise TypeError("config: %s: nested lists and maps are not config values" % (key or "(document)"))
         return " [" + ", ".join(_scalar(v, key) for v in value) + "]\n"
     return " " + _scalar(value, key) + "\n"
 

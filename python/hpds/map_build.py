@@ -12,12 +12,13 @@ process without Dask.
 import argparse
 import logging
 import os
+import signal
 import sys
 
 from . import _hpds
 from .config import to_yaml
 from .runners import BuildError, DaskRunner, SerialRunner
-from .tiled_build import build
+from .tiled_build import MANIFEST, build, remove_scratch_unless_building
 
 
 def parse_args(argv):
@@ -40,7 +41,12 @@ def parse_args(argv):
     lvl = s.add_mutually_exclusive_group()
     lvl.add_argument("--level", type=int, help="write levels 0..D (output.level)")
     lvl.add_argument("--spacing", type=float, help="[m] coarsest level with r_D <= S (output.spacing)")
-    s.add_argument("--normals", action="store_true", help="estimate PCA normals and curvature (normals.enabled)")
+    s.add_argument("--normals", action=argparse.BooleanOptionalAction, default=None,
+                   help="estimate PCA normals and curvature, or not (normals.enabled; default: the config's, on)")
+    s.add_argument("--covariances", action="store_true",
+                   help="also write GICP covariances cov_xx..cov_zz (normals.covariances; implies --normals)")
+    s.add_argument("--float64-xyz", action="store_true",
+                   help="write x y z as float64 (output.float64_xyz): for georeferenced coordinates")
     s.add_argument("--order", help="random | input | sphericity | surface_variation (order.type)")
     s.add_argument("--seed", type=int, help="seed of the random order (order.seed)")
     s.add_argument("--mode", help="map (a tiled build is a map build; scan is refused)")
@@ -71,8 +77,13 @@ def resolve_config(a):
     if a.spacing is not None:
         put("output", "level", -1)
         put("output", "spacing", a.spacing)
-    if a.normals:
-        put("normals", "enabled", True)
+    if a.covariances and a.normals is False:
+        raise ValueError("--covariances needs normals: it cannot go with --no-normals")
+    put("normals", "enabled", True if a.covariances else a.normals)
+    if a.covariances:
+        put("normals", "covariances", True)
+    if a.float64_xyz:
+        put("output", "float64_xyz", True)
     put("order", "type", a.order)
     put("order", "seed", a.seed)
     if a.threads is not None:
@@ -93,23 +104,42 @@ def _dask_runner(a):
     return DaskRunner(client), [client, cluster]
 
 
+def _stop_on_sigterm(signum, frame):
+    # As SystemExit, so that the build's cleanup runs (the default action would end the process on the spot).
+    raise SystemExit(128 + signum)
+
+
 def main(argv=None):
     a = parse_args(sys.argv[1:] if argv is None else argv)
     closers = []
+    previous = signal.signal(signal.SIGTERM, _stop_on_sigterm)
+    started = False
     try:
         config_yaml = resolve_config(a)
         if a.workers == 0:
             runner = SerialRunner()
         else:
             runner, closers = _dask_runner(a)
+        started = True
         m = build(a.inputs, a.poses, a.output, a.tile_size, config_yaml, runner, chunk_frames=a.chunk_frames,
                   other_inputs=[a.config] if a.config else [])
     except (BuildError, ValueError, RuntimeError, OSError) as e:
         print("hpds.map_build: error: %s" % e, file=sys.stderr)
         return 1
+    except KeyboardInterrupt:
+        print("hpds.map_build: interrupted: no manifest was written (the tiles written so far are incomplete)",
+              file=sys.stderr)
+        return 130
+    except SystemExit as e:
+        print("hpds.map_build: stopped by a signal: no manifest was written", file=sys.stderr)
+        return e.code
     finally:
         for c in closers:
             c.close()
+        # Dask tasks still running when the build stopped may have written scratch after the build removed it.
+        if started and not os.path.exists(os.path.join(a.output, MANIFEST)):
+            remove_scratch_unless_building(a.output)
+        signal.signal(signal.SIGTERM, previous)
     c = m["counts"]
     print("wrote %d samples (levels 0..%d) in %d tiles to %s (manifest.json); %d of %d points skipped, %d out of "
           "range, %d dropped below the build depth" %

@@ -3,8 +3,11 @@
 
     tile = hpds.ply.read("out/tile_0_1.ply")        # fields x, y, z, level, [normal_x ... curvature], input fields
     hpds.ply.merge(["out/tile_0_1.ply", "out/tile_1_1.ply"], "map.ply")
+
+Every problem with a file is a ValueError that names it; nothing is allocated beyond what the file holds.
 """
 import os
+import re
 
 import numpy as np
 
@@ -13,53 +16,94 @@ _TYPES = {"char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1", "short": "<i
           "float": "<f4", "float32": "<f4", "double": "<f8", "float64": "<f8"}
 _NAMES = {"i1": "char", "u1": "uchar", "i2": "short", "u2": "ushort", "i4": "int", "u4": "uint", "f4": "float",
           "f8": "double"}
+# A property name is one header word: printable ASCII without spaces (anything else would change the header).
+_NAME = re.compile(r"^[!-~]+$")
 
 
 def read(path):
-    """The vertices of a binary little-endian PLY file as a structured array (one field per property)."""
+    """The vertices of a binary little-endian PLY file as a structured array (one field per property). The vertex
+    element must come first; elements after it (faces, say) are ignored."""
+    def bad(why):
+        return ValueError("%s: %s" % (path, why))
+
     with open(path, "rb") as f:
         if f.readline().strip() != b"ply":
-            raise ValueError("%s: not a PLY file" % path)
-        fields, count, fmt, in_vertex = [], None, None, False
+            raise bad("not a PLY file")
+        fields, count, fmt, element = [], None, None, None
+        number = 1
         while True:
             line = f.readline()
+            number += 1
             if not line:
-                raise ValueError("%s: header ends before end_header" % path)
+                raise bad("header ends before end_header")
             words = line.decode("ascii", "replace").split()
             if not words or words[0] in ("comment", "obj_info"):
                 continue
             if words[0] == "end_header":
                 break
             if words[0] == "format":
+                if len(words) != 3:
+                    raise bad("header line %d: expected 'format <type> <version>'" % number)
                 fmt = words[1]
             elif words[0] == "element":
-                in_vertex = words[1] == "vertex"
-                if in_vertex:
+                if len(words) != 3 or not words[2].isdigit():
+                    raise bad("header line %d: expected 'element <name> <count>' with a count >= 0" % number)
+                element = words[1]
+                if element == "vertex":
+                    if count is not None:
+                        raise bad("header line %d: a second vertex element" % number)
                     count = int(words[2])
-                elif fields or count is None:
-                    raise ValueError("%s: only files whose first element is vertex are read" % path)
-            elif words[0] == "property" and in_vertex:
+                elif count is None:
+                    raise bad("element '%s' comes before the vertex element; only files whose first element is "
+                              "vertex are read" % element)
+            elif words[0] == "property":
+                if element != "vertex":
+                    continue  # a later element's property: its data follows the vertices and is not read
+                if len(words) < 3 or (words[1] != "list" and len(words) != 3):
+                    raise bad("header line %d: expected 'property <type> <name>'" % number)
                 if words[1] == "list" or words[1] not in _TYPES:
-                    raise ValueError("%s: unsupported property '%s'" % (path, " ".join(words[1:])))
+                    raise bad("unsupported property '%s'" % " ".join(words[1:]))
+                if any(name == words[2] for name, _ in fields):
+                    raise bad("property '%s' appears twice" % words[2])
                 fields.append((words[2], _TYPES[words[1]]))
+            else:
+                raise bad("header line %d: unknown keyword '%s'" % (number, words[0][:40]))
         if fmt != "binary_little_endian" or count is None:
-            raise ValueError("%s: only binary_little_endian PLY with a vertex element is read" % path)
+            raise bad("only binary_little_endian PLY with a vertex element is read")
+        if not fields:
+            raise bad("the vertex element has no properties")
         dtype = np.dtype(fields)
+        available = os.fstat(f.fileno()).st_size - f.tell()
+        if count * dtype.itemsize > available:
+            raise bad("truncated: the header announces %d vertices of %d bytes, the file holds %d bytes after it"
+                      % (count, dtype.itemsize, available))
         data = np.frombuffer(f.read(dtype.itemsize * count), dtype=dtype)
-        if len(data) != count:
-            raise ValueError("%s: truncated (%d of %d vertices)" % (path, len(data), count))
         return data.copy()
+
+
+def _property_type(vertices, name):
+    base = vertices.dtype[name].base
+    if vertices.dtype[name].shape:
+        raise ValueError("write: field '%s' is not a scalar" % name)
+    key = base.str.lstrip("<>|=")
+    if key not in _NAMES:
+        hint = {"b": " (use uint8)", "i": " (PLY has no 64-bit integers: use int32 or float64)",
+                "u": " (PLY has no 64-bit integers: use uint32 or float64)"}.get(base.kind, "")
+        raise ValueError("write: field '%s' has type %s, which PLY cannot store%s" % (name, base, hint))
+    return _NAMES[key]
 
 
 def write(path, vertices):
     """Writes a structured array as binary little-endian PLY, atomically (a temporary beside `path`, renamed)."""
     vertices = np.ascontiguousarray(vertices)
+    if vertices.dtype.names is None or vertices.ndim != 1:
+        raise ValueError("write: expects a 1-D structured array (fields x, y, z, ...), got shape %s and dtype %s"
+                         % (vertices.shape, vertices.dtype))
     lines = ["ply", "format binary_little_endian 1.0", "element vertex %d" % len(vertices)]
     for name in vertices.dtype.names:
-        base = vertices.dtype[name].base
-        if vertices.dtype[name].shape:
-            raise ValueError("write: field '%s' is not a scalar" % name)
-        lines.append("property %s %s" % (_NAMES[base.str.lstrip("<>|=")], name))
+        if not _NAME.match(name):
+            raise ValueError("write: field name %r is not one word of printable ASCII" % name)
+        lines.append("property %s %s" % (_property_type(vertices, name), name))
     lines.append("end_header")
     le = np.dtype([(n, vertices.dtype[n].newbyteorder("<")) for n in vertices.dtype.names])
     tmp = "%s.tmp.%d" % (path, os.getpid())
@@ -76,10 +120,21 @@ def write(path, vertices):
         raise
 
 
+def _same_file(a, b):
+    """True when a and b name one file: the same path after links, or (both existing) the same inode."""
+    if os.path.realpath(a) == os.path.realpath(b):
+        return True
+    try:
+        return os.path.samefile(a, b)
+    except OSError:
+        return False
+
+
 def merge(paths, out_path):
     """Concatenates PLY files with the same fields (the tiles of one build) into one, written atomically."""
-    if os.path.abspath(out_path) in {os.path.abspath(p) for p in paths}:
-        raise ValueError("merge: the output '%s' is one of the inputs" % out_path)
+    for p in paths:
+        if _same_file(p, out_path):
+            raise ValueError("merge: the output '%s' is the input '%s'" % (out_path, p))
     parts = [read(p) for p in paths]
     for p, part in zip(paths[1:], parts[1:]):
         if part.dtype != parts[0].dtype:

@@ -4,8 +4,11 @@ after what and where the files go. The tiling rule, why it is exact, memory and 
 
     OUTDIR/tile_<i>_<j>.ply     each tile's samples of the output levels (the `hpds sample` PLY layout)
     OUTDIR/manifest.json        tiles, bounds, counts, config; written last: the build is complete when it exists
-    OUTDIR/.hpds_work/          buckets, tile maps and border files while the build runs (removed at the end)
+    OUTDIR/.hpds_work/          buckets, tile maps and border files while the build runs (removed at the end, and
+                                when the build fails or is interrupted)
+    OUTDIR/.hpds_build.lock     held while a build runs: a second build into the same folder is refused
 """
+import fcntl
 import glob
 import json
 import os
@@ -18,6 +21,7 @@ from . import _hpds
 from .runners import BuildError, Task
 
 WORK_DIR = ".hpds_work"
+LOCK = ".hpds_build.lock"
 MANIFEST = "manifest.json"
 _TILE_PLY = re.compile(r"tile_-?\d+_-?\d+\.ply$")
 
@@ -77,8 +81,60 @@ def check_paths(inputs, outdir):
         earlier.insert(0, MANIFEST)
     if earlier:
         shown = ", ".join(earlier[:3]) + (", ..." if len(earlier) > 3 else "")
-        raise BuildError("%s already holds a tiled build (%s): choose another output folder or move those files "
-                         "away; hpds never overwrites them" % (outdir, shown))
+        if MANIFEST in earlier:
+            raise BuildError("%s already holds a tiled build (%s): choose another output folder or move those files "
+                             "away; hpds never overwrites them" % (outdir, shown))
+        raise BuildError("%s holds the tiles of an incomplete tiled build (%s; no %s): choose another output folder, "
+                         "or delete them%s; hpds never overwrites them"
+                         % (outdir, shown, MANIFEST, " and its scratch folder " + WORK_DIR
+                            if os.path.isdir(os.path.join(outdir, WORK_DIR)) else ""))
+
+
+def remove_scratch(outdir):
+    """Removes a build's scratch folder (the buckets are a copy of the input): after the build, when it failed or
+    was interrupted. Complete tiles stay; without a manifest the build is marked incomplete."""
+    shutil.rmtree(os.path.join(outdir, WORK_DIR), ignore_errors=True)
+
+
+def remove_scratch_unless_building(outdir):
+    """remove_scratch, unless another build holds OUTDIR's lock (then the scratch is that build's)."""
+    if not os.path.isdir(os.path.join(outdir, WORK_DIR)):
+        return
+    try:
+        lock = _lock(outdir)
+    except BuildError:
+        return
+    try:
+        remove_scratch(outdir)
+    finally:
+        lock.close()
+
+
+def _lock(outdir):
+    """An exclusive lock on OUTDIR/.hpds_build.lock for the build's duration (released when the file is closed, also
+    when the process dies), so that a second build into the same folder cannot remove the first one's scratch."""
+    f = open(os.path.join(outdir, LOCK), "a")
+    try:
+        fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        f.close()
+        raise BuildError("another tiled build is writing to %s (it holds %s): wait for it, or choose another output "
+                         "folder" % (outdir, LOCK))
+    return f
+
+
+def _check_layouts(bucketed, chunks, inputs):
+    """Every frame of a map must have the first frame's point fields (as `hpds sample --mode map` requires): each
+    bucketing task checks its own frames, this compares the tasks."""
+    first = bucketed["bucket-0"]["layout"]
+    for c, (a, b) in enumerate(chunks):
+        layout = bucketed["bucket-%d" % c]["layout"]
+        if layout != first:
+            names = lambda l: " ".join(f[0] for f in l[0]) or "(none)"  # noqa: E731
+            raise BuildError("frame's point fields differ from the map's (the first frame's) fields: '%s' (one of "
+                             "frames %d..%d) has %s (%d bytes per point), '%s' has %s (%d bytes per point); every "
+                             "frame of a map needs the same fields" % (inputs[a], a, b - 1, names(layout), layout[1],
+                                                                        inputs[0], names(first), first[1]))
 
 
 def _chunks(n, workers, chunk_frames):
@@ -122,8 +178,24 @@ def build(inputs, poses_path, outdir, tile_size, config_yaml, runner, chunk_fram
     check_paths(inputs + [os.fspath(poses_path)] + [os.fspath(p) for p in other_inputs], outdir)
     os.makedirs(outdir, exist_ok=True)
     outdir = os.path.abspath(outdir)
+    lock = _lock(outdir)
+    try:
+        # Checked again under the lock: a build that finished meanwhile left its tiles.
+        check_paths(inputs + [os.fspath(poses_path)] + [os.fspath(p) for p in other_inputs], outdir)
+        remove_scratch(outdir)  # our own scratch from a killed build
+        try:
+            return _run(inputs, poses, poses_path, outdir, plan, tile_size, config_yaml, runner, chunk_frames, log,
+                        t_start)
+        except BaseException:
+            # Failed, interrupted (Ctrl-C) or stopped (SIGTERM as SystemExit): the scratch goes, complete tiles stay.
+            remove_scratch(outdir)
+            raise
+    finally:
+        lock.close()
+
+
+def _run(inputs, poses, poses_path, outdir, plan, tile_size, config_yaml, runner, chunk_frames, log, t_start):
     work = os.path.join(outdir, WORK_DIR)
-    shutil.rmtree(work, ignore_errors=True)  # our own scratch from an interrupted build
     os.makedirs(os.path.join(work, "tiles"))
 
     # 1. Bucketing: frames in chunks, each point filed under its tile.
@@ -133,11 +205,8 @@ def build(inputs, poses_path, outdir, tile_size, config_yaml, runner, chunk_fram
                   (config_yaml, tile_size, inputs[a:b], poses[a:b], a, os.path.join(work, "buckets", "c%05d" % c)), [])
              for c, (a, b) in enumerate(chunks)]
     t0 = time.monotonic()
-    try:
-        bucketed = runner.run(tasks)
-    except BuildError:
-        shutil.rmtree(work, ignore_errors=True)
-        raise
+    bucketed = runner.run(tasks)
+    _check_layouts(bucketed, chunks, inputs)
     seconds = {"bucketing": time.monotonic() - t0}
     counters, buckets, points = {}, {}, {}
     for c in range(len(chunks)):
@@ -177,13 +246,7 @@ def build(inputs, poses_path, outdir, tile_size, config_yaml, runner, chunk_fram
     log("building %d tiles in 4 phases on %s" % (len(tiles), "%d workers" % runner.workers if runner.workers
                                                  else "this process"))
     t0 = time.monotonic()
-    try:
-        done = runner.run(tasks)
-    except BuildError:
-        # The buckets are a copy of the input: not left behind. Complete tiles stay; without a manifest the build
-        # is marked incomplete.
-        shutil.rmtree(work, ignore_errors=True)
-        raise
+    done = runner.run(tasks)
     seconds["tiles"] = time.monotonic() - t0
     bucket_cpu = [r["cpu_seconds"] for r in bucketed.values()]
     cpu = {"bucketing": sum(bucket_cpu),
@@ -218,19 +281,23 @@ def build(inputs, poses_path, outdir, tile_size, config_yaml, runner, chunk_fram
                         "samples_per_level": f["samples_per_level"], "invalid_normals": f["invalid_normals"]})
     counts["samples_written"] = sum(per_level)
     counts["samples_per_level"] = per_level
+    rounding = max((done["finish-%d_%d" % k]["rounding"] for k in tiles), default=0.0)
+    warning = _hpds.rounding_warning(rounding, plan["output_radius"], "output.float64_xyz: true (--float64-xyz)")
+    if warning:
+        log("warning: " + warning)
     seconds["total"] = time.monotonic() - t_start
     manifest = {
         "format": "hpds tiled map 1",
         "tile_size": plan["tile_size"], "cell_size": plan["cell_size"], "output_level": depth,
         "build_depth": plan["build_depth"], "frames": len(inputs),
         "bounds": {"min": lo, "max": hi} if counts["samples_written"] else None,
-        "counts": counts, "tiles": entries,
+        "counts": counts, "tiles": entries, "position_rounding": rounding,
         "config": _hpds.config_dict(config_yaml, ""),
         "run": {"workers": runner.workers, "bucketing_tasks": len(chunks), "seconds": seconds,
                 "task_cpu_seconds": cpu, "peak_tile_memory_bytes": peak},
     }
     _write_json(os.path.join(outdir, MANIFEST), manifest)
-    shutil.rmtree(work, ignore_errors=True)
+    remove_scratch(outdir)
     # Temporaries of output tasks whose worker died before the rename (AtomicFile's "<target>.hpds-tmp.<pid>.<n>"):
     # every task is done, so none is being written.
     for stale in glob.glob(os.path.join(glob.escape(outdir), "tile_*_*.ply.hpds-tmp.*")):

@@ -25,9 +25,12 @@ std::vector<Eigen::Vector3f> pointsFrom(const py::handle &object) {
     throw py::type_error("points: expected an (N, 3) NumPy array of float32 or float64, got " +
                          std::string(py::str(py::type::of(object).attr("__name__"))));
   const auto array = py::reinterpret_borrow<py::array>(object);
-  if (!array.dtype().is(py::dtype::of<float>()) && !array.dtype().is(py::dtype::of<double>()))
+  // By kind and size, not dtype identity: byte-swapped ('>f8') and metadata-carrying float dtypes are floats too
+  // (forcecast below converts them).
+  const py::dtype dtype = array.dtype();
+  if (dtype.kind() != 'f' || (dtype.itemsize() != 4 && dtype.itemsize() != 8))
     throw py::type_error("points: expected float32 or float64 coordinates, got dtype " +
-                         std::string(py::str(array.dtype())));
+                         std::string(py::str(static_cast<const py::handle &>(dtype))));
   if (array.ndim() != 2 || array.shape(1) != 3)
     throw py::value_error("points: expected shape (N, 3), got " + shapeText(array));
   const auto f32 = py::array_t<float, py::array::c_style | py::array::forcecast>::ensure(array);

@@ -9,6 +9,7 @@
 
 #include "Bindings.hpp"
 #include "hpds/config/ConfigYaml.hpp"
+#include "hpds/pipeline/OutputCloud.hpp"
 #include "hpds/tiling/TileBucket.hpp"
 #include "hpds/tiling/TileBuild.hpp"
 
@@ -63,6 +64,7 @@ void bindTiling(py::module_ &m) {
         d["normal_ring"] = normalRing(config);
         d["border_ring"] = borderRing(config);
         d["output_level"] = resolveOutputLevel(config);
+        d["output_radius"] = resolveOutput(config).radius;
         d["build_depth"] = Pipeline(config).buildDepth();
         return d;
       },
@@ -104,6 +106,7 @@ void bindTiling(py::module_ &m) {
         FrameCounters totals;
         std::vector<std::tuple<std::int32_t, std::int32_t, std::uint64_t, std::string>> tiles;
         std::size_t bytes = 0;
+        PointLayout layout;
         {
           py::gil_scoped_release unlocked;
           TileBucketer bucketer(config, grid);
@@ -118,6 +121,7 @@ void bindTiling(py::module_ &m) {
             }
           }
           bytes = bucketer.memUsage();
+          layout = bucketer.layout();
           std::filesystem::create_directories(out_dir);
           for (const auto &[key, n] : bucketer.tiles()) {
             const std::string path = (std::filesystem::path(out_dir) / tileFileName(key, ".bkt")).string();
@@ -129,6 +133,11 @@ void bindTiling(py::module_ &m) {
         d["tiles"] = tiles;
         d["counters"] = countersDict(totals);
         d["memory_bytes"] = bytes;
+        // The frames' point fields, which every bucketing task of one build must share (map mode's rule).
+        py::list fields;
+        for (const PointField &f : layout.fields)
+          fields.append(py::make_tuple(f.name, f.offset, fieldTypeName(f.type), f.count));
+        d["layout"] = py::make_tuple(fields, layout.point_step);
         return d;
       },
       py::arg("config_yaml"), py::arg("tile_size"), py::arg("inputs"), py::arg("poses"), py::arg("first_frame"),
@@ -177,11 +186,15 @@ void bindTiling(py::module_ &m) {
         d["invalid_normals"] = s.invalid_normals;
         d["band_samples"] = s.band_samples;
         d["bounds"] = std::vector<double>(s.bounds.begin(), s.bounds.end());
+        d["rounding"] = s.rounding;
         return d;
       },
       py::arg("config_yaml"), py::arg("tile_size"), py::arg("i"), py::arg("j"), py::arg("map_path"),
       py::arg("borders"), py::arg("ply_path"),
       "Output task: writes tile (i, j)'s PLY (normals read across its neighbours' border files).");
+  m.def("rounding_warning", &positionRoundingWarning, py::arg("rounding"), py::arg("output_radius"), py::arg("key"),
+        "The warning `hpds sample` prints when float32 x y z round positions by more than 1 % of the output radius "
+        "(empty below that).");
 }
 
 }  // namespace hpds::python

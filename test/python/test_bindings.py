@@ -199,6 +199,29 @@ class Arguments(support.ScratchCase):
         with self.assertRaises(ValueError):
             hpds.downsample(self.points.reshape(-1))
 
+    def test_float_dtypes_by_kind_not_identity(self):
+        # Byte-swapped and metadata-carrying float arrays are floats: the same samples as the native array.
+        want = hpds.downsample(self.points)["index"]
+        for dtype in (np.dtype(">f8"), np.dtype(">f4"), np.dtype("f8", metadata={"unit": "m"})):
+            with self.subTest(dtype=str(dtype)):
+                got = hpds.downsample(self.points.astype(dtype))["index"]
+                self.assertTrue(np.array_equal(got, want))
+        for dtype in (np.float16, np.longdouble):
+            with self.subTest(dtype=str(dtype)):
+                with self.assertRaises(TypeError) as e:
+                    hpds.downsample(self.points.astype(dtype))
+                self.assertIn("float32 or float64", str(e.exception))
+
+    def test_an_array_where_one_value_belongs_names_the_key(self):
+        for value in (np.array([0.3, 0.4]), [0.3, 0.4], np.array([[0.3]])):
+            with self.subTest(value=repr(value)):
+                with self.assertRaises((ValueError, TypeError)) as e:
+                    hpds.downsample(self.points, {"output": {"spacing": value}})
+                self.assertIn("output.spacing", str(e.exception))
+        # A one-element NumPy value is a scalar.
+        self.assertTrue(np.array_equal(hpds.downsample(self.points, {"output": {"spacing": np.float64(0.3)}})["index"],
+                                       hpds.downsample(self.points, {"output": {"spacing": 0.3}})["index"]))
+
     def test_load_config_is_the_core_defaults_plus_the_overrides(self):
         c = hpds.load_config({"normals": {"enabled": True}, "order": {"seed": 9}})
         self.assertIs(c["normals"]["enabled"], True)

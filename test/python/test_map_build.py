@@ -4,6 +4,7 @@ bytes as one process, a worker killed in the middle of a tile is retried (or, ki
 with the tile named and nothing half-written published), and the build never overwrites an input or an earlier
 build."""
 import contextlib
+import fcntl
 import filecmp
 import functools
 import glob
@@ -267,6 +268,131 @@ class MapBuild(unittest.TestCase):
         with open(os.path.join(self.out("d2"), "manifest.json")) as f:
             manifest = json.load(f)
         self.assertGreater(manifest["counts"]["samples_written"], 0)
+
+    def two_poses(self, name, dx=0.0):
+        """The drive's first two poses, moved by dx along x."""
+        with open(self.poses) as f:
+            rows = [list(map(float, line.split())) for line in f if line.strip()][:2]
+        path = self.out(name)
+        with open(path, "w") as f:
+            for r in rows:
+                r[3] += dx
+                f.write(" ".join(repr(v) for v in r) + "\n")
+        return path
+
+    def test_frames_with_other_fields_are_refused_even_in_other_tasks(self):
+        # A synthetic frame (x y z intensity ring time) and a KITTI .bin (x y z intensity), bucketed by separate
+        # tasks: as `hpds sample --mode map` does, the build refuses them instead of writing tiles of two layouts.
+        kitti = self.out("other_fields.bin")
+        support.write_kitti_bin(kitti, hpds.read_points(self.frames[1]))
+        with self.assertRaises(BuildError) as e:
+            build([self.frames[0], kitti], self.two_poses("poses_mixed.txt"), self.out("mixed"), TILE,
+                  self.config_yaml, SerialRunner(), chunk_frames=1, log=lambda m: None)
+        self.assertIn("point fields differ", str(e.exception))
+        self.assertIn("other_fields.bin", str(e.exception))
+        self.assertEqual(tile_files(self.out("mixed")), [])
+        self.assertFalse(os.path.exists(os.path.join(self.out("mixed"), ".hpds_work")))
+
+    def test_float32_rounding_is_warned_and_float64_xyz_avoids_it(self):
+        # 1e7 m along x: float32 x y z round by 0.6 m, against an output radius of 0.11 m.
+        poses = self.two_poses("poses_far.txt", dx=1e7)
+        base = self.frames[:2] + ["--poses", poses, "--tile-size", str(TILE), "--workers", "0"] + SAMPLING
+        for flags, warned in (([], True), (["--float64-xyz"], False)):
+            with self.subTest(flags=flags):
+                out = self.out("far%s" % "".join(flags))
+                with contextlib.redirect_stderr(io.StringIO()) as err:
+                    self.assertEqual(map_build.main(base + ["-o", out] + flags), 0)
+                self.assertEqual("float64_xyz" in err.getvalue(), warned, err.getvalue())
+                with open(os.path.join(out, "manifest.json")) as f:
+                    rounding = json.load(f)["position_rounding"]
+                tile = hpds.ply.read(os.path.join(out, tile_files(out)[0]))
+                if warned:
+                    self.assertGreater(rounding, 0.5)
+                    self.assertEqual(tile.dtype["x"], np.dtype("<f4"))
+                else:
+                    self.assertEqual(rounding, 0.0)
+                    self.assertEqual(tile.dtype["x"], np.dtype("<f8"))
+                    self.assertGreater(tile["x"].min(), 1e7 - 100)
+
+    def test_normals_and_covariances_flags(self):
+        base = self.frames[:2] + ["--poses", self.two_poses("poses_flags.txt"), "--tile-size", str(TILE),
+                                  "--workers", "0", "--cell-size", str(CELL), "--max-depth", "5", "--level", "4"]
+        for flags, field, present in ((["--no-normals"], "normal_x", False), ([], "normal_x", True),
+                                      (["--covariances"], "cov_xx", True)):
+            with self.subTest(flags=flags):
+                out = self.out("flags%s" % "".join(flags))
+                with contextlib.redirect_stderr(io.StringIO()):
+                    self.assertEqual(map_build.main(base + ["-o", out] + flags), 0)
+                names = hpds.ply.read(os.path.join(out, tile_files(out)[0])).dtype.names
+                self.assertEqual(field in names, present, names)
+        with contextlib.redirect_stderr(io.StringIO()) as err:
+            self.assertEqual(map_build.main(base + ["-o", self.out("flags_bad"), "--covariances", "--no-normals"]), 1)
+        self.assertIn("--covariances", err.getvalue())
+
+    def test_a_second_build_into_a_folder_in_use_is_refused(self):
+        out = self.out("locked")
+        os.makedirs(os.path.join(out, ".hpds_work", "buckets"))  # the running build's scratch
+        with open(os.path.join(out, ".hpds_build.lock"), "a") as held:
+            fcntl.flock(held, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            with self.assertRaises(BuildError) as e:
+                build(self.frames[:2], self.two_poses("poses_locked.txt"), out, TILE, self.config_yaml,
+                      SerialRunner(), log=lambda m: None)
+            self.assertIn("another tiled build", str(e.exception))
+            self.assertTrue(os.path.isdir(os.path.join(out, ".hpds_work", "buckets")), "the other build's scratch")
+            # The command line too: refused, and the other build's scratch is left alone.
+            with contextlib.redirect_stderr(io.StringIO()) as err:
+                self.assertEqual(map_build.main(self.frames[:2] + ["--poses", self.two_poses("poses_locked.txt"),
+                                                                   "-o", out, "--tile-size", str(TILE),
+                                                                   "--workers", "0"] + SAMPLING), 1)
+            self.assertIn("another tiled build", err.getvalue())
+            self.assertTrue(os.path.isdir(os.path.join(out, ".hpds_work", "buckets")))
+
+    def test_an_interrupted_build_leaves_no_scratch_and_says_so(self):
+        class StopAtTiles(SerialRunner):
+            """Interrupts the build when its tiles start (the buckets, a copy of the input, are on disk)."""
+
+            def __init__(self, stop):
+                super().__init__()
+                self.stop, self.calls = stop, 0
+
+            def run(self, tasks):
+                self.calls += 1
+                if self.calls == 2:
+                    self.stop()
+                return super().run(tasks)
+
+        def ctrl_c():
+            raise KeyboardInterrupt
+
+        def sigterm():
+            os.kill(os.getpid(), signal.SIGTERM)  # main's handler raises SystemExit here
+
+        args = self.frames[:2] + ["--poses", self.two_poses("poses_stop.txt"), "--tile-size", str(TILE),
+                                  "--workers", "0"] + SAMPLING
+        for name, stop, code in (("ctrl_c", ctrl_c, 130), ("sigterm", sigterm, 128 + signal.SIGTERM)):
+            with self.subTest(name=name):
+                out = self.out("stopped_" + name)
+                original = map_build.SerialRunner
+                map_build.SerialRunner = lambda: StopAtTiles(stop)
+                try:
+                    with contextlib.redirect_stderr(io.StringIO()) as err:
+                        self.assertEqual(map_build.main(args + ["-o", out]), code)
+                finally:
+                    map_build.SerialRunner = original
+                self.assertIn("no manifest", err.getvalue())
+                self.assertFalse(os.path.exists(os.path.join(out, ".hpds_work")))
+                self.assertFalse(os.path.exists(os.path.join(out, "manifest.json")))
+        self.assertEqual(signal.getsignal(signal.SIGTERM), signal.SIG_DFL)
+
+    def test_tiles_of_an_incomplete_build_are_named_as_such(self):
+        out = self.out("incomplete")
+        os.makedirs(os.path.join(out, ".hpds_work"))
+        shutil.copy(os.path.join(self.reference, tile_files(self.reference)[0]), os.path.join(out, "tile_0_0.ply"))
+        with self.assertRaises(BuildError) as e:
+            build(self.frames[:2], self.two_poses("poses_inc.txt"), out, TILE, self.config_yaml, SerialRunner(),
+                  log=lambda m: None)
+        self.assertIn("incomplete", str(e.exception))
+        self.assertIn(".hpds_work", str(e.exception))
 
 
 if __name__ == "__main__":

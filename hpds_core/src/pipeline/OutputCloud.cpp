@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <sstream>
 #include <stdexcept>
 
 namespace hpds {
@@ -134,6 +135,15 @@ double positionRounding(const PointBuffer &cloud) {
     }
   }
   return std::ldexp(largest, -24);
+}
+
+std::string positionRoundingWarning(double rounding, double output_radius, const std::string &key) {
+  if (!(rounding > 0.01 * output_radius)) return {};
+  std::ostringstream out;
+  out << "the output's float32 x y z round positions by up to " << rounding << " m (coordinates up to "
+      << std::ldexp(rounding, 24) << " m), more than 1 % of the output radius " << output_radius
+      << " m: samples may come out closer than it; set " << key << " (or work in a local frame)";
+  return out.str();
 }
 
 }  // namespace hpds

@@ -192,6 +192,7 @@ TileFinishStats finishTile(const HpdsConfig &given, const TileGrid &grid, const 
     }
   }
   stats.samples = ids.size();
+  stats.rounding = positionRounding(cloud);
 
   writePly(ply_path, cloud);  // atomic: a temporary beside it, renamed when complete
   return stats;

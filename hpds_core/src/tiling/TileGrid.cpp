@@ -32,9 +32,10 @@ TileGrid::TileGrid(const HierarchyConfig &hierarchy, double tile_size) : cell_si
       std::snprintf(buf, sizeof buf, " (nearest: %.17g or %.17g m)", below * cell_size_, above * cell_size_);
       nearest = buf;
     }
-    throw std::invalid_argument("tile size: must be a whole multiple (>= 1, <= 2^20) of the level-0 cell (" +
-                                std::to_string(cell_size_) + " m), so that tiles hold whole cells; got " +
-                                std::to_string(tile_size) + " m" + nearest);
+    char sizes[96];  // %g: std::to_string would print 1e300 as 301 digits and 1e-7 as 0.000000
+    std::snprintf(sizes, sizeof sizes, "(%.9g m), so that tiles hold whole cells; got %.9g m", cell_size_, tile_size);
+    throw std::invalid_argument(std::string("tile size: must be a whole multiple (>= 1, <= 2^20) of the level-0 cell ") +
+                                sizes + nearest);
   }
   k_ = static_cast<int>(k);
   inv_cell_ = 1.0 / cell_size_;

@@ -8,6 +8,7 @@
 
 #include "hpds/io/AtomicFile.hpp"
 #include "hpds/io/HierarchyFile.hpp"
+#include "hpds/pipeline/OutputCloud.hpp"
 #include "hpds/util/ParallelFor.hpp"
 
 namespace hpds_node {
@@ -360,11 +361,9 @@ void HpdsServer::handle(const sensor_msgs::PointCloud2::ConstPtr &msg, std::size
                                                                    "the spacing or hierarchy.cell_size");
         for (const std::string &name : frame.fields_not_carried) warnFieldNotCarriedOnce(name);
         const double radius = processor.pipeline().outputResolution().radius;
-        if (frame.position_rounding > 0.01 * radius)
-          ROS_WARN_STREAM_ONCE_NAMED("hpds", "hpds: the outputs' float32 x y z round positions by up to "
-                                                 << frame.position_rounding << " m, more than 1 % of the output "
-                                                 << "radius " << radius << " m: samples may come out closer than it; "
-                                                 << "set output/float64_xyz true (or use a local fixed frame)");
+        const std::string rounding =
+            hpds::positionRoundingWarning(frame.position_rounding, radius, "the parameter output/float64_xyz true");
+        if (!rounding.empty()) ROS_WARN_STREAM_ONCE_NAMED("hpds", "hpds: " << rounding);
         turns.waitToPublish();
         publish(frame);
         seconds = frame.seconds;

@@ -39,4 +39,9 @@ namespace hpds {
 /// compare it with the output radius and say when it is not small against it.
 [[nodiscard]] double positionRounding(const PointBuffer &cloud);
 
+/// The sentence the CLI, the node and the tiled build print when float32 x y z round positions (`rounding`,
+/// positionRounding) by more than 1 % of the output radius: samples may then come out closer than it. Empty below
+/// that. `key` is how the reader sets output.float64_xyz there ("output.float64_xyz: true", a flag, a parameter).
+[[nodiscard]] std::string positionRoundingWarning(double rounding, double output_radius, const std::string &key);
+
 }  // namespace hpds

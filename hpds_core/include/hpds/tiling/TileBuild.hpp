@@ -60,6 +60,8 @@ struct TileFinishStats {
   std::uint64_t band_samples = 0;     ///< neighbours' samples read for the normals
   /// Bounds of the written samples {x_min, y_min, z_min, x_max, y_max, z_max} [m]; NaN when none.
   std::array<double, 6> bounds{};
+  /// [m] positionRounding of the written cloud: how far its float32 x y z may round positions (0 for float64).
+  double rounding = 0.0;
 };
 
 /// Writes tile `key`'s output PLY from its map file and (normals) the border files of every neighbour within
