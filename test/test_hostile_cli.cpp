@@ -185,6 +185,13 @@ TEST(HostileCli, GeoreferencedCoordinatesKeepTheirPrecisionOrAreSaidToLoseIt) {
   EXPECT_EQ(log.find("float64_xyz"), std::string::npos) << log;
   EXPECT_EQ(readPointCloud((tmp / "f64.ply").string()).layout().find("x")->type, FieldType::Float64);
   EXPECT_EQ(hpds("verify " + q(tmp / "f64.ply") + " --spacing 0.1", &log), 0) << log;
+  // The flag does what the key does.
+  ASSERT_EQ(hpds(posed + " --float64-xyz -o " + q(tmp / "f64_flag.ply"), &log), 0) << log;
+  EXPECT_EQ(log.find("float64_xyz"), std::string::npos) << log;
+  EXPECT_EQ(readPointCloud((tmp / "f64_flag.ply").string()).layout().find("x")->type, FieldType::Float64);
+  // Covariances need normals: asking for both and for no normals is an error, not a silent choice.
+  EXPECT_NE(hpds("sample " + q(f4) + " --covariances --no-normals -o " + q(tmp / "cov.ply"), &log), 0) << log;
+  EXPECT_NE(log.find("--covariances"), std::string::npos) << log;
 }
 
 TEST(HostileCli, MissingXyzAndUnrepresentableFieldsAreRefused) {

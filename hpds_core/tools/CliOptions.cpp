@@ -75,6 +75,8 @@ void addSamplingOptions(CLI::App &app, SamplingOptions &o) {
       "estimate PCA normals and curvature, or not (normals.enabled; default: the config's, on)");
   app.add_flag("--covariances", o.covariances,
                "also write GICP covariances cov_xx..cov_zz (normals.covariances; implies --normals)");
+  app.add_flag("--float64-xyz", o.float64_xyz,
+               "write x y z as float64 (output.float64_xyz): for georeferenced coordinates");
   app.add_option("--order", o.order, "random | input | sphericity | surface_variation (order.type)");
   app.add_option("--seed", o.seed, "seed of the random order (order.seed)")->check(unsigned64());
   app.add_option("--mode", o.mode, "scan | map (mode)");
@@ -92,7 +94,10 @@ HpdsConfig resolveConfig(const SamplingOptions &o) {
     c.output.spacing = *o.spacing;
   }
   if (o.normals) c.normals.enabled = *o.normals;
+  if (o.covariances && o.normals && !*o.normals)
+    throw std::invalid_argument("--covariances needs normals: it cannot go with --no-normals");
   if (o.covariances) c.normals.enabled = c.normals.covariances = true;
+  if (o.float64_xyz) c.output.float64_xyz = true;
   if (o.order) c.order.type = parseInsertionOrder(*o.order, "--order");
   if (o.seed) c.order.seed = *o.seed;
   if (o.mode) c.mode = parseMode(*o.mode, "--mode");

@@ -18,6 +18,7 @@ struct SamplingOptions {
   std::optional<double> spacing;
   std::optional<bool> normals;
   bool covariances = false;
+  bool float64_xyz = false;
   std::optional<std::string> order;
   std::optional<std::uint64_t> seed;
   std::optional<std::string> mode;
@@ -31,8 +32,8 @@ struct SamplingOptions {
 [[nodiscard]] CLI::Validator integerIn(long long lo, long long hi);
 [[nodiscard]] CLI::Validator unsigned64();
 
-/// Registers --config, --cell-size, --max-depth, --level, --spacing, --normals/--no-normals, --covariances, --order,
-/// --seed, --mode, --threads.
+/// Registers --config, --cell-size, --max-depth, --level, --spacing, --normals/--no-normals, --covariances,
+/// --float64-xyz, --order, --seed, --mode, --threads.
 void addSamplingOptions(CLI::App &app, SamplingOptions &options);
 
 /// Defaults, then --config FILE, then the flags; throws std::invalid_argument naming the key on a bad value.

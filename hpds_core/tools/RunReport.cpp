@@ -14,7 +14,7 @@
 namespace hpds::cli {
 
 std::string roundingWarning(const PointBuffer &cloud, double output_radius) {
-  const std::string w = positionRoundingWarning(positionRounding(cloud), output_radius, "output.float64_xyz: true");
+  const std::string w = positionRoundingWarning(positionRounding(cloud), output_radius, "output.float64_xyz: true (--float64-xyz)");
   return w.empty() ? w : "hpds: warning: " + w;
 }
 
