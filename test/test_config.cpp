@@ -314,6 +314,13 @@ TEST(ConfigYaml, InvalidDocumentsNameTheKey) {
       {"hierarchy: {max_depth: 99999999999}", "hierarchy.max_depth", "out of range"},
       {"hierarchy: {cell_size: abc}", "hierarchy.cell_size", "expected a number, got 'abc'"},
       {"hierarchy: {cell_size: '4.0'}", "hierarchy.cell_size", "quoted string"},
+      // explicit tags: the text would mean something else to a YAML reader than to hpds
+      {"output: {spacing: !!str 0.2}", "output.spacing", "YAML tag !!str"},
+      {"output: {spacing: !foo 0.2}", "output.spacing", "YAML tag !foo"},
+      {"normals: {enabled: !!str true}", "normals.enabled", "YAML tag !!str"},
+      {"mode: !!int map", "mode", "YAML tag !!int"},
+      {"output: {level: !!float 3}", "output.level", "YAML tag !!float"},
+      {"order: {type: !!binary random}", "order.type", "YAML tag !!binary"},
       {"hierarchy: {cell_size: }", "hierarchy.cell_size", "expected a number"},
       {"hierarchy: {cell_size: 1e999}", "hierarchy.cell_size", "out of the range"},
       {"order: {seed: -1}", "order.seed", "non-negative integer"},
@@ -347,6 +354,10 @@ TEST(ConfigYaml, InvalidDocumentsNameTheKey) {
     EXPECT_EQ(message.rfind(std::string(c.key) + ":", 0), 0u) << "yaml: " << c.yaml << "\nmessage: " << message;
     EXPECT_NE(message.find(c.detail), std::string::npos) << "yaml: " << c.yaml << "\nmessage: " << message;
   }
+  // A NUL byte (yaml-cpp reported what followed it as an "unknown escape character").
+  const std::string nul("output:\n  spacing: 0.3\0garbage", 28);
+  const std::string message = loadError(nul);
+  EXPECT_NE(message.find("NUL byte at line 2"), std::string::npos) << message;
 }
 
 TEST(ConfigYaml, FileErrorsNameThePath) {

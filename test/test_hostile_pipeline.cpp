@@ -146,17 +146,146 @@ TEST(HostilePipeline, NanInfInEveryFieldAndPose) {
   const FrameResult r = p.addFrame(frameOf(b));
   EXPECT_EQ(r.counters.skipped_invalid, b.size());
   EXPECT_EQ(p.makeCloud(p.outputSamples(), false).size(), 0u);
-  // A finite pose that sends finite points to infinity: skipped as invalid, not inserted at inf.
-  Frame huge = frameOf(typedCloud(FieldType::Float64, {{1e300, 0, 0}, {1, 1, 1}}));
-  huge.sensor_to_fixed.linear() *= 1e10;
+  // A finite rigid pose that sends finite points to infinity: skipped as invalid, not inserted at inf.
+  Frame huge = frameOf(typedCloud(FieldType::Float64, {{1e308, 0, 0}, {1, 1, 1}}));
+  huge.sensor_to_fixed.translation() = Eigen::Vector3d(1.5e308, 0.0, 0.0);
   HpdsConfig m;
   m.mode = Mode::Map;
   Pipeline pm(m);
   const FrameResult rh = pm.addFrame(huge);
-  EXPECT_EQ(rh.counters.skipped_invalid, 1u);  // 1e310 overflows to inf
-  EXPECT_EQ(rh.counters.out_of_range, 1u);     // 1e10 m is beyond the exact keys of 1.6 cm cells
+  EXPECT_EQ(rh.counters.skipped_invalid, 1u);  // 2.5e308 overflows to inf
+  EXPECT_EQ(rh.counters.out_of_range, 1u);     // 1.5e308 m is beyond the exact keys of 1.4 cm cells
   EXPECT_EQ(rh.counters.accepted, 0u);
   for (SampleId id : pm.outputSamples()) EXPECT_TRUE(std::isfinite(pm.hierarchy().position(id)[0]));
+}
+
+// A pose must be rigid: a scaled, sheared, mirrored or projective matrix would put the points somewhere no sensor
+// saw them (a scale of 0 collapsed a frame into one sample without a word).
+TEST(HostilePipeline, PosesThatAreNotRigidAreRefused) {
+  const PointBuffer cloud = typedCloud(FieldType::Float32, gridPoints(5, 0.5));
+  for (const Mode mode : {Mode::Scan, Mode::Map}) {
+    HpdsConfig c;
+    c.mode = mode;
+    Pipeline p(c);
+    std::vector<std::pair<const char *, Eigen::Isometry3d>> bad;
+    Eigen::Isometry3d t = Eigen::Isometry3d::Identity();
+    t.linear() *= 0.0;
+    bad.emplace_back("scale 0", t);
+    t = Eigen::Isometry3d::Identity();
+    t.linear() *= 2.0;
+    bad.emplace_back("scale 2", t);
+    t = Eigen::Isometry3d::Identity();
+    t.linear()(0, 0) = -1.0;
+    bad.emplace_back("mirror", t);
+    t = Eigen::Isometry3d::Identity();
+    t.linear()(0, 1) = 0.01;
+    bad.emplace_back("shear", t);
+    t = Eigen::Isometry3d::Identity();
+    t.matrix()(3, 0) = 0.5;
+    bad.emplace_back("bottom row", t);
+    t = Eigen::Isometry3d::Identity();
+    t.matrix()(1, 3) = NAN;
+    bad.emplace_back("NaN", t);
+    for (const auto &[what, pose] : bad) {
+      SCOPED_TRACE(what);
+      Frame f = frameOf(cloud);
+      f.sensor_to_fixed = pose;
+      try {
+        (void)p.addFrame(f);
+        ADD_FAILURE() << "accepted";
+      } catch (const std::invalid_argument &e) {
+        EXPECT_NE(std::string(e.what()).find("sensor_to_fixed"), std::string::npos) << e.what();
+      }
+      EXPECT_EQ(p.framesProcessed(), 0u);
+    }
+    // A rotation as a tf or a pose file gives it (within 1e-3 of orthonormal) is accepted.
+    Frame f = frameOf(cloud);
+    f.sensor_to_fixed.linear() = Eigen::AngleAxisd(0.3, Eigen::Vector3d(1, 2, 3).normalized()).toRotationMatrix();
+    f.sensor_to_fixed.linear()(0, 0) += 1e-6;
+    f.sensor_to_fixed.translation() = Eigen::Vector3d(100.0, -20.0, 3.0);
+    EXPECT_GT(p.addFrame(f).counters.accepted, 0u);
+  }
+}
+
+// Map mode's layout is the first frame's even when that frame gave no sample; a loaded map's after loadMap.
+TEST(HostilePipeline, AnEmptyFirstMapFrameSetsTheLayout) {
+  HpdsConfig c;
+  c.mode = Mode::Map;
+  for (const bool nan_only : {false, true}) {
+    SCOPED_TRACE(nan_only ? "NaN-only first frame" : "empty first frame");
+    Pipeline p(c);
+    PointBuffer first = typedCloud(FieldType::Float32, nan_only ? std::vector<std::array<double, 3>>{{NAN, 0, 0}}
+                                                               : std::vector<std::array<double, 3>>{});
+    EXPECT_EQ(p.addFrame(frameOf(first)).counters.accepted, 0u);
+    const PointBuffer other = typedCloud(FieldType::Float64, gridPoints(4, 1.0));
+    ASSERT_NE(other.layout(), first.layout());
+    EXPECT_THROW((void)p.addFrame(frameOf(other)), std::invalid_argument);
+    EXPECT_GT(p.addFrame(frameOf(typedCloud(FieldType::Float32, gridPoints(4, 1.0)))).counters.accepted, 0u);
+  }
+}
+
+// samplesHitByLastFrame against brute force over the last frame's points, at radii from far below the spacing
+// (where its grid cannot key the whole frame) to infinity.
+TEST(HostilePipeline, SamplesHitByLastFrameAtEveryRadius) {
+  SyntheticLidarConfig lc;
+  lc.beams = 16;
+  lc.azimuth_steps = 600;
+  lc.frames = 2;
+  const SyntheticLidar lidar(lc);
+  HpdsConfig c;
+  c.mode = Mode::Map;
+  c.normals.enabled = false;
+  Pipeline p(c);
+  std::vector<std::array<double, 3>> last;
+  for (int i = 0; i < 2; ++i) {
+    const auto f = lidar.frame(i);
+    (void)p.addFrame(f.frame);
+    if (i == 1) {
+      const PointBuffer &b = f.frame.points;
+      const PointField *fx = b.layout().find("x"), *fy = b.layout().find("y"), *fz = b.layout().find("z");
+      for (std::size_t k = 0; k < b.size(); ++k) {
+        const Eigen::Vector3d q = f.frame.sensor_to_fixed * Eigen::Vector3d(readAsDouble(b.record(k), *fx),
+                                                                            readAsDouble(b.record(k), *fy),
+                                                                            readAsDouble(b.record(k), *fz));
+        if (q.allFinite() && !(readAsDouble(b.record(k), *fx) == 0 && readAsDouble(b.record(k), *fy) == 0 &&
+                               readAsDouble(b.record(k), *fz) == 0))
+          last.push_back({q.x(), q.y(), q.z()});
+      }
+    }
+  }
+  const int deepest = p.buildDepth();
+  for (const double radius : {1e-6, 1e-5, 1e-3, 0.1, 1.0, double(INFINITY)}) {
+    SCOPED_TRACE(radius);
+    const std::vector<SampleId> got = p.samplesHitByLastFrame(0, deepest, radius);
+    std::vector<SampleId> want;
+    for (SampleId id = 0; id < p.hierarchy().idBound(); ++id) {
+      if (!p.hierarchy().isLive(id)) continue;
+      const double *s = p.hierarchy().position(id);
+      for (const auto &q : last) {
+        const double dx = s[0] - q[0], dy = s[1] - q[1], dz = s[2] - q[2];
+        if (dx * dx + dy * dy + dz * dz < radius * radius) {
+          want.push_back(id);
+          break;
+        }
+      }
+    }
+    ASSERT_FALSE(want.empty());
+    EXPECT_EQ(got, want);
+  }
+}
+
+TEST(HostilePipeline, PointBufferSizesThatWrapAreRefused) {
+  PointLayout l;
+  l.append("x", FieldType::Float32);
+  l.append("y", FieldType::Float32);
+  l.append("z", FieldType::Float32);
+  PointBuffer b(l, 3);
+  EXPECT_THROW(b.resize(std::size_t(0x1555555555555556ull)), std::length_error);  // 12 * n wraps to 8
+  EXPECT_THROW(b.resize(std::size_t(1) << 32), std::length_error);                // beyond a 32-bit width
+  EXPECT_THROW(b.reserve(std::size_t(0x1555555555555556ull)), std::length_error);
+  EXPECT_EQ(b.size(), 3u);  // unchanged
+  EXPECT_EQ(std::size_t(b.width()) * b.height(), b.size());
+  EXPECT_THROW(PointBuffer(l, std::size_t(0x1555555555555556ull)), std::length_error);
 }
 
 TEST(HostilePipeline, AllPointsAtOneSpotAndAtTheOrigin) {
@@ -258,8 +387,10 @@ TEST(HostilePipeline, AFarOutlierReturnLeavesTheFramesNormalsAndMapOutput) {
   m.map.evict_distance = 0.0;
   Pipeline map(m);
   map.addFrame(frameOf(typedCloud(FieldType::Float32, pts)));
+  // Every output sample was hit, the outlier too (it is its own candidate): the frame spans 2e6 m, more than the
+  // frame grid can key at this radius, and the search goes through the hierarchy instead.
   const std::vector<SampleId> hit = map.samplesHitByLastFrame(0, map.outputLevel(), map.hierarchy().radius(map.outputLevel()));
-  EXPECT_EQ(hit.size() + 1, map.outputSamples().size());
+  EXPECT_EQ(hit, map.outputSamples());
 }
 
 TEST(HostilePipeline, TenMillionPointFrameInBoundedTimeAndMemory) {

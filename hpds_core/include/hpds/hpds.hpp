@@ -6,8 +6,9 @@
 // - `points` are in the sensor frame, metres; the sensor (the viewpoint normals face) is at the origin. NaN/Inf
 //   points, exact (0,0,0) no-returns (input.skip_zero_points) and points outside input.min_range/max_range are
 //   skipped; they never appear in the result. So are points beyond the exact cell-key range of the finest level
-//   (|coordinate| >= 2^30 cells of level hierarchy.max_depth: about 8.4e6 m at the defaults, less for coarser
-//   spacings); sample georeferenced points relative to a local origin, or check with Pipeline's counters.
+//   (|coordinate| >= 2^30 cells of level hierarchy.max_depth: 1.55e7 m at the defaults; 8.4e6 to 1.7e7 m for any
+//   output.spacing above 1.4 cm with the derived cell; less for finer spacings, a larger hierarchy.max_depth or a
+//   smaller fixed cell); sample georeferenced points relative to a local origin, or check with Pipeline's counters.
 // - The samples are those `hpds sample` writes for the same points and config (one frame, its mode and seed), in
 //   the same order: levels 0..D of the output level D (output.level / output.spacing).
 // - Deterministic: the same points and config give the same samples, whatever config.threads is.

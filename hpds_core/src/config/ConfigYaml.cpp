@@ -184,13 +184,23 @@ std::size_t editDistance(std::string_view a, std::string_view b) {
 // conversions accept things this file must reject (yes/no, 1.5 for an int, hex) and depend on the global locale.
 
 // A number or boolean must be a scalar; the text itself goes to the one strict scalar parser (YamlScalar.hpp).
+void refuseTag(const YAML::Node &node, const std::string &key);
+
 const std::string &scalarText(const YAML::Node &node, const std::string &key, const char *expected) {
   if (!node.IsScalar()) fail(key, std::string("expected ") + expected + ", got " + describe(node));
+  refuseTag(node, key);
   return node.Scalar();
 }
 
-// yaml-cpp tags quoted scalars "!".
+// yaml-cpp tags quoted scalars "!" and plain untagged ones "?". Any other tag (!!str, !!int, !custom) would change
+// what the value means to a YAML reader while hpds read the text alone: refused, naming the key.
 bool isQuoted(const YAML::Node &node) { return node.Tag() == "!"; }
+void refuseTag(const YAML::Node &node, const std::string &key) {
+  const std::string &tag = node.Tag();
+  if (tag.empty() || tag == "?" || tag == "!") return;
+  const std::string shown = tag.rfind("tag:yaml.org,2002:", 0) == 0 ? "!!" + tag.substr(18) : tag;
+  fail(key, "has the YAML tag " + shown + "; config values are plain scalars (remove the tag)");
+}
 
 void parseValue(const YAML::Node &node, const std::string &key, double *out) {
   *out = yaml::parseNumber(scalarText(node, key, "a number"), isQuoted(node), key);
@@ -207,6 +217,7 @@ void parseValue(const YAML::Node &node, const std::string &key, bool *out) {
 
 const std::string &enumScalar(const YAML::Node &node, const std::string &key) {
   if (!node.IsScalar()) fail(key, "expected a string, got " + describe(node));
+  refuseTag(node, key);
   return node.Scalar();
 }
 
@@ -346,6 +357,13 @@ void applyConfigYaml(const std::string &yaml_text, HpdsConfig &config, const std
                           " a config may have");
     // yaml-cpp 0.7's LoadAll never returns on some garbage (a lone ','), so documents are counted here and the
     // text is parsed with Load, which does return.
+    // A NUL byte ends the text for yaml-cpp's scanner partway, which then reports whatever follows oddly (an
+    // "unknown escape character"); say what it is.
+    if (const std::size_t nul = yaml_text.find('\0'); nul != std::string::npos) {
+      const std::size_t line = 1 + static_cast<std::size_t>(std::count(yaml_text.begin(), yaml_text.begin() + nul, '\n'));
+      fail(kDocument, "a NUL byte at line " + std::to_string(line) + " (byte " + std::to_string(nul) +
+                          "): a config is YAML text");
+    }
     const std::size_t documents = countDocuments(yaml_text);
     if (documents > 1) fail(kDocument, "expected one YAML document, got " + std::to_string(documents));
     YAML::Node document;

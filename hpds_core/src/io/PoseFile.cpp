@@ -39,7 +39,27 @@ double orthonormalityError(const Eigen::Matrix3d &r) {
   return (r.transpose() * r - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff();
 }
 
+// Empty, or why r is no rotation within kAcceptTolerance.
+std::string rotationProblem(const Eigen::Matrix3d &r, double *err_out = nullptr) {
+  const double err = orthonormalityError(r);
+  const double det = r.determinant();
+  if (err_out) *err_out = err;
+  if (err <= kAcceptTolerance && std::abs(det - 1.0) <= kAcceptTolerance) return {};
+  char buf[160];
+  std::snprintf(buf, sizeof buf, "rotation part is not a rotation (max |R^T R - I| = %.3g, det = %.6g; tolerance 1e-3)",
+                err, det);
+  return buf;
+}
+
 }  // namespace
+
+std::string rigidPoseProblem(const Eigen::Isometry3d &pose) {
+  const Eigen::Matrix4d &m = pose.matrix();
+  if (!m.allFinite()) return "pose is not finite";
+  if (m(3, 0) != 0.0 || m(3, 1) != 0.0 || m(3, 2) != 0.0 || m(3, 3) != 1.0)
+    return "pose's bottom row is not 0 0 0 1 (not a rigid transform)";
+  return rotationProblem(pose.linear());
+}
 
 std::vector<Eigen::Isometry3d> readKittiPoses(const std::string &path) {
   requireRegularFile(path);
@@ -82,14 +102,8 @@ std::vector<Eigen::Isometry3d> readKittiPoses(const std::string &path) {
       for (int col = 0; col < 3; ++col) r(row, col) = v[row * 4 + col];
       t(row) = v[row * 4 + 3];
     }
-    const double err = orthonormalityError(r);
-    const double det = r.determinant();
-    if (!(err <= kAcceptTolerance) || !(std::abs(det - 1.0) <= kAcceptTolerance)) {
-      char buf[160];
-      std::snprintf(buf, sizeof buf,
-                    "rotation part is not a rotation (max |R^T R - I| = %.3g, det = %.6g; tolerance 1e-3)", err, det);
-      failLine(path, line_no, buf);
-    }
+    double err = 0.0;
+    if (const std::string why = rotationProblem(r, &err); !why.empty()) failLine(path, line_no, why);
     if (err > kExactTolerance) {
       // Nearest rotation in the Frobenius sense; det stays +1 because R was already within 1e-3 of a rotation.
       const Eigen::JacobiSVD<Eigen::Matrix3d> svd(r, Eigen::ComputeFullU | Eigen::ComputeFullV);

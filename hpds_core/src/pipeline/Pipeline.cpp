@@ -10,6 +10,7 @@
 #include <string>
 #include <thread>
 
+#include "hpds/io/PoseFile.hpp"
 #include "hpds/pipeline/FramePoints.hpp"
 #include "hpds/pipeline/OutputCloud.hpp"
 #include "hpds/sampling/FrameGridIndex.hpp"
@@ -90,14 +91,18 @@ FrameResult Pipeline::addFrame(const Frame &frame) {
   if (!fx || !fy || !fz) throw std::invalid_argument("frame has no x/y/z fields");
   if (fx->count != 1 || fy->count != 1 || fz->count != 1) throw std::invalid_argument("x/y/z fields must have count 1");
   layout.validate();
-  if (!frame.sensor_to_fixed.matrix().allFinite()) throw std::invalid_argument("frame pose is not finite");
+  if (const std::string why = rigidPoseProblem(frame.sensor_to_fixed); !why.empty())
+    throw std::invalid_argument("frame.sensor_to_fixed: " + why);
   const bool map_mode = config_.mode == Mode::Map;
-  if (map_mode && hierarchy_.idBound() > 0 && layout != hierarchy_.recordLayout())
+  // The map's layout is the first frame's, even when that frame gave no sample (empty, or NaN only), or the loaded
+  // map's.
+  if (map_mode && map_layout_fixed_ && layout != hierarchy_.recordLayout())
     throw std::invalid_argument("frame's point fields differ from the map's (the first frame's) fields");
 
   // 1. Scan mode starts every frame on an empty hierarchy.
   if (!map_mode) hierarchy_.clear();
   hierarchy_.setRecordLayout(layout);
+  if (map_mode) map_layout_fixed_ = true;
   // Capacity kept from a frame far larger than any recent one (the peak decays by 10% per frame) is released
   // instead of being held for the life of the pipeline.
   recent_points_ = std::max(static_cast<double>(pts.size()), 0.9 * recent_points_);
@@ -291,6 +296,7 @@ void Pipeline::replaceMap(Hierarchy &&map, std::uint32_t next_frame) {
     throw std::invalid_argument("hierarchy: the map's cell_size/max_depth differ from the configuration's");
   hierarchy_ = std::move(map);
   frames_ = next_frame;
+  map_layout_fixed_ = true;
 }
 
 std::vector<SampleId> Pipeline::outputSamples() const { return hierarchy_.samplesUpTo(output_level_); }
@@ -313,15 +319,37 @@ std::vector<SampleId> Pipeline::outputSamplesNear(const double center[3], double
 std::vector<SampleId> Pipeline::samplesHitByLastFrame(int min_level, int max_level, double radius) const {
   std::vector<SampleId> hit;
   if (candidates_.empty() || !(radius > 0.0)) return hit;
-  // The last frame's candidates are still in xyz_ (fixed frame): bucket them once, then test each sample near
-  // them against its 27 buckets.
-  const FrameGridIndex index(xyz_.data(), candidates_, radius);
+  const auto inLevels = [&](SampleId id) {
+    return hierarchy_.isLive(id) && hierarchy_.level(id) >= min_level && hierarchy_.level(id) <= max_level;
+  };
+  if (std::isinf(radius)) {  // every candidate is within an infinite radius of every sample
+    for (SampleId id = 0; id < hierarchy_.idBound(); ++id)
+      if (inLevels(id)) hit.push_back(id);
+    return hit;
+  }
   double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
   for (std::uint32_t i : candidates_)
     for (int a = 0; a < 3; ++a) {
       lo[a] = std::min(lo[a], xyz_[3 * std::size_t(i) + a] - radius);
       hi[a] = std::max(hi[a], xyz_[3 * std::size_t(i) + a] + radius);
     }
+  // FrameGridIndex keys 2^21 cells of edge `radius` per axis: a frame wider than that (a radius far below the
+  // spacing) is searched from each candidate through the hierarchy's own grids instead, which cost a few cells per
+  // level at such a radius.
+  constexpr double kGridCells = 1048576.0;  // 2^20: half FrameGridIndex's window, a margin for rounding
+  if (hi[0] - lo[0] >= kGridCells * radius || hi[1] - lo[1] >= kGridCells * radius ||
+      hi[2] - lo[2] >= kGridCells * radius) {
+    std::vector<std::uint8_t> marked(hierarchy_.idBound(), 0);
+    for (std::uint32_t i : candidates_)
+      hierarchy_.forEachInBall(&xyz_[3 * std::size_t(i)], radius, std::min(max_level, hierarchy_.maxDepth()),
+                               [&](SampleId id, double) { marked[id] = 1; });
+    for (SampleId id = 0; id < hierarchy_.idBound(); ++id)
+      if (marked[id] && inLevels(id)) hit.push_back(id);
+    return hit;
+  }
+  // The last frame's candidates are still in xyz_ (fixed frame): bucket them once, then test each sample near
+  // them against its 27 buckets.
+  const FrameGridIndex index(xyz_.data(), candidates_, radius);
   for (SampleId id = 0; id < hierarchy_.idBound(); ++id) {
     if (!hierarchy_.isLive(id)) continue;
     const int l = hierarchy_.level(id);

@@ -4,6 +4,7 @@
 #include <limits>
 #include <set>
 #include <stdexcept>
+#include <string>
 
 namespace hpds {
 
@@ -98,13 +99,28 @@ void PointBuffer::setOrganization(std::uint32_t width, std::uint32_t height) {
   height_ = height;
 }
 
+namespace {
+// Bytes of n records, or std::length_error: the width is 32 bits (PointCloud2's), and n * step must not wrap.
+std::size_t bytesFor(std::size_t n, std::uint32_t step) {
+  if (step == 0) return 0;
+  if (n > 0xFFFFFFFFull) throw std::length_error("point buffer: more than 2^32 - 1 points (" + std::to_string(n) + ")");
+  if (n > std::numeric_limits<std::size_t>::max() / step)
+    throw std::length_error("point buffer: " + std::to_string(n) + " points of " + std::to_string(step) +
+                            " bytes exceed the address space");
+  return n * step;
+}
+}  // namespace
+
 void PointBuffer::resize(std::size_t n) {
-  data_.resize(n * layout_.point_step, 0);
+  data_.resize(bytesFor(n, layout_.point_step), 0);
   width_ = layout_.point_step ? static_cast<std::uint32_t>(n) : 0;
   height_ = 1;
 }
 
+void PointBuffer::reserve(std::size_t n) { data_.reserve(bytesFor(n, layout_.point_step)); }
+
 void PointBuffer::pushBack(const std::uint8_t *record) {
+  (void)bytesFor(size() + 1, layout_.point_step);
   data_.insert(data_.end(), record, record + layout_.point_step);
   width_ = static_cast<std::uint32_t>(size());
   height_ = 1;

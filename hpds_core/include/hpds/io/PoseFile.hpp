@@ -24,6 +24,11 @@ namespace hpds {
 
 [[nodiscard]] std::vector<Eigen::Isometry3d> readKittiPoses(const std::string &path);
 
+/// Empty when `pose` is rigid as the readers accept it (finite; rotation orthonormal with determinant +1 within
+/// 1e-3; bottom row exactly 0 0 0 1), else a sentence saying what is wrong. Pipeline::addFrame applies it to
+/// frame.sensor_to_fixed.
+[[nodiscard]] std::string rigidPoseProblem(const Eigen::Isometry3d &pose);
+
 void writeKittiPoses(const std::string &path, const std::vector<Eigen::Isometry3d> &poses);
 
 }  // namespace hpds

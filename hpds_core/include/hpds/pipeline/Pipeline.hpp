@@ -18,8 +18,9 @@
 //   cut back to map.max_samples (farthest first), so memory is bounded by the cap plus one frame.
 // - Points are transformed by frame.sensor_to_fixed (identity = sensor frame). NaN/Inf coordinates, exact (0,0,0)
 //   no-returns (input.skip_zero_points) and points outside input.min_range/max_range are skipped and counted.
-// - A frame without x/y/z fields, or (map mode) whose field layout differs from the first frame's, throws
-//   std::invalid_argument before anything changes.
+// - A frame without x/y/z fields, with a pose that is not rigid (rigidPoseProblem, io/PoseFile.hpp), or (map mode)
+//   whose field layout differs from the first frame's (or the loaded map's), throws std::invalid_argument before
+//   anything changes.
 // - Same config (seed) and same frames give identical samples, whatever `threads` is.
 // - normals() and makeCloud() take ids of live samples (outputSamples(), FrameResult::new_samples of the last frame, ...);
 //   any other id (evicted, from an earlier scan-mode frame, never issued) throws std::invalid_argument.
@@ -146,6 +147,7 @@ class Pipeline {
   Hierarchy hierarchy_;
   FrameCounters totals_;
   std::uint32_t frames_ = 0;
+  bool map_layout_fixed_ = false;  ///< map mode: a frame (or a loaded map) has set the map's point layout
   // Per-frame scratch, and a slowly decaying peak of recent frame sizes that decides when to give it back.
   std::vector<double> xyz_;
   std::vector<std::uint32_t> candidates_;

@@ -100,10 +100,13 @@ class PointBuffer {
   void setOrganization(std::uint32_t width, std::uint32_t height);
 
   /// Resizes to n records (new bytes zeroed); organisation becomes n x 1. A layout of point_step 0 holds no record:
-  /// the buffer stays 0 x 1.
+  /// the buffer stays 0 x 1. Throws std::length_error for more than 2^32 - 1 records (a width, as in PointCloud2)
+  /// or n * point_step beyond the address space; nothing changes then.
   void resize(std::size_t n);
-  void reserve(std::size_t n) { data_.reserve(n * layout_.point_step); }
-  /// Appends one record copied from `record` (point_step bytes); organisation becomes size() x 1.
+  /// As resize, without changing the records; the same std::length_error.
+  void reserve(std::size_t n);
+  /// Appends one record copied from `record` (point_step bytes); organisation becomes size() x 1. Throws
+  /// std::length_error past 2^32 - 1 records.
   void pushBack(const std::uint8_t *record);
 
   [[nodiscard]] std::uint8_t *record(std::size_t i) { return data_.data() + i * layout_.point_step; }
