@@ -296,7 +296,9 @@ void Pipeline::replaceMap(Hierarchy &&map, std::uint32_t next_frame) {
     throw std::invalid_argument("hierarchy: the map's cell_size/max_depth differ from the configuration's");
   hierarchy_ = std::move(map);
   frames_ = next_frame;
-  map_layout_fixed_ = true;
+  // A map that has a layout (a saved one always does, even without samples) fixes it; a bare Hierarchy (the tiled
+  // build's empty band) leaves it to the first frame.
+  map_layout_fixed_ = !hierarchy_.recordLayout().fields.empty();
 }
 
 std::vector<SampleId> Pipeline::outputSamples() const { return hierarchy_.samplesUpTo(output_level_); }
