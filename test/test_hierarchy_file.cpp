@@ -212,7 +212,31 @@ TEST_F(MapFile, MismatchedConfigAndScanModeAreRefusedAndLeaveThePipelineUnchange
   PointLayout xyz;
   for (const char *n : {"x", "y", "z"}) xyz.append(n, FieldType::Float64);
   other_fields.points = PointBuffer(xyz, 4);
-  EXPECT_THROW(m.addFrame(other_fields), std::invalid_argument);
+  try {
+    (void)m.addFrame(other_fields);
+    ADD_FAILURE() << "a frame of other fields was taken";
+  } catch (const std::invalid_argument &e) {
+    // Both sets of fields are named, so a user sees what differs.
+    const std::string what = e.what();
+    EXPECT_NE(what.find("(x y z as float64 float64 float64, 24 bytes)"), std::string::npos) << what;
+    EXPECT_NE(what.find("loaded map"), std::string::npos) << what;
+  }
+  // The other way round: a pipeline that took frames of other fields refuses the map (the node's load_map service
+  // answered success, then dropped every later frame).
+  Pipeline running(mapConfig());
+  Frame xyz_frame;
+  xyz_frame.points = PointBuffer(xyz, 1);
+  for (const char *n : {"x", "y", "z"}) writeFromDouble(xyz_frame.points.record(0), *xyz.find(n), 1.0);
+  (void)running.addFrame(xyz_frame);
+  const std::size_t kept = running.hierarchy().sampleCount();
+  try {
+    loadMap(p.string(), running);
+    ADD_FAILURE() << "a map of other fields was loaded";
+  } catch (const std::invalid_argument &e) {
+    EXPECT_NE(std::string(e.what()).find("differ from those of the frames so far"), std::string::npos) << e.what();
+  }
+  EXPECT_EQ(running.hierarchy().sampleCount(), kept);
+  EXPECT_EQ(running.framesProcessed(), 1u);
 }
 
 void expectRefused(const fs::path &p, const std::string &what, const std::string &why) {

@@ -65,11 +65,16 @@ ProcessorStats &ProcessorStats::operator+=(const ProcessorStats &o) {
   return *this;
 }
 
+std::string tfFrameId(const std::string &frame_id) {
+  const std::size_t first = frame_id.find_first_not_of('/');
+  return first == std::string::npos ? std::string() : frame_id.substr(first);
+}
+
 bool lookupSensorPose(const tf2::BufferCore &buffer, const std::string &target, const std::string &source,
                       const ros::Time &stamp, Eigen::Isometry3d &pose, std::string *why) {
   geometry_msgs::TransformStamped t;
   try {
-    t = buffer.lookupTransform(target, source, stamp);
+    t = buffer.lookupTransform(target, tfFrameId(source), stamp);
   } catch (const tf2::TransformException &e) {
     if (why) *why = e.what();
     return false;

@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -128,6 +129,7 @@ DiagnosticsReader::DiagnosticsReader(ros::NodeHandle &nh, const std::string &nod
           if (status.name.find(node_name_) == std::string::npos) continue;
           std::lock_guard<std::mutex> lock(mutex_);
           for (const auto &kv : status.values) values_[kv.key] = kv.value;
+          highest_level_ = std::max(highest_level_, int(status.level));
           ++updates_;
         }
       });
@@ -137,6 +139,11 @@ double DiagnosticsReader::value(const std::string &key) const {
   std::lock_guard<std::mutex> lock(mutex_);
   const auto it = values_.find(key);
   return it == values_.end() ? -1.0 : std::stod(it->second);
+}
+
+int DiagnosticsReader::highestLevel() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return highest_level_;
 }
 
 std::size_t DiagnosticsReader::updates() const {

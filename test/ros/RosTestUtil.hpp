@@ -89,6 +89,8 @@ class DiagnosticsReader {
   /// Value of `key` as a number, or -1 when not reported yet.
   double value(const std::string &key) const;
   std::size_t updates() const;
+  /// The highest level (diagnostic_msgs::DiagnosticStatus::OK, WARN, ERROR) of any status seen, -1 before the first.
+  int highestLevel() const;
 
  private:
   std::string node_name_;
@@ -96,6 +98,7 @@ class DiagnosticsReader {
   mutable std::mutex mutex_;
   std::map<std::string, std::string> values_;
   std::size_t updates_ = 0;
+  int highest_level_ = -1;
 };
 
 /// Checks that x y z are float32 at offsets 0, 4, 8, every field sits at a multiple of its element size without

@@ -333,7 +333,7 @@ TEST(NodePersistenceBusy, FramesKeepArrivingAndAreCountedWhileTheMapIsSaved) {
       [&] { return diag.value("frames processed") + diag.value("dropped overload") == double(3 + burst); }, 60.0))
       << "processed " << diag.value("frames processed") << ", overload " << diag.value("dropped overload");
   EXPECT_GT(diag.value("dropped overload"), 0.0);
-  EXPECT_EQ(diag.value("dropped lost_upstream"), 0.0);
+  EXPECT_EQ(diag.value("frames lost upstream"), 0.0);
   fs::remove(fifo);
 }
 

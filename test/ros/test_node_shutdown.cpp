@@ -31,19 +31,23 @@ std::string readText(const fs::path &p) {
   return std::string(b.begin(), b.end());
 }
 
-// Starts hpds_node as `name` in map mode, saving to `map_file` on shutdown, with its output in `log`.
-pid_t startNode(const std::string &name, const std::string &map_file, const fs::path &log) {
+// Starts hpds_node (or, with `nodelet`, `nodelet standalone hpds/HpdsNodelet`) as `name` in map mode, saving to
+// `map_file` on shutdown, with its output in `log`.
+pid_t startNode(const std::string &name, const std::string &map_file, const fs::path &log, bool nodelet = false) {
   const std::string binary = ros::NodeHandle("~").param<std::string>("node_binary", "");
-  std::vector<std::string> args = {binary,
-                                   "__name:=" + name,
-                                   "_mode:=map",
-                                   "_ros/fixed_frame:=odom",
-                                   "_ros/local_map_rate:=0.0",
-                                   "_ros/save_map_on_shutdown:=true",
-                                   "_ros/map_file:=" + map_file,
-                                   "_hierarchy/max_depth:=6",
-                                   "_output/level:=4",
-                                   "~input:=/" + name + "_points"};
+  std::vector<std::string> args = {binary};
+  if (nodelet) args = {ros::NodeHandle("~").param<std::string>("nodelet_binary", "/usr/lib/nodelet/nodelet"),
+                       "standalone", "hpds/HpdsNodelet"};
+  const std::vector<std::string> rest = {"__name:=" + name,
+                                         "_mode:=map",
+                                         "_ros/fixed_frame:=odom",
+                                         "_ros/local_map_rate:=0.0",
+                                         "_ros/save_map_on_shutdown:=true",
+                                         "_ros/map_file:=" + map_file,
+                                         "_hierarchy/max_depth:=6",
+                                         "_output/level:=4",
+                                         "~input:=/" + name + "_points"};
+  args.insert(args.end(), rest.begin(), rest.end());
   const pid_t pid = ::fork();
   if (pid == 0) {
     const int fd = ::open(log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
@@ -86,9 +90,9 @@ class NodeShutdown : public testing::Test {
   // Starts the node, sends it three frames (waiting for each one's output), stops it with `stop`, and returns its
   // exit status and log.
   std::pair<int, std::string> runAndStop(const std::string &name, const std::string &map_file,
-                                         const std::function<void(pid_t)> &stop) {
+                                         const std::function<void(pid_t)> &stop, bool nodelet = false) {
     const fs::path log = dir_ / (name + ".log");
-    const pid_t pid = startNode(name, map_file, log);
+    const pid_t pid = startNode(name, map_file, log, nodelet);
     EXPECT_GT(pid, 0);
     Collector<PointCloud2> output(nh_, "/" + name + "/output");
     ros::Publisher pub = nh_.advertise<PointCloud2>("/" + name + "_points", 8);
@@ -165,6 +169,40 @@ TEST_F(NodeShutdown, AFailedSaveIsAnErrorLineAndExitStatusOne) {
   EXPECT_TRUE(contains(log, "[ERROR]") && contains(log, "hpds: shutdown: the map was not saved: saving the map failed: " +
                                                             file + ": cannot create a temporary file beside it"))
       << log;
+}
+
+// A nodelet is destroyed after its manager's ros::shutdown(), when rosconsole no longer prints: the save's outcome
+// goes to stderr instead (it said nothing). The manager's exit status is its own.
+TEST_F(NodeShutdown, ANodeletSaysWhatBecameOfTheMap) {
+  const std::string file = (dir_ / "nodelet.hpdsmap").string();
+  const auto [status, log] =
+      runAndStop("hpds_shutdown_nodelet", file, [](pid_t pid) { ::kill(pid, SIGINT); }, true);
+  EXPECT_GE(status, 0) << log;
+  expectSaved(log, file);
+  const fs::path folder = dir_ / "vanishing_nodelet";
+  fs::create_directories(folder);
+  const std::string lost = (folder / "m.hpdsmap").string();
+  const auto [status2, log2] = runAndStop("hpds_shutdown_nodelet_fail", lost, [&](pid_t pid) {
+    fs::remove_all(folder);
+    ::kill(pid, SIGINT);
+  }, true);
+  EXPECT_GE(status2, 0) << log2;
+  EXPECT_TRUE(contains(log2, "[ERROR]") && contains(log2, "hpds: shutdown: the map was not saved")) << log2;
+}
+
+// A map file that names a folder passed the start-up check and failed at shutdown, after all the mapping.
+TEST_F(NodeShutdown, AMapFileThatIsAFolderIsRefusedAtStart) {
+  for (const std::string &path : {dir_.string(), (dir_ / "maps").string() + "/"}) {
+    SCOPED_TRACE(path);
+    fs::create_directories(dir_ / "maps");
+    const fs::path log = dir_ / "folder.log";
+    const pid_t pid = startNode("hpds_shutdown_folder", path, log);
+    const int status = waitExit(pid, 60.0);
+    const std::string text = readText(log);
+    EXPECT_NE(status, 0) << text;
+    EXPECT_NE(status, -1) << "the node did not stop by itself:\n" << text;
+    EXPECT_TRUE(contains(text, "ros/map_file") && contains(text, "folder")) << text;
+  }
 }
 
 }  // namespace

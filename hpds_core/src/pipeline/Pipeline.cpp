@@ -49,6 +49,18 @@ FrameCounters &FrameCounters::operator+=(const FrameCounters &o) {
 }
 
 namespace {
+/// "x y z intensity (float32 x4, 16 bytes)": names, and the types and size when the names alone do not differ.
+std::string fieldNames(const PointLayout &l) {
+  std::string names, types;
+  for (const PointField &f : l.fields) {
+    names += (names.empty() ? "" : " ") + f.name;
+    types += std::string(types.empty() ? "" : " ") + fieldTypeName(f.type) +
+             (f.count > 1 ? "[" + std::to_string(f.count) + "]" : "");
+  }
+  return (names.empty() ? "none" : names) + " as " + (types.empty() ? "-" : types) + ", " +
+         std::to_string(l.point_step) + " bytes";
+}
+
 /// The deepest level read: the output levels, in map mode the finer levels the normals average over (scan mode's
 /// normals average the frame's own points instead, see fineLevelFor), the levels a map keeps.
 int buildDepthFor(const HpdsConfig &config, int output_level) {
@@ -97,7 +109,8 @@ FrameResult Pipeline::addFrame(const Frame &frame) {
   // The map's layout is the first frame's, even when that frame gave no sample (empty, or NaN only), or the loaded
   // map's.
   if (map_mode && map_layout_fixed_ && layout != hierarchy_.recordLayout())
-    throw std::invalid_argument("frame's point fields differ from the map's (the first frame's) fields");
+    throw std::invalid_argument("frame's point fields (" + fieldNames(layout) + ") differ from the map's (" +
+                                fieldNames(hierarchy_.recordLayout()) + "; the first frame's or the loaded map's)");
 
   // 1. Scan mode starts every frame on an empty hierarchy.
   if (!map_mode) hierarchy_.clear();
@@ -294,6 +307,11 @@ void Pipeline::replaceMap(Hierarchy &&map, std::uint32_t next_frame) {
   if (config_.mode != Mode::Map) throw std::invalid_argument("mode: replacing the map needs map mode");
   if (map.cellSize() != config_.hierarchy.cell_size || map.maxDepth() != config_.hierarchy.max_depth)
     throw std::invalid_argument("hierarchy: the map's cell_size/max_depth differ from the configuration's");
+  // Frames already taken fixed the fields: a map of other fields would have every later frame refused.
+  if (map_layout_fixed_ && !map.recordLayout().fields.empty() && map.recordLayout() != hierarchy_.recordLayout())
+    throw std::invalid_argument("the map's point fields (" + fieldNames(map.recordLayout()) +
+                                ") differ from those of the frames so far (" + fieldNames(hierarchy_.recordLayout()) +
+                                "): later frames would all be refused");
   hierarchy_ = std::move(map);
   frames_ = next_frame;
   // A map that has a layout (a saved one always does, even without samples) fixes it; a bare Hierarchy (the tiled

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <filesystem>
 #include <sstream>
 #include <system_error>
@@ -75,7 +76,8 @@ HpdsServer::HpdsServer(ros::NodeHandle nh, ros::NodeHandle private_nh, const std
     try {
       updater_.force_update();
     } catch (const std::exception &e) {
-      ROS_ERROR_STREAM_THROTTLE_NAMED(10.0, "hpds", "hpds: diagnostics not published: " << e.what());
+      if (logAllowed("diagnostics"))
+        ROS_ERROR_STREAM_NAMED("hpds", "hpds: diagnostics not published: " << e.what());
     }
   });
   snapshot_.stats.resize(processors_.size());
@@ -120,19 +122,29 @@ bool HpdsServer::shutdown() {
   if (service_spinner_) service_spinner_->stop();
   srv_save_map_.shutdown();
   srv_load_map_.shutdown();
+  // hpds_node stops itself while roscpp still runs (node_main.cpp); a nodelet is destroyed after its manager's
+  // ros::shutdown(), which has taken rosconsole down: then the lines go to stderr directly, or nobody would learn
+  // what became of the map.
+  const auto say = [](bool error, const std::string &text) {
+    if (ros::isStarted() && !ros::isShuttingDown()) {
+      if (error)
+        ROS_ERROR_STREAM_NAMED("hpds", text);
+      else
+        ROS_INFO_STREAM_NAMED("hpds", text);
+    } else {
+      std::fprintf(stderr, "[%s] [%.6f]: %s\n", error ? "ERROR" : " INFO", ros::WallTime::now().toSec(), text.c_str());
+      std::fflush(stderr);
+    }
+  };
   const std::size_t discarded = pool_ ? pool_->stop() : 0;
   if (discarded > 0)
-    ROS_WARN_STREAM_NAMED("hpds", "hpds: shutdown: " << discarded << " received frame(s) were still queued and are "
-                                                     << "not processed");
+    say(false, "hpds: shutdown: " + std::to_string(discarded) + " received frame(s) were still queued and are not "
+               "processed");
   // The workers are gone: the map is complete (no frame half-inserted) and nothing else touches it.
   if (config_.ros.save_map_on_shutdown && config_.hpds.mode == hpds::Mode::Map) {
     const auto [ok, message] = runMapCommand(true);
     shutdown_ok_ = ok;
-    if (ok) {
-      ROS_INFO_STREAM_NAMED("hpds", "hpds: shutdown: " << message);
-    } else {
-      ROS_ERROR_STREAM_NAMED("hpds", "hpds: shutdown: the map was not saved: " << message);
-    }
+    say(!ok, ok ? "hpds: shutdown: " + message : "hpds: shutdown: the map was not saved: " + message);
   }
   return shutdown_ok_;
 }
@@ -147,8 +159,16 @@ bool HpdsServer::logAllowed(const std::string &key) {
 }
 
 void HpdsServer::requireMapFolder() const {
-  // Found saving into a missing folder: the error came at shutdown, after all the mapping.
-  const std::string why = hpds::folderProblem(config_.ros.map_file);
+  // Found saving into a missing folder, or onto a folder: the error came at shutdown, after all the mapping.
+  const std::string &path = config_.ros.map_file;
+  std::error_code ec;
+  std::string why;
+  if (!path.empty() && path.back() == '/')
+    why = "names a folder (ends with '/'), not a map file";
+  else if (std::filesystem::is_directory(path, ec))
+    why = "is a folder, not a map file (name a file in it)";
+  else
+    why = hpds::folderProblem(path);
   if (!why.empty())
     throw std::invalid_argument("parameter " + pnh_.getNamespace() + "/ros/map_file: '" + config_.ros.map_file + "' " +
                                 why + " (ros/save_map_on_shutdown would fail at the end of the run)");
@@ -252,16 +272,18 @@ void HpdsServer::onCloud(const ros::MessageEvent<const sensor_msgs::PointCloud2>
     std::lock_guard<std::mutex> lock(input_mutex_);
     overload_total = ++overload_;
   }
-  if (lost > 0)
-    ROS_WARN_STREAM_THROTTLE_NAMED(5.0, "hpds", "hpds: " << lost << " frame(s) from " << publisher
-                                                         << " never arrived (header.seq jumped to " << msg->header.seq
-                                                         << "): lost before hpds received them (" << lost_total
-                                                         << " so far, counted as lost_upstream)");
-  if (dropped)
-    ROS_WARN_STREAM_THROTTLE_NAMED(5.0, "hpds", "hpds: dropped the oldest queued frame: frames arrive faster than "
-                                                "they are processed ("
-                                                    << overload_total << " so far, counted as overload; ros.queue_size "
-                                                    << config_.ros.queue_size << ")");
+  // Throttled on the wall clock (logAllowed), not ROS time: under use_sim_time without /clock a ROS-time throttle
+  // never lets the first line through.
+  if (lost > 0 && logAllowed("lost_upstream"))
+    ROS_WARN_STREAM_NAMED("hpds", "hpds: " << lost << " frame(s) from " << publisher << " never arrived (header.seq "
+                                           << "jumped to " << msg->header.seq << "): lost before hpds received them ("
+                                           << lost_total << " so far, counted as lost_upstream; a throttle, drop or "
+                                           << "filter upstream skips numbers on purpose, and then this is expected)");
+  if (dropped && logAllowed("overload"))
+    ROS_WARN_STREAM_NAMED("hpds", "hpds: dropped the oldest queued frame: frames arrive faster than they are "
+                                  "processed ("
+                                      << overload_total << " so far, counted as overload; ros.queue_size "
+                                      << config_.ros.queue_size << ")");
   std::string warning;
   {
     std::lock_guard<std::mutex> lock(keep_up_mutex_);
@@ -274,9 +296,10 @@ void HpdsServer::onCloud(const ros::MessageEvent<const sensor_msgs::PointCloud2>
 void HpdsServer::onInternalError(std::size_t worker, const std::string &what) {
   // A bug or an exhausted resource must not take the node down with it; the frame is lost, counted and said so.
   processors_[worker]->countDrop(DropReason::InternalError);
-  ROS_ERROR_STREAM_THROTTLE_NAMED(5.0, "hpds", "hpds: frame dropped by an internal error ("
-                                                   << statsSoFar(worker).dropped[int(DropReason::InternalError)]
-                                                   << " so far, counted as internal_error): " << what);
+  if (logAllowed("internal_error"))
+    ROS_ERROR_STREAM_NAMED("hpds", "hpds: frame dropped by an internal error ("
+                                       << statsSoFar(worker).dropped[int(DropReason::InternalError)]
+                                       << " so far, counted as internal_error): " << what);
   takeSnapshot(worker, 0.0);
 }
 
@@ -305,7 +328,7 @@ bool HpdsServer::waitForPose(const std::string &target, const std_msgs::Header &
   // runs on the bag clock and never expires once the bag stops, which would wedge the worker.
   const ros::WallTime deadline = ros::WallTime::now() + ros::WallDuration(config_.ros.tf_timeout);
   for (;;) {
-    if (tf_buffer_.canTransform(target, header.frame_id, header.stamp))
+    if (tf_buffer_.canTransform(target, tfFrameId(header.frame_id), header.stamp))
       return lookupSensorPose(tf_buffer_, target, header.frame_id, header.stamp, pose, why);
     if (ros::WallTime::now() >= deadline || !ros::ok() || pool_->stopping()) break;
     ros::WallDuration(0.002).sleep();
@@ -335,11 +358,11 @@ void HpdsServer::handle(const sensor_msgs::PointCloud2::ConstPtr &msg, std::size
     Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
     if (!target_frame_.empty() && !waitForPose(target_frame_, msg->header, pose, &why)) {
       processor.countDrop(DropReason::NoTransform);
-      ROS_WARN_STREAM_THROTTLE_NAMED(5.0, "hpds", "hpds: dropped frame at "
-                                                      << msg->header.stamp << ": no transform '" << msg->header.frame_id
-                                                      << "' -> '" << target_frame_ << "' ("
-                                                      << count(DropReason::NoTransform)
-                                                      << " so far, counted as no_transform): " << why);
+      if (logAllowed("no_transform"))
+        ROS_WARN_STREAM_NAMED("hpds", "hpds: dropped frame at " << msg->header.stamp << ": no transform '"
+                                                                << msg->header.frame_id << "' -> '" << target_frame_
+                                                                << "' (" << count(DropReason::NoTransform)
+                                                                << " so far, counted as no_transform): " << why);
     } else {
       // 4. Shared per-frame processing, then publish what was built, in arrival order. With one worker its
       //    pipeline counts the frames itself; several take the index of their frame in the stream.
@@ -351,8 +374,8 @@ void HpdsServer::handle(const sensor_msgs::PointCloud2::ConstPtr &msg, std::size
           ROS_ERROR_STREAM_NAMED("hpds", "hpds: dropped frame (" << toString(frame.drop) << ", " << count(frame.drop)
                                                                  << " so far): " << frame.why);
       } else {
-        if (frame.counters.out_of_range > 0)
-          ROS_WARN_STREAM_THROTTLE_NAMED(5.0, "hpds", "hpds: " << frame.counters.out_of_range << " of the frame's "
+        if (frame.counters.out_of_range > 0 && logAllowed("out_of_range"))
+          ROS_WARN_STREAM_NAMED("hpds", "hpds: " << frame.counters.out_of_range << " of the frame's "
                                                                 << frame.counters.input
                                                                 << " points lie beyond the exact key range of the "
                                                                    "finest level (|coordinate| / cell edge >= 2^30) "

@@ -57,10 +57,11 @@ void HpdsServer::diagnose(diagnostic_updater::DiagnosticStatusWrapper &status) {
   for (std::size_t m : s.memory) memory_bytes += m;
   const ProcessorStats &w = window_stats_;
   const std::uint64_t frames_window = t.processed - w.processed;
-  // Frames nobody listens to are not a problem worth a warning; every other loss is.
+  // Frames nobody listens to are not a problem worth a warning; every other drop of a received frame is. Frames
+  // lost upstream never reached the node, and a throttle or filter upstream (topic_tools throttle/drop, rosbag
+  // filter) skips header.seq numbers on purpose: they are counted and logged, but do not make the node WARN.
   const std::uint64_t dropped_window =
-      (t.droppedTotal() - w.droppedTotal()) + (overload - window_overload_) +
-      (lost_upstream - window_lost_upstream_) -
+      (t.droppedTotal() - w.droppedTotal()) + (overload - window_overload_) -
       (t.dropped[int(DropReason::NoSubscribers)] - w.dropped[int(DropReason::NoSubscribers)]);
 
   status.add("input rate [Hz]", double(received - window_received_) / window);
@@ -71,12 +72,12 @@ void HpdsServer::diagnose(diagnostic_updater::DiagnosticStatusWrapper &status) {
   status.add("processing time max [ms]", 1e3 * s.seconds_max_window);
   status.add("processing time mean, all frames [ms]", 1e3 * mean(t.seconds_sum, t.processed));
   status.add("processing time max, all frames [ms]", 1e3 * t.seconds_max);
-  status.add("dropped total", t.droppedTotal() + overload + lost_upstream);
+  status.add("dropped total", t.droppedTotal() + overload);
   status.add("dropped malformed", t.malformedTotal());
   for (int e = 1; e < kCloudErrorCount; ++e)
     status.add(std::string("dropped malformed ") + toString(CloudError(e)), t.malformed[e]);
   status.add("dropped overload", overload);
-  status.add("dropped lost_upstream", lost_upstream);
+  status.add("frames lost upstream", lost_upstream);
   for (DropReason r : {DropReason::NoTransform, DropReason::LayoutChanged, DropReason::NoSubscribers,
                        DropReason::InternalError})
     status.add(std::string("dropped ") + toString(r), t.dropped[int(r)]);

@@ -117,7 +117,8 @@ class Pipeline {
 
   /// Map mode: replaces the map with `map` (e.g. read by loadMap in HierarchyFile.hpp) and numbers the next frame
   /// `next_frame`, as if the frames that built `map` had gone through this pipeline. Throws std::invalid_argument,
-  /// leaving the pipeline unchanged, outside map mode or when the map's cell_size/max_depth differ from the config.
+  /// leaving the pipeline unchanged, outside map mode, when the map's cell_size/max_depth differ from the config, or
+  /// when frames already taken have other point fields than the map's (every later frame would be refused).
   void replaceMap(Hierarchy &&map, std::uint32_t next_frame);
 
  private:
