@@ -208,8 +208,18 @@ void applyNodeConfigYaml(const std::string &yaml_text, NodeConfig &config, const
     try {
       for (const auto &entry : root) {
         const std::string name = entry.first.IsScalar() ? entry.first.Scalar() : std::string();
+        static const char *const kRosLeaves[] = {"fixed_frame", "output_frame", "tf_timeout", "local_map_radius",
+                                                 "local_map_rate", "publish_levels", "queue_size", "map_file",
+                                                 "load_map_on_start", "save_map_on_shutdown"};
         if (name == "ros") {
           applyRosSection(entry.second, result.ros);
+        } else if (std::find(std::begin(kRosLeaves), std::end(kRosLeaves), name) != std::end(kRosLeaves)) {
+          fail(name, "unknown key (did you mean 'ros." + name + "'? the node's own keys are under ros/)");
+        } else if (name == "input" && entry.second.IsScalar()) {
+          // `_input:=/velodyne_points` sets a parameter; the topic is a remapping.
+          fail(name, "expected a map of input.* keys (skip_zero_points, min_range, max_range), got '" +
+                         entry.second.Scalar() + "': the topic is not a parameter, remap it: ~input:=" +
+                         entry.second.Scalar());
         } else if (std::find(ignored_keys.begin(), ignored_keys.end(), name) == ignored_keys.end()) {
           rest[entry.first] = entry.second;
         }

@@ -15,6 +15,8 @@
 // Parameters: ~target, ~input (its input topic), ~map_dir (created here), ~scan_target, ~nofile_target,
 // ~fifo_target and ~fifo_input (a map-mode node whose ros/map_file is a FIFO this test creates).
 #include <gtest/gtest.h>
+
+#include <limits>
 #include <std_srvs/Trigger.h>
 
 #include <fcntl.h>
@@ -352,6 +354,34 @@ TEST(NodeParameters, DiagnosticPeriodIsBounded) {
       ADD_FAILURE() << "started with a bad diagnostic_period";
     } catch (const std::invalid_argument &e) {
       EXPECT_TRUE(contains(e.what(), ns + "/diagnostic_period: must be a number of seconds in (0, 3600]")) << e.what();
+    }
+  }
+  ros::param::del(ns);
+}
+
+// Parameter mistakes a ROS user makes, each refused with what to do instead.
+TEST(NodeParameters, CommonMistakesSayWhatWasMeant) {
+  const std::string ns = "/hpds_mistakes";
+  ros::NodeHandle nh;
+  struct Case {
+    std::function<void()> set;
+    std::string expected;
+  };
+  const std::vector<Case> cases = {
+      {[&] { ros::param::set(ns + "/config_file", 5); }, ns + "/config_file: expected the path of a YAML file"},
+      {[&] { ros::param::set(ns + "/output/spacing", std::numeric_limits<double>::quiet_NaN()); },
+       ns + "/output/spacing: must be a finite number"},
+      {[&] { ros::param::set(ns + "/input", std::string("/velodyne_points")); }, "remap it: ~input:=/velodyne_points"},
+      {[&] { ros::param::set(ns + "/fixed_frame", std::string("odom")); }, "did you mean 'ros.fixed_frame'"},
+  };
+  for (const Case &c : cases) {
+    ros::param::del(ns);
+    c.set();
+    try {
+      hpds_node::HpdsServer server(nh, ros::NodeHandle(ns), "hpds_mistakes");
+      ADD_FAILURE() << "started; expected: " << c.expected;
+    } catch (const std::invalid_argument &e) {
+      EXPECT_TRUE(contains(e.what(), c.expected)) << e.what();
     }
   }
   ros::param::del(ns);

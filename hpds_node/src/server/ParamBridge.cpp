@@ -36,7 +36,9 @@ void emitParam(YAML::Emitter &out, XmlRpc::XmlRpcValue &v) {
       // 32-bit: rosparam turns a larger one (order/seed 5000000000) into a double, which is written back as the
       // integer it was while a double holds it exactly (up to 2^53).
       const double d = static_cast<double>(v);
-      if (std::fabs(d) >= 2147483648.0 && std::fabs(d) <= 9007199254740992.0 && d == std::floor(d))
+      if (!std::isfinite(d))
+        out << d;  // the emitter writes .nan/.inf/-.inf plain; as text they came out quoted, a "string"
+      else if (std::fabs(d) >= 2147483648.0 && std::fabs(d) <= 9007199254740992.0 && d == std::floor(d))
         out << std::to_string(static_cast<long long>(d));
       else
         out << hpds::yaml::formatNumber(d);
@@ -61,7 +63,9 @@ NodeConfig loadNodeConfigFromParams(const ros::NodeHandle &private_nh) {
   NodeConfig config;
   const std::string ns = private_nh.getNamespace();
   std::string file;
-  if (private_nh.getParam("config_file", file) && !file.empty()) {
+  if (private_nh.hasParam("config_file") && !private_nh.getParam("config_file", file))
+    throw std::invalid_argument("parameter " + ns + "/config_file: expected the path of a YAML file (a string)");
+  if (!file.empty()) {
     try {
       config = loadNodeConfigFile(file);
     } catch (const std::invalid_argument &e) {
