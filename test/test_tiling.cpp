@@ -55,8 +55,12 @@ TEST(TileGrid, TileSizeMustBeAWholeMultipleOfTheCellSize) {
       EXPECT_NE(what.find("tile size"), std::string::npos) << what;
       // The size as given, in a few digits (not 301 of them, nor 0.000000 for 1e-7).
       EXPECT_LT(what.size(), 200u) << what;
-      if (bad == 1e300) EXPECT_NE(what.find("got 1e+300 m"), std::string::npos) << what;
-      if (bad == 1e-7) EXPECT_NE(what.find("got 1e-07 m"), std::string::npos) << what;
+      if (bad == 1e300) {
+        EXPECT_NE(what.find("got 1e+300 m"), std::string::npos) << what;
+      }
+      if (bad == 1e-7) {
+        EXPECT_NE(what.find("got 1e-07 m"), std::string::npos) << what;
+      }
     }
   }
   // The shipped defaults derive the cell from output.spacing (3.69504 m for 0.1 m): the error names valid sizes,

@@ -8,8 +8,9 @@
 //   ~local_map, plus ~level_<D> for each ros.publish_levels entry, out. Diagnostics on /diagnostics.
 // - Every frame is processed or counted as dropped, with its reason, in the diagnostics, and logged (throttled):
 //   - the subscriber callback only queues the message (OrderedWorkerPool, ros.queue_size deep; when full the oldest
-//     is dropped: overload) and counts gaps in header.seq per publisher (lost_upstream: frames that never arrived,
-//     e.g. dropped by a publisher's or roscpp's queue);
+//     is dropped: overload) and counts gaps in header.seq per publisher ("frames lost upstream": frames that never
+//     arrived, dropped by a publisher's or roscpp's queue or skipped by a throttle upstream; logged, but no drop
+//     of the node's);
 //   - a worker validates (malformed <reason>), waits for tf (at most ros.tf_timeout of wall time: no_transform),
 //     runs its FrameProcessor (layout_changed) and publishes; anything the processing throws is counted
 //     (internal_error) and logged with its message, and the worker carries on.
@@ -146,7 +147,7 @@ class HpdsServer {
   ros::WallTime window_start_;
   std::uint64_t window_received_ = 0;
   ProcessorStats window_stats_;
-  std::uint64_t window_overload_ = 0, window_lost_upstream_ = 0;
+  std::uint64_t window_overload_ = 0;
 
   std::unique_ptr<OrderedWorkerPool> pool_;  // started once everything above exists
   // Services: their own queue and thread, declared after the pool so that they are torn down first.

@@ -106,7 +106,6 @@ void HpdsServer::diagnose(diagnostic_updater::DiagnosticStatusWrapper &status) {
   window_start_ = now;
   window_received_ = received;
   window_overload_ = overload;
-  window_lost_upstream_ = lost_upstream;
   window_stats_ = t;
 }
 
