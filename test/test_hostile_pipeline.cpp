@@ -14,6 +14,7 @@
 #include <vector>
 
 #include "HostileTestSupport.hpp"
+#include "TiledRun.hpp"
 #include "hpds/eval/SamplingVerifier.hpp"
 #include "hpds/eval/SyntheticLidar.hpp"
 #include "hpds/pipeline/Pipeline.hpp"
@@ -236,23 +237,8 @@ TEST(HostilePipeline, SamplesHitByLastFrameAtEveryRadius) {
   c.mode = Mode::Map;
   c.normals.enabled = false;
   Pipeline p(c);
-  std::vector<std::array<double, 3>> last;
-  for (int i = 0; i < 2; ++i) {
-    const auto f = lidar.frame(i);
-    (void)p.addFrame(f.frame);
-    if (i == 1) {
-      const PointBuffer &b = f.frame.points;
-      const PointField *fx = b.layout().find("x"), *fy = b.layout().find("y"), *fz = b.layout().find("z");
-      for (std::size_t k = 0; k < b.size(); ++k) {
-        const Eigen::Vector3d q = f.frame.sensor_to_fixed * Eigen::Vector3d(readAsDouble(b.record(k), *fx),
-                                                                            readAsDouble(b.record(k), *fy),
-                                                                            readAsDouble(b.record(k), *fz));
-        if (q.allFinite() && !(readAsDouble(b.record(k), *fx) == 0 && readAsDouble(b.record(k), *fy) == 0 &&
-                               readAsDouble(b.record(k), *fz) == 0))
-          last.push_back({q.x(), q.y(), q.z()});
-      }
-    }
-  }
+  for (int i = 0; i < 2; ++i) (void)p.addFrame(lidar.frame(i).frame);
+  const std::vector<std::array<double, 3>> last = test::insertedPoints(c, {lidar.frame(1).frame});
   const int deepest = p.buildDepth();
   for (const double radius : {1e-6, 1e-5, 1e-3, 0.1, 1.0, double(INFINITY)}) {
     SCOPED_TRACE(radius);

@@ -175,13 +175,14 @@ def build(inputs, poses_path, outdir, tile_size, config_yaml, runner, chunk_fram
     if len(poses) != len(inputs):
         raise BuildError("--poses: '%s' has %d poses for %d inputs (one pose per input is required)"
                          % (poses_path, len(poses), len(inputs)))
-    check_paths(inputs + [os.fspath(poses_path)] + [os.fspath(p) for p in other_inputs], outdir)
+    read = inputs + [os.fspath(poses_path)] + [os.fspath(p) for p in other_inputs]
+    check_paths(read, outdir)  # before the folder is made, so that a refused build leaves nothing behind
     os.makedirs(outdir, exist_ok=True)
     outdir = os.path.abspath(outdir)
     lock = _lock(outdir)
     try:
         # Checked again under the lock: a build that finished meanwhile left its tiles.
-        check_paths(inputs + [os.fspath(poses_path)] + [os.fspath(p) for p in other_inputs], outdir)
+        check_paths(read, outdir)
         remove_scratch(outdir)  # our own scratch from a killed build
         try:
             return _run(inputs, poses, poses_path, outdir, plan, tile_size, config_yaml, runner, chunk_frames, log,

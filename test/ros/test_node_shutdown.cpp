@@ -116,6 +116,18 @@ class NodeShutdown : public testing::Test {
     return {status, readText(log)};
   }
 
+  // A run whose save must fail: the map's folder is there when the node starts (a missing one is refused at start)
+  // and gone when it is stopped with SIGINT. Returns the exit status and log; `file` receives the map's path.
+  std::pair<int, std::string> runWithVanishingFolder(const std::string &name, bool nodelet, std::string &file) {
+    const fs::path folder = dir_ / ("vanishing_" + name);
+    fs::create_directories(folder);
+    file = (folder / "m.hpdsmap").string();
+    return runAndStop(name, file, [&](pid_t pid) {
+      fs::remove_all(folder);
+      ::kill(pid, SIGINT);
+    }, nodelet);
+  }
+
   // The log says "saved N samples ... to '<file>'" and the file holds N samples.
   void expectSaved(const std::string &log, const std::string &file) {
     const std::size_t at = log.find("hpds: shutdown: saved ");
@@ -157,14 +169,8 @@ TEST_F(NodeShutdown, RosnodeKillSavesTheMapAndSaysSo) {
 }
 
 TEST_F(NodeShutdown, AFailedSaveIsAnErrorLineAndExitStatusOne) {
-  // The folder is there when the node starts (a missing one is refused at start) and gone when it stops.
-  const fs::path folder = dir_ / "vanishing";
-  fs::create_directories(folder);
-  const std::string file = (folder / "m.hpdsmap").string();
-  const auto [status, log] = runAndStop("hpds_shutdown_fail", file, [&](pid_t pid) {
-    fs::remove_all(folder);
-    ::kill(pid, SIGINT);
-  });
+  std::string file;
+  const auto [status, log] = runWithVanishingFolder("hpds_shutdown_fail", false, file);
   EXPECT_EQ(status, 1) << log;
   EXPECT_TRUE(contains(log, "[ERROR]") && contains(log, "hpds: shutdown: the map was not saved: saving the map failed: " +
                                                             file + ": cannot create a temporary file beside it"))
@@ -179,13 +185,8 @@ TEST_F(NodeShutdown, ANodeletSaysWhatBecameOfTheMap) {
       runAndStop("hpds_shutdown_nodelet", file, [](pid_t pid) { ::kill(pid, SIGINT); }, true);
   EXPECT_GE(status, 0) << log;
   expectSaved(log, file);
-  const fs::path folder = dir_ / "vanishing_nodelet";
-  fs::create_directories(folder);
-  const std::string lost = (folder / "m.hpdsmap").string();
-  const auto [status2, log2] = runAndStop("hpds_shutdown_nodelet_fail", lost, [&](pid_t pid) {
-    fs::remove_all(folder);
-    ::kill(pid, SIGINT);
-  }, true);
+  std::string lost;
+  const auto [status2, log2] = runWithVanishingFolder("hpds_shutdown_nodelet_fail", true, lost);
   EXPECT_GE(status2, 0) << log2;
   EXPECT_TRUE(contains(log2, "[ERROR]") && contains(log2, "hpds: shutdown: the map was not saved")) << log2;
 }

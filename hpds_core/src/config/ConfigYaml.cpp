@@ -183,15 +183,6 @@ std::size_t editDistance(std::string_view a, std::string_view b) {
 // Scalars. Parsed from the scalar text (YamlScalar.hpp) rather than with yaml-cpp's as<T>(), whose stream
 // conversions accept things this file must reject (yes/no, 1.5 for an int, hex) and depend on the global locale.
 
-// A number or boolean must be a scalar; the text itself goes to the one strict scalar parser (YamlScalar.hpp).
-void refuseTag(const YAML::Node &node, const std::string &key);
-
-const std::string &scalarText(const YAML::Node &node, const std::string &key, const char *expected) {
-  if (!node.IsScalar()) fail(key, std::string("expected ") + expected + ", got " + describe(node));
-  refuseTag(node, key);
-  return node.Scalar();
-}
-
 // yaml-cpp tags quoted scalars "!" and plain untagged ones "?". Any other tag (!!str, !!int, !custom) would change
 // what the value means to a YAML reader while hpds read the text alone: refused, naming the key.
 bool isQuoted(const YAML::Node &node) { return node.Tag() == "!"; }
@@ -200,6 +191,14 @@ void refuseTag(const YAML::Node &node, const std::string &key) {
   if (tag.empty() || tag == "?" || tag == "!") return;
   const std::string shown = tag.rfind("tag:yaml.org,2002:", 0) == 0 ? "!!" + tag.substr(18) : tag;
   fail(key, "has the YAML tag " + shown + "; config values are plain scalars (remove the tag)");
+}
+
+// A value must be an untagged scalar; the text itself goes to the one strict scalar parser (YamlScalar.hpp), or is
+// an enum's name.
+const std::string &scalarText(const YAML::Node &node, const std::string &key, const char *expected) {
+  if (!node.IsScalar()) fail(key, std::string("expected ") + expected + ", got " + describe(node));
+  refuseTag(node, key);
+  return node.Scalar();
 }
 
 void parseValue(const YAML::Node &node, const std::string &key, double *out) {
@@ -216,9 +215,7 @@ void parseValue(const YAML::Node &node, const std::string &key, bool *out) {
 }
 
 const std::string &enumScalar(const YAML::Node &node, const std::string &key) {
-  if (!node.IsScalar()) fail(key, "expected a string, got " + describe(node));
-  refuseTag(node, key);
-  return node.Scalar();
+  return scalarText(node, key, "a string");
 }
 
 void parseValue(const YAML::Node &node, const std::string &key, Mode *out) {

@@ -219,8 +219,11 @@ void AtomicFile::commit() {
 }
 
 std::string folderProblem(const std::string &path) {
-  const std::string folder = folderOf(followLinks(path));
+  // A folder is no file name: AtomicFile would refuse it only when writing, after the work.
   struct stat st {};
+  if (!path.empty() && path.back() == '/') return "names a folder (ends with '/'), not a file";
+  if (::stat(path.c_str(), &st) == 0 && S_ISDIR(st.st_mode)) return "is a folder, not a file name";
+  const std::string folder = folderOf(followLinks(path));
   if (::stat(folder.c_str(), &st) != 0) return "is in folder '" + folder + "', which does not exist";
   if (!S_ISDIR(st.st_mode)) return "is in '" + folder + "', which is not a folder";
   if (::access(folder.c_str(), W_OK | X_OK) != 0) return "is in folder '" + folder + "', which is not writable";

@@ -49,7 +49,7 @@ FrameCounters &FrameCounters::operator+=(const FrameCounters &o) {
 }
 
 namespace {
-/// "x y z intensity (float32 x4, 16 bytes)": names, and the types and size when the names alone do not differ.
+/// "x y z intensity as float32 float32 float32 float32, 16 bytes": what tells two layouts apart in an error.
 std::string fieldNames(const PointLayout &l) {
   std::string names, types;
   for (const PointField &f : l.fields) {
@@ -371,9 +371,7 @@ std::vector<SampleId> Pipeline::samplesHitByLastFrame(int min_level, int max_lev
   // them against its 27 buckets.
   const FrameGridIndex index(xyz_.data(), candidates_, radius);
   for (SampleId id = 0; id < hierarchy_.idBound(); ++id) {
-    if (!hierarchy_.isLive(id)) continue;
-    const int l = hierarchy_.level(id);
-    if (l < min_level || l > max_level) continue;
+    if (!inLevels(id)) continue;
     const double *p = hierarchy_.position(id);
     if (p[0] < lo[0] || p[0] > hi[0] || p[1] < lo[1] || p[1] > hi[1] || p[2] < lo[2] || p[2] > hi[2]) continue;
     if (index.anyWithin(p)) hit.push_back(id);

@@ -145,14 +145,14 @@ class FrameProcessor {
   double last_local_map_stamp_ = 0.0;
 };
 
-/// Pose of frame `source` (the sensor) in `target` at `stamp` from any tf2 buffer (the node's listener buffer or
-/// the replay's, filled from the bag); false with `why` set when the buffer cannot answer. The pose is rounded
-/// (rotation to float32 quaternion precision, translation to 2^-20 m) so that it does not depend on whether the
-/// buffer already holds later transforms, which changes the last bits of tf2's result.
 /// A message's frame_id as tf2 takes it: ROS 1 drivers and old bags still write "/velodyne", which tf2 refuses (and
 /// warns about on every lookup); its transforms are stored without the slash.
 [[nodiscard]] std::string tfFrameId(const std::string &frame_id);
 
+/// Pose of frame `source` (the sensor) in `target` at `stamp` from any tf2 buffer (the node's listener buffer or
+/// the replay's, filled from the bag); false with `why` set when the buffer cannot answer. The pose is rounded
+/// (rotation to float32 quaternion precision, translation to 2^-20 m) so that it does not depend on whether the
+/// buffer already holds later transforms, which changes the last bits of tf2's result.
 bool lookupSensorPose(const tf2::BufferCore &buffer, const std::string &target, const std::string &source,
                       const ros::Time &stamp, Eigen::Isometry3d &pose, std::string *why = nullptr);
 

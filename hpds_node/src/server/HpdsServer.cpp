@@ -160,15 +160,7 @@ bool HpdsServer::logAllowed(const std::string &key) {
 
 void HpdsServer::requireMapFolder() const {
   // Found saving into a missing folder, or onto a folder: the error came at shutdown, after all the mapping.
-  const std::string &path = config_.ros.map_file;
-  std::error_code ec;
-  std::string why;
-  if (!path.empty() && path.back() == '/')
-    why = "names a folder (ends with '/'), not a map file";
-  else if (std::filesystem::is_directory(path, ec))
-    why = "is a folder, not a map file (name a file in it)";
-  else
-    why = hpds::folderProblem(path);
+  const std::string why = hpds::folderProblem(config_.ros.map_file);
   if (!why.empty())
     throw std::invalid_argument("parameter " + pnh_.getNamespace() + "/ros/map_file: '" + config_.ros.map_file + "' " +
                                 why + " (ros/save_map_on_shutdown would fail at the end of the run)");

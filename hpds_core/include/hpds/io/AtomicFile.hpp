@@ -68,9 +68,10 @@ void writeFileAtomically(const std::string &target, std::string_view bytes);
 /// The file a write to `path` replaces: `path` with symbolic links followed (the last one kept when it dangles).
 [[nodiscard]] std::string followLinks(const std::string &path);
 
-/// Why an AtomicFile for `path` could not be created in its folder (links followed: the folder of followLinks), as
-/// "is in folder 'F', which does not exist", "is in 'F', which is not a folder" or "is in folder 'F', which is not
-/// writable"; empty when the folder takes it. For programs that check outputs before the work.
+/// Why an AtomicFile for `path` could not be written (links followed: the folder of followLinks), as "is a folder,
+/// not a file name" (also for a path ending in '/'), "is in folder 'F', which does not exist", "is in 'F', which is
+/// not a folder" or "is in folder 'F', which is not writable"; empty when it could. For programs that check outputs
+/// before the work.
 [[nodiscard]] std::string folderProblem(const std::string &path);
 
 /// Removes the hpds temporaries in `folder` whose writer is gone (see contract) and returns how many. AtomicFile
