@@ -303,7 +303,7 @@ TEST_F(HostileTest, GapsInHeaderSeqAreCountedAsLostUpstreamAndLogged) {
   ros::WallDuration(0.5).sleep();  // more diagnostics periods (0.2 s), covering the last frames
   EXPECT_LT(diag.highestLevel(), int(diagnostic_msgs::DiagnosticStatus::WARN));
   EXPECT_TRUE(hpds_test::waitFor(
-      [&] { return logs.has(rosgraph_msgs::Log::WARN, {"never arrived", "counted as lost_upstream"}); }, 10.0))
+      [&] { return logs.has(rosgraph_msgs::Log::WARN, {"never arrived", "counted in /diagnostics as 'frames lost upstream'"}); }, 10.0))
       << logs.dump();
 }
 
