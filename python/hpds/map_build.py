@@ -11,6 +11,7 @@ process without Dask.
 """
 import argparse
 import logging
+import math
 import os
 import signal
 import sys
@@ -28,7 +29,8 @@ def parse_args(argv):
     p.add_argument("--poses", required=True, help="KITTI pose file: one 3x4 sensor-to-world matrix per input")
     p.add_argument("-o", "--output", required=True, metavar="OUTDIR", help="output folder (tiles and manifest.json)")
     p.add_argument("--tile-size", required=True, type=float, metavar="T",
-                   help="[m] tile edge, a whole multiple of hierarchy.cell_size")
+                   help="[m] tile edge, a whole multiple of hierarchy.cell_size; with the cell derived from "
+                        "--spacing (no --cell-size), rounded to the nearest whole number of cells")
     where = p.add_mutually_exclusive_group()
     where.add_argument("--workers", type=int, default=None,
                        help="local Dask worker processes (default: one per core); 0 = no Dask, this process")
@@ -91,6 +93,21 @@ def resolve_config(a):
     return _hpds.config_yaml("", a.config or "", to_yaml(overlay))
 
 
+def whole_cell_tile_size(tile_size, config_yaml, log=None):
+    """--tile-size with a cell derived from output.spacing (hierarchy.cell_size 0): the cell is an odd size (3.695 m
+    for 0.1 m) that no round tile size is a multiple of, so T is rounded to the nearest whole number (>= 1) of cells,
+    and the build says so. A cell the config fixes is left to the tile grid's check, which refuses other sizes."""
+    cell, derived = _hpds.tile_cell(config_yaml)
+    if not derived or not math.isfinite(tile_size) or not tile_size > 0.0:
+        return tile_size
+    k = max(1, round(tile_size / cell))
+    rounded = k * cell
+    if abs(rounded - tile_size) > 1e-9 * rounded and log is not None:
+        log("tile size %g m is not a whole number of level-0 cells (%.9g m, derived from output.spacing): "
+            "tiles of %.9g m (%d cells) instead" % (tile_size, cell, rounded, k))
+    return rounded
+
+
 def _dask_runner(a):
     from distributed import Client, LocalCluster
 
@@ -116,12 +133,14 @@ def main(argv=None):
     started = False
     try:
         config_yaml = resolve_config(a)
+        tile_size = whole_cell_tile_size(a.tile_size, config_yaml,
+                                         log=lambda msg: print("hpds.map_build: " + msg, file=sys.stderr, flush=True))
         if a.workers == 0:
             runner = SerialRunner()
         else:
             runner, closers = _dask_runner(a)
         started = True
-        m = build(a.inputs, a.poses, a.output, a.tile_size, config_yaml, runner, chunk_frames=a.chunk_frames,
+        m = build(a.inputs, a.poses, a.output, tile_size, config_yaml, runner, chunk_frames=a.chunk_frames,
                   other_inputs=[a.config] if a.config else [])
     except (BuildError, ValueError, RuntimeError, OSError) as e:
         print("hpds.map_build: error: %s" % e, file=sys.stderr)

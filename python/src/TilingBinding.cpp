@@ -71,6 +71,16 @@ void bindTiling(py::module_ &m) {
       py::arg("config_yaml"), py::arg("tile_size"),
       "Checks a tiled build's config and tile size (ValueError naming the key) and returns its geometry.");
   m.def(
+      "tile_cell",
+      [](const std::string &yaml) {
+        const HpdsConfig config = loadConfigString(yaml);
+        validateTiledConfig(config);
+        return py::make_tuple(resolveOutput(config).cell_size, config.hierarchy.cell_size == 0.0);
+      },
+      py::arg("config_yaml"),
+      "(cell_size, derived): the level-0 cell a tiled build runs with, and whether it is derived from output.spacing "
+      "(hierarchy.cell_size 0) rather than fixed by the config.");
+  m.def(
       "tile_neighbours",
       [](const std::string &yaml, double tile_size, std::int32_t i, std::int32_t j, int ring) {
         const HpdsConfig config = resolvedConfig(loadConfigString(yaml));

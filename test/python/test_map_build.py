@@ -11,8 +11,8 @@ import glob
 import io
 import json
 import logging
+import math
 import os
-import re
 import shutil
 import signal
 import tempfile
@@ -257,17 +257,24 @@ class MapBuild(unittest.TestCase):
             self.assertEqual(map_build.main(base + ["-o", self.out("e5"), "--tile-size", "8", "--cell-size", "2"]), 1)
         self.assertIn("poses", err.getvalue())
 
-    def test_the_shipped_defaults_build_with_a_tile_size_the_error_names(self):
-        # No sampling flag: the cell is derived from output.spacing (0.1 m), an odd size that 8 m does not divide.
-        base = self.frames + ["--poses", self.poses, "--workers", "0"]
+    def test_the_shipped_defaults_round_the_tile_size_to_whole_cells(self):
+        # The README's command: no --cell-size, so the cell is derived from output.spacing (3.695 m for 0.1 m), an
+        # odd size that no round tile size divides. The tile size is rounded to whole cells (said on stderr) rather
+        # than refused; a cell the user fixed is still checked exactly (test_command_line_errors_name_the_option_or_key).
+        base = self.frames + ["--poses", self.poses, "--workers", "0", "--spacing", "0.1"]
         with contextlib.redirect_stderr(io.StringIO()) as err:
-            self.assertEqual(map_build.main(base + ["-o", self.out("d1"), "--tile-size", "8"]), 1)
-        m = re.search(r"\(nearest: ([0-9.e+-]+) or ([0-9.e+-]+) m\)", err.getvalue())
-        self.assertIsNotNone(m, err.getvalue())
-        self.assertEqual(map_build.main(base + ["-o", self.out("d2"), "--tile-size", m.group(2)]), 0)
-        with open(os.path.join(self.out("d2"), "manifest.json")) as f:
+            self.assertEqual(map_build.main(base + ["-o", self.out("d1"), "--tile-size", "8"]), 0, err.getvalue())
+        with open(os.path.join(self.out("d1"), "manifest.json")) as f:
             manifest = json.load(f)
+        cell = manifest["cell_size"]
+        self.assertAlmostEqual(cell, 2 * 0.1 / math.sqrt(3) * 2 ** 5, places=6)
+        self.assertEqual(manifest["tile_size"], 2 * cell)  # 8 / 3.695 = 2.17 cells: 2
+        self.assertIn("tiles of %.9g m (2 cells) instead" % (2 * cell), err.getvalue())
         self.assertGreater(manifest["counts"]["samples_written"], 0)
+        # A size that is already whole cells is taken as it is, without a word.
+        with contextlib.redirect_stderr(io.StringIO()) as err:
+            self.assertEqual(map_build.main(base + ["-o", self.out("d2"), "--tile-size", repr(3 * cell)]), 0)
+        self.assertNotIn("instead", err.getvalue())
 
     def two_poses(self, name, dx=0.0):
         """The drive's first two poses, moved by dx along x."""
