@@ -107,6 +107,11 @@ TEST(BadInput, MissingEmptyAndUnknownFiles) {
   expectError([&] { (void)readPointCloud((dir / "noext").string()); }, "noext", {"unsupported extension"});
   fs::create_directories(dir / "dir.pcd");
   expectError([&] { (void)readPointCloud((dir / "dir.pcd").string()); }, "dir.pcd", {"not a regular file"});
+  // A path without a point-cloud extension that is not a file at all (a folder of frames, a mistyped name) says
+  // so, not that its extension '(none)' is unsupported.
+  fs::create_directories(dir / "frames");
+  expectError([&] { (void)readPointCloud((dir / "frames").string()); }, "frames", {"not a regular file"});
+  expectError([&] { (void)readPointCloud((dir / "no_such_frame").string()); }, "no_such_frame", {"file not found"});
   writeBytes(dir / "odd.bin", std::string(17, '\0'));
   expectError([&] { (void)readPointCloud((dir / "odd.bin").string()); }, "odd.bin", {"17", "multiple of 16"});
 }

@@ -4,6 +4,7 @@
 #include "ReaderSupport.hpp"
 #include "hpds/io/KittiBin.hpp"
 #include "hpds/io/PlyWriter.hpp"
+#include "io/FileAccess.hpp"
 
 namespace hpds {
 
@@ -18,6 +19,8 @@ PointBuffer readPointCloud(const std::string &path) {
   if (ext == ".pcd") return readPcd(path);
   if (ext == ".ply") return readPly(path);
   if (ext == ".bin") return readKittiBin(path);
+  // A folder of frames or a mistyped path: "file not found" / "not a regular file" says more than its extension.
+  io_detail::requireRegularFile(path);
   fail(path, "unsupported extension " + quote(ext.empty() ? "(none)" : ext) + " (expected .pcd, .ply or .bin)");
 }
 
