@@ -96,10 +96,13 @@ std::string messagesJson(const hpds_node::ProcessorStats &s, std::uint64_t wrong
 std::string messageSummary(std::size_t messages, const std::string &topic, const hpds_node::ProcessorStats &s,
                            std::uint64_t wrong_type, const std::string &target) {
   std::ostringstream m;
-  m << messages << " on " << topic << ", " << s.processed << " processed, " << s.malformedTotal() << " malformed, "
-    << s.dropped[int(hpds_node::DropReason::NoTransform)] << " without transform to '" << target << "', "
-    << s.dropped[int(hpds_node::DropReason::LayoutChanged)] << " with other fields than the map, " << wrong_type
-    << " not PointCloud2";
+  m << messages << " on " << topic << ", " << s.processed << " processed, " << s.malformedTotal() << " malformed, ";
+  // Only map mode looks transforms up and keeps a map's fields (its target frame is then never empty): a scan-mode
+  // summary naming an empty frame would read as a misconfiguration.
+  if (!target.empty())
+    m << s.dropped[int(hpds_node::DropReason::NoTransform)] << " without transform to '" << target << "', "
+      << s.dropped[int(hpds_node::DropReason::LayoutChanged)] << " with other fields than the map, ";
+  m << wrong_type << " not PointCloud2";
   if (const std::uint64_t lost = s.dropped[int(hpds_node::DropReason::LostUpstream)])
     m << ", " << lost << " missing from the recording (gaps in header.seq)";
   return m.str();

@@ -15,7 +15,10 @@ grep -q '"data_size": 1' "$work/stats.json" || { echo "expected the truncated cl
 cmp "$work/map1.ply" "$work/map2.ply" || { echo "replay is not deterministic"; exit 1; }
 # Scan mode into one PLY, and a fixed frame that the bag does not have: every frame dropped, exit status 1 with an
 # error line, and the existing outputs of an earlier run (bag and PLY) left as they were.
-"$hpds" replay "$work/input.bag" "${common[@]}" --mode scan -o "$work/scan.ply" > /dev/null
+"$hpds" replay "$work/input.bag" "${common[@]}" --mode scan -o "$work/scan.ply" > "$work/scan.log"
+# Scan mode looks no transform up: its summary names no target frame.
+grep -q "^messages: .* 6 processed" "$work/scan.log" || { cat "$work/scan.log"; exit 1; }
+grep -q "without transform" "$work/scan.log" && { echo "scan-mode summary names a transform"; cat "$work/scan.log"; exit 1; }
 cp "$work/cli.bag" "$work/prev.bag"
 for out in prev.bag scan.ply; do
   before=$(md5sum < "$work/$out")
