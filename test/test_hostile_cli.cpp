@@ -435,5 +435,21 @@ TEST(HostileCli, PlyThatTripsPclsAssertIsRefused) {
   EXPECT_EQ(hpds("sample " + q(input) + " -o " + q(tmp / "o.ply"), &log), 1) << log;
 }
 
+
+// `hpds verify` on a raw scan (no level field) or on a file whose levels are not hpds's said only
+// "verifySampling: sampling has no 'level' field", naming neither the file nor what to give instead.
+TEST(HostileCli, VerifyNamesTheFileThatIsNotASampling) {
+  const auto tmp = test::scratchDir("hostile_verify_not_sampling");
+  writeText(tmp / "scan.pcd", "VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 2\n"
+                              "HEIGHT 1\nPOINTS 2\nDATA ascii\n1 2 3\n4 5 6\n");
+  writeText(tmp / "deep.ply", "ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\nproperty float y\n"
+                              "property float z\nproperty uchar level\nend_header\n1 2 3 0\n4 5 6 99\n");
+  runCases({
+      {"verify " + q(tmp / "scan.pcd") + " --spacing 0.1", 1, "scan.pcd: no 'level' field"},
+      {"verify " + q(tmp / "scan.pcd") + " --spacing 0.1", 1, "hpds sample"},
+      {"verify " + q(tmp / "deep.ply") + " --cell-size 4", 1, "deep.ply: sample 1 has level 99"},
+  });
+}
+
 }  // namespace
 }  // namespace hpds

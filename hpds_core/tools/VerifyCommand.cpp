@@ -61,6 +61,11 @@ void addVerifyCommand(CLI::App &app) {
     // A scan-mode output of several frames holds one sampling per frame (each frame sampled on its own): each is
     // checked on its own, as the sampler made it.
     PointBuffer all = readPointCloud(a->sampling);
+    // Checked here, where the file can be named: a raw scan given by mistake is the usual cause.
+    if (!all.layout().find("level"))
+      throw std::invalid_argument(a->sampling +
+                                  ": no 'level' field, so not a sampling written by hpds sample (verify checks "
+                                  "hpds sample's output; give it that, and the scan as --input)");
     const bool several = all.layout().find("frame") != nullptr;
     std::map<std::uint64_t, PointBuffer> frames = byFrame(std::move(all));
     if (a->frame >= 0) {
@@ -81,8 +86,16 @@ void addVerifyCommand(CLI::App &app) {
     if (!a->input.empty()) input = readPointCloud(a->input);
     std::size_t bad = 0, bad_frames = 0;
     for (const auto &[frame, sampling] : frames) {
-      const VerifyReport report =
-          verifySampling(sampling, cell_size, a->input.empty() ? nullptr : &input, a->threads);
+      VerifyReport report;
+      try {
+        report = verifySampling(sampling, cell_size, a->input.empty() ? nullptr : &input, a->threads);
+      } catch (const std::invalid_argument &e) {
+        // The verifier knows no file names; its complaints are about the sampling's content.
+        std::string why = e.what();
+        const std::string prefix = "verifySampling: ";
+        if (why.compare(0, prefix.size(), prefix) == 0) why.erase(0, prefix.size());
+        throw std::invalid_argument(a->sampling + ": " + why);
+      }
       const std::size_t v = report.total_violations();
       // One frame's table, or each failing frame's when there are several.
       if (frames.size() == 1 || v > 0) {
