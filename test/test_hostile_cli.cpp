@@ -451,5 +451,39 @@ TEST(HostileCli, VerifyNamesTheFileThatIsNotASampling) {
   });
 }
 
+
+// A PCD saved in a map frame keeps the sensor position in VIEWPOINT, and PCL's NormalEstimation faces it
+// (use_sensor_origin_). hpds ignored it and turned every normal toward (0,0,0): here a floor 10 m above the origin,
+// scanned from 10 m above the floor, came out with every normal pointing down, into the floor.
+TEST(HostileCli, NormalsFaceThePcdViewpoint) {
+  const auto tmp = test::scratchDir("hostile_viewpoint");
+  std::string body;
+  int n = 0;
+  for (int i = 0; i < 40; ++i)
+    for (int j = 0; j < 40; ++j, ++n)
+      body += std::to_string(0.05 * i) + " " + std::to_string(0.05 * j) + " 10\n";
+  const std::string head = "VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH " +
+                           std::to_string(n) + "\nHEIGHT 1\nVIEWPOINT ";
+  const std::string tail = "\nPOINTS " + std::to_string(n) + "\nDATA ascii\n" + body;
+  writeText(tmp / "floor.pcd", head + "1 1 20 1 0 0 0" + tail);
+  std::string log;
+  ASSERT_EQ(hpds("sample " + q(tmp / "floor.pcd") + " -o " + q(tmp / "o.ply") + " --spacing 0.2", &log), 0) << log;
+  const PointBuffer out = readPointCloud((tmp / "o.ply").string());
+  const PointField *nz = out.layout().find("normal_z");
+  ASSERT_NE(nz, nullptr);
+  std::size_t valid = 0;
+  for (std::size_t i = 0; i < out.size(); ++i) {
+    const double v = readAsDouble(out.record(i), *nz);
+    if (std::isnan(v)) continue;
+    ++valid;
+    EXPECT_GT(v, 0.9) << "sample " << i << " faces away from the VIEWPOINT above the floor";
+  }
+  EXPECT_GT(valid, out.size() / 2);
+  // A VIEWPOINT position that cannot be faced is refused with the file and line named.
+  writeText(tmp / "nan_vp.pcd", head + "nan 0 0 1 0 0 0" + tail);
+  runCases({{"sample " + q(tmp / "nan_vp.pcd") + " -o " + q(tmp / "o.ply"), 1,
+             "nan_vp.pcd: bad PCD header, line 8: VIEWPOINT position 'nan' is not a finite number"}});
+}
+
 }  // namespace
 }  // namespace hpds

@@ -3,6 +3,8 @@
 
 #include <array>
 #include <cerrno>
+#include <charconv>
+#include <cmath>
 #include <cstring>
 #include <fstream>
 #include <limits>
@@ -35,6 +37,7 @@ struct PcdHeader {
   std::uint64_t point_step = 0;
   PcdData data = PcdData::Ascii;
   std::uint64_t data_offset = 0;  ///< byte offset of the data section in the file
+  double viewpoint[3] = {0.0, 0.0, 0.0};  ///< VIEWPOINT's translation: where the sensor was
 };
 
 std::optional<FieldType> pcdFieldType(std::uint32_t size, char type) {
@@ -155,6 +158,15 @@ PcdHeader parsePcdHeader(const std::string &path, const FileBytes &file) {
       if (tok.size() != 8) lineError("VIEWPOINT needs 7 values (tx ty tz qw qx qy qz)");
       for (std::size_t i = 1; i < tok.size(); ++i)
         if (!isNumber(tok[i])) lineError("VIEWPOINT value " + quote(tok[i]) + " is not a number");
+      // Normals are turned toward this position, so it must be a usable one (PCL would orient toward NaN).
+      for (int a = 0; a < 3; ++a) {
+        const std::string_view t = tok[1 + a];
+        double v = 0.0;
+        const auto res = std::from_chars(t.data(), t.data() + t.size(), v);
+        if (res.ec != std::errc() || res.ptr != t.data() + t.size() || !std::isfinite(v))
+          lineError("VIEWPOINT position " + quote(t) + " is not a finite number");
+        h.viewpoint[a] = v;
+      }
     } else if (key == "POINTS") {
       if (!have_fields) lineError("POINTS before FIELDS");
       h.points = singleValue(tok, "POINTS");
@@ -346,9 +358,10 @@ void checkLzfStream(const std::string &path, const PcdHeader &h) {
 
 }  // namespace
 
-PointBuffer readPcd(const std::string &path) {
+PointBuffer readPcd(const std::string &path, Eigen::Vector3d *viewpoint) {
   const FileBytes file = openForReading(path);
   const PcdHeader header = parsePcdHeader(path, file);
+  if (viewpoint) *viewpoint = Eigen::Vector3d(header.viewpoint[0], header.viewpoint[1], header.viewpoint[2]);
   checkPcdBody(path, file, header);
   if (header.data != PcdData::BinaryCompressed) return readWithPcl(path, PclFormat::Pcd);
   try {

@@ -14,9 +14,12 @@ using pcl_detail::quote;
 using pcl_detail::readPcd;
 using pcl_detail::readPly;
 
-PointBuffer readPointCloud(const std::string &path) {
+PointBuffer readPointCloud(const std::string &path) { return readPointCloud(path, nullptr); }
+
+PointBuffer readPointCloud(const std::string &path, Eigen::Vector3d *viewpoint) {
+  if (viewpoint) viewpoint->setZero();
   const std::string ext = lowerExtension(path);
-  if (ext == ".pcd") return readPcd(path);
+  if (ext == ".pcd") return readPcd(path, viewpoint);
   if (ext == ".ply") return readPly(path);
   if (ext == ".bin") return readKittiBin(path);
   // A folder of frames or a mistyped path: "file not found" / "not a regular file" says more than its extension.

@@ -10,6 +10,8 @@
 
 #include <pcl/PCLPointCloud2.h>
 
+#include <Eigen/Core>
+
 #include <charconv>
 #include <cstdint>
 #include <optional>
@@ -90,7 +92,7 @@ struct FileBytes {
 // Readers and the PCL side
 
 /// PCD through PCL after PcdReader.cpp's checks.
-[[nodiscard]] PointBuffer readPcd(const std::string &path);
+[[nodiscard]] PointBuffer readPcd(const std::string &path, Eigen::Vector3d *viewpoint = nullptr);
 /// PLY through PCL (or hpds's own vertex reader for colour arrangements PCL cannot pack) after PlyReader.cpp's checks.
 [[nodiscard]] PointBuffer readPly(const std::string &path);
 

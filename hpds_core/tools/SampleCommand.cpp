@@ -99,7 +99,7 @@ int runSample(const SampleArgs &a) {
   auto runFrame = [&](Pipeline &p, std::size_t i, StageSeconds &seconds, PointBuffer *cloud) {
     auto t0 = std::chrono::steady_clock::now();
     Frame frame;
-    frame.points = readPointCloud(a.inputs[i]);
+    frame.points = readPointCloud(a.inputs[i], &frame.viewpoint);
     for (const std::string &name : fieldsNotCarried(frame.points.layout())) {
       const std::lock_guard<std::mutex> lock(not_carried_mutex);
       not_carried.try_emplace(name, a.inputs[i]);

@@ -18,6 +18,7 @@ void poseFramePoints(const Frame &frame, const InputConfig &input, std::vector<d
   candidates.reserve(n);
   const Eigen::Matrix3d R = frame.sensor_to_fixed.linear();
   const Eigen::Vector3d t = frame.sensor_to_fixed.translation();
+  const Eigen::Vector3d v = frame.viewpoint;
   const double min_r2 = input.min_range * input.min_range;
   const double max_r2 = input.max_range > 0.0 ? input.max_range * input.max_range : INFINITY;
   // Drivers almost always send float32 x/y/z: read those directly instead of through the per-type switch.
@@ -40,7 +41,8 @@ void poseFramePoints(const Frame &frame, const InputConfig &input, std::vector<d
       ++skipped.zero;
       continue;
     }
-    const double r2 = x * x + y * y + z * z;
+    const double dx = x - v.x(), dy = y - v.y(), dz = z - v.z();
+    const double r2 = dx * dx + dy * dy + dz * dz;
     if (r2 < min_r2 || r2 > max_r2) {
       ++skipped.range;
       continue;

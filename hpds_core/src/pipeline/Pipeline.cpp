@@ -105,6 +105,7 @@ FrameResult Pipeline::addFrame(const Frame &frame) {
   layout.validate();
   if (const std::string why = rigidPoseProblem(frame.sensor_to_fixed); !why.empty())
     throw std::invalid_argument("frame.sensor_to_fixed: " + why);
+  if (!frame.viewpoint.allFinite()) throw std::invalid_argument("frame.viewpoint is not finite");
   const bool map_mode = config_.mode == Mode::Map;
   // The map's layout is the first frame's, even when that frame gave no sample (empty, or NaN only), or the loaded
   // map's.
@@ -137,7 +138,7 @@ FrameResult Pipeline::addFrame(const Frame &frame) {
   c.skipped_zero = skipped.zero;
   c.skipped_range = skipped.range;
   const std::size_t n = pts.size();
-  const Eigen::Vector3d t = frame.sensor_to_fixed.translation();
+  const Eigen::Vector3d t = frame.sensor_to_fixed * frame.viewpoint;
 
   // 3. Map mode: keep memory bounded around the sensor before adding more.
   const double viewpoint[3] = {t.x(), t.y(), t.z()};

@@ -41,6 +41,7 @@
 // std::runtime_error starting with the path on failure.
 #pragma once
 
+#include <Eigen/Core>
 #include <string>
 
 #include "hpds/points/PointBuffer.hpp"
@@ -48,6 +49,9 @@
 namespace hpds {
 
 [[nodiscard]] PointBuffer readPointCloud(const std::string &path);
+/// Also gives where the sensor was among the points: a PCD's VIEWPOINT translation (which PCL's normal estimation
+/// faces; it must be finite), (0,0,0) for any other file. For Frame::viewpoint.
+[[nodiscard]] PointBuffer readPointCloud(const std::string &path, Eigen::Vector3d *viewpoint);
 
 void writePcd(const std::string &path, const PointBuffer &cloud);
 

@@ -3,7 +3,10 @@
 // Contract
 // - `points` are in the sensor frame, in metres, with x/y/z fields of any float or integer type plus any other fields.
 // - `sensor_to_fixed` maps sensor coordinates into the fixed (map) frame; identity in scan mode or without poses.
-//   Its translation is the viewpoint that normals of this frame's samples are oriented toward.
+// - `viewpoint` is where the sensor was among `points` (a PCD's VIEWPOINT: a cloud saved in another frame keeps its
+//   sensor position there, and PCL's normal estimation faces it). sensor_to_fixed * viewpoint is the position that
+//   normals of this frame's samples are oriented toward and map eviction measures from; input.min_range/max_range
+//   are measured from `viewpoint`. It must be finite.
 // - `stamp` is seconds (any epoch); it is carried to outputs, never interpreted.
 #pragma once
 
@@ -17,6 +20,7 @@ struct Frame {
   PointBuffer points;
   double stamp = 0.0;
   Eigen::Isometry3d sensor_to_fixed = Eigen::Isometry3d::Identity();
+  Eigen::Vector3d viewpoint = Eigen::Vector3d::Zero();
 };
 
 }  // namespace hpds
