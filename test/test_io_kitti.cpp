@@ -71,6 +71,30 @@ TEST(KittiBin, RoundTripConvertsAnyTypesAndDefaultsIntensity) {
   expectError([&] { writeKittiBin((dir / "bad.bin").string(), PointBuffer(no_xyz, 1)); }, "bad.bin", {"x/y/z"});
 }
 
+// numpy's default dtype is float64: `points.tofile("scan.bin")` of a float64 array gives 32-byte records whose size
+// is still a multiple of 16. They were read as float32 and sampled as garbage (most "points" 1e20 m away, the rest
+// scattered), exit code 0. The same values as float32 records must still read.
+TEST(KittiBin, Float64RecordsAreRefusedNotSampledAsGarbage) {
+  const ScratchDir scratch("io_kitti_f64");
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> coord(-50.0, 50.0), intensity(0.0, 1.0);
+  std::vector<double> f64;
+  std::vector<float> f32;
+  for (int i = 0; i < 1000; ++i) {
+    const double p[4] = {coord(rng), coord(rng), 0.2 * coord(rng), intensity(rng)};
+    for (double v : p) {
+      f64.push_back(v);
+      f32.push_back(static_cast<float>(v));
+    }
+  }
+  const fs::path wide = scratch.path / "numpy_float64.bin", narrow = scratch.path / "float32.bin";
+  writeBytes(wide, hpds::test::bytesOf(f64));
+  writeBytes(narrow, hpds::test::bytesOf(f32));
+  expectError([&] { (void)readPointCloud(wide.string()); }, wide.string(),
+              {"not a KITTI .bin file", "float64", "1000 plausible points", "astype(numpy.float32)"});
+  EXPECT_EQ(readPointCloud(narrow.string()).size(), 1000u);
+}
+
 TEST(Poses, RoundTripIsBitExact) {
   const ScratchDir scratch("io_poses");
   const fs::path &dir = scratch.path;

@@ -3,6 +3,7 @@
 #include "io/FileAccess.hpp"
 
 #include <algorithm>
+#include <cmath>
 #include <cerrno>
 #include <cstdio>
 #include <cstring>
@@ -30,6 +31,40 @@ PointLayout kittiLayout() {
   return layout;
 }
 
+// A coordinate no sensor-frame scan holds: beyond 100 km, or a subnormal-sized nonzero value. Real float32 records
+// have none; the low halves of float64 values read as float32 are mostly such (their exponent bits are mantissa).
+bool implausible(double v) {
+  const double a = std::fabs(v);
+  return std::isfinite(v) && (a > 1e5 || (a != 0.0 && a < 1e-30));
+}
+
+// numpy's default dtype is float64, so `points.tofile("x.bin")` writes 32-byte records that also pass the size
+// check; read as float32 they are garbage that would be sampled without a word. Said only when the file reads
+// plausibly as float64 x y z intensity, so that noise or odd-but-real float32 data is still just points.
+void refuseFloat64Records(const std::string &path, const PointBuffer &cloud) {
+  const std::size_t n = cloud.size();
+  if (n < 2 || n % 2 != 0) return;
+  std::size_t as_f32 = 0, as_f64 = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    float f[3];
+    std::memcpy(f, cloud.record(i), sizeof f);
+    as_f32 += implausible(f[0]) || implausible(f[1]) || implausible(f[2]) ? 1 : 0;
+  }
+  for (std::size_t i = 0; i < n / 2; ++i) {
+    double d[4];
+    std::memcpy(d, cloud.record(2 * i), sizeof d);
+    as_f64 += !(std::isfinite(d[0]) && std::isfinite(d[1]) && std::isfinite(d[2])) || implausible(d[0]) ||
+                      implausible(d[1]) || implausible(d[2])
+                  ? 1
+                  : 0;
+  }
+  if (as_f32 * 10 > n && as_f64 * 100 <= n / 2)
+    fail(path, "not a KITTI .bin file: " + std::to_string(as_f32) + " of " + std::to_string(n) +
+                   " float32 records have a coordinate beyond 100 km or subnormal, but read as float64 x y z "
+                   "intensity the file is " + std::to_string(n / 2) + " plausible points; KITTI .bin is float32 "
+                   "(with numpy: points.astype(numpy.float32).tofile(path))");
+}
+
 }  // namespace
 
 PointBuffer readKittiBin(const std::string &path) {
@@ -51,6 +86,7 @@ PointBuffer readKittiBin(const std::string &path) {
   if (std::fread(cloud.bytes().data(), 1, cloud.bytes().size(), file.get()) != cloud.bytes().size())
     fail(path, std::string("read failed (file changed while reading?): ") +
                    (std::ferror(file.get()) ? std::strerror(errno) : "unexpected end of file"));
+  refuseFloat64Records(path, cloud);
   return cloud;
 }
 
