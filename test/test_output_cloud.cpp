@@ -52,6 +52,10 @@ PointLayout randomInputLayout(std::mt19937 &rng) {
     fields.push_back(PointField{"f" + std::to_string(i), 0, kTypes[rng() % 8],
                                 static_cast<std::uint32_t>(rng() % 5 == 0 ? 1 + rng() % 3 : 1)});
   if (rng() % 3 == 0) fields.push_back(PointField{"level", 0, FieldType::Float32, 1});  // one of the output's names
+  // Names the output writes only with normals, covariances or the frame field: carried when it does not.
+  if (rng() % 3 == 0) fields.push_back(PointField{"curvature", 0, FieldType::Float64, 1});
+  if (rng() % 3 == 0) fields.push_back(PointField{"frame", 0, FieldType::UInt16, 1});
+  if (rng() % 3 == 0) fields.push_back(PointField{"cov_xx", 0, FieldType::Float32, 1});
   std::shuffle(fields.begin(), fields.end(), rng);
   PointLayout in;
   in.point_step = rng() % 3;  // an odd start
@@ -84,11 +88,13 @@ TEST(OutputCloud, LayoutIsAlignedForPackedInputs) {
           if (normals) expected.insert({"normal_x", "normal_y", "normal_z", "curvature"});
           if (covariances) expected.insert({"cov_xx", "cov_xy", "cov_xz", "cov_yy", "cov_yz", "cov_zz"});
           if (frame) expected.insert("frame");
-          const std::set<std::string> own = {"x",      "y",      "z",      "level",  "normal_x", "normal_y",
-                                             "normal_z", "curvature", "frame", "cov_xx", "cov_xy", "cov_xz",
-                                             "cov_yy", "cov_yz", "cov_zz"};
+          const std::set<std::string> own = expected;  // the output's own fields replace inputs of those names
+          std::vector<std::string> replaced;
           for (const PointField &f : in.fields) {
-            if (own.count(f.name)) continue;
+            if (own.count(f.name)) {
+              if (f.name != "x" && f.name != "y" && f.name != "z") replaced.push_back(f.name);
+              continue;
+            }
             expected.insert(f.name);
             const PointField *g = out.find(f.name);
             ASSERT_NE(g, nullptr) << f.name;
@@ -99,6 +105,7 @@ TEST(OutputCloud, LayoutIsAlignedForPackedInputs) {
           for (const PointField &f : out.fields) names.insert(f.name);
           EXPECT_EQ(names, expected);
           EXPECT_EQ(out.find("level")->type, FieldType::UInt8);
+          EXPECT_EQ(fieldsNotCarried(in, normals, frame, covariances), replaced);
         }
   }
 }
@@ -162,6 +169,50 @@ TEST(OutputCloud, PackedOneByteFieldsKeepTheirBytes) {
           EXPECT_EQ(out[b], 0) << "padding byte " << b << " of sample " << s;
         }
       }
+    }
+  }
+}
+
+// An input's own normals (PointXYZINormal; a PLY from another estimator) are kept when hpds writes none: `hpds sample
+// --no-normals` on such a file used to drop them, with a warning that hpds wrote its own.
+TEST(OutputCloud, InputNormalsAreCarriedWhenHpdsWritesNone) {
+  PointLayout in;
+  for (const char *n : {"x", "y", "z", "intensity", "normal_x", "normal_y", "normal_z", "curvature"})
+    in.append(n, FieldType::Float32);
+  Hierarchy h(4.0, 2);
+  h.setRecordLayout(in);
+  std::vector<float> records;
+  std::vector<double> xyz;
+  std::vector<std::uint32_t> order;
+  for (int i = 0; i < 3; ++i) {
+    const float x = 10.0f * static_cast<float>(i);
+    records.insert(records.end(), {x, 0.0f, 1.0f, 7.0f, 0.6f, 0.0f, 0.8f, 0.01f * static_cast<float>(i + 1)});
+    xyz.insert(xyz.end(), {x, 0.0, 1.0});
+    order.push_back(static_cast<std::uint32_t>(i));
+  }
+  InsertBatch batch;
+  batch.xyz = xyz.data();
+  batch.size = 3;
+  batch.order = order.data();
+  batch.order_size = order.size();
+  batch.records = reinterpret_cast<const std::uint8_t *>(records.data());
+  batch.record_step = in.point_step;
+  const InsertResult inserted = h.insert(batch);
+  ASSERT_EQ(inserted.accepted.size(), 3u);
+
+  EXPECT_EQ(fieldsNotCarried(in, false, false, false), std::vector<std::string>{});
+  EXPECT_EQ(fieldsNotCarried(in, true, false, false),
+            (std::vector<std::string>{"normal_x", "normal_y", "normal_z", "curvature"}));
+  const std::vector<SampleNormal> ours(3, SampleNormal{{0.0f, 0.0f, 1.0f}, 0.5f, true});
+  for (const bool with_normals : {false, true}) {
+    const PointBuffer cloud = buildOutputCloud(h, inserted.accepted, with_normals ? &ours : nullptr, false);
+    const PointLayout &out = cloud.layout();
+    for (std::size_t s = 0; s < cloud.size(); ++s) {
+      const float *src = records.data() + 8 * inserted.accepted[s];
+      EXPECT_EQ(readAsDouble(cloud.record(s), *out.find("intensity")), 7.0);
+      EXPECT_EQ(readAsDouble(cloud.record(s), *out.find("normal_x")), with_normals ? 0.0 : double(src[4]));
+      EXPECT_EQ(readAsDouble(cloud.record(s), *out.find("normal_z")), with_normals ? 1.0 : double(src[6]));
+      EXPECT_EQ(readAsDouble(cloud.record(s), *out.find("curvature")), with_normals ? 0.5 : double(src[7]));
     }
   }
 }

@@ -249,7 +249,7 @@ int runReplay(const ReplayArgs &a) {
     if (const std::string w = roundingWarning(ply, report.output_radius); !w.empty()) std::cerr << w << "\n";
   for (const std::string &name : not_carried)
     std::cerr << "hpds: warning: input field '" << name << "' is not in the output: hpds writes its own '" << name
-              << "' or keeps the name for it; rename the field to keep it\n";
+              << "'; rename the field to keep it\n";
   return 0;
 }
 

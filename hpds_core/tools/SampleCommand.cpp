@@ -93,14 +93,15 @@ int runSample(const SampleArgs &a) {
   const bool scan = config.mode == Mode::Scan;
   const bool frame_field = scan && a.inputs.size() > 1;
   // One frame through a pipeline: read, insert, and in scan mode its output cloud.
-  // Input fields the output cannot carry (their names are hpds's own), with the first input that had each.
+  // Input fields the output cannot carry (it writes fields of those names), with the first input that had each.
   std::map<std::string, std::string> not_carried;
   std::mutex not_carried_mutex;
   auto runFrame = [&](Pipeline &p, std::size_t i, StageSeconds &seconds, PointBuffer *cloud) {
     auto t0 = std::chrono::steady_clock::now();
     Frame frame;
     frame.points = readPointCloud(a.inputs[i], &frame.viewpoint);
-    for (const std::string &name : fieldsNotCarried(frame.points.layout())) {
+    for (const std::string &name : fieldsNotCarried(frame.points.layout(), config.normals.enabled, frame_field,
+                                                    config.normals.enabled && config.normals.covariances)) {
       const std::lock_guard<std::mutex> lock(not_carried_mutex);
       not_carried.try_emplace(name, a.inputs[i]);
     }
@@ -160,7 +161,7 @@ int runSample(const SampleArgs &a) {
   for (const auto &[name, input] : not_carried)
     std::cerr << "hpds: warning: input field '" << name << "' (of '" << input
               << "' and maybe others) is not in the output: hpds writes its own '" << name
-              << "' or keeps the name for it; rename the field to keep it\n";
+              << "'; rename the field to keep it\n";
   if (scan) {
     for (std::size_t d = 0; d < report.samples_per_level.size(); ++d) report.samples_per_level[d] = totals.accepted_per_level[d];
   } else {

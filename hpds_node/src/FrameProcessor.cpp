@@ -154,7 +154,10 @@ ProcessedFrame FrameProcessor::process(const sensor_msgs::PointCloud2 &msg, cons
     ++stats_.malformed[static_cast<int>(r.malformed)];
     return r;
   }
-  r.fields_not_carried = hpds::fieldsNotCarried(frame.points.layout());
+  // The node's clouds never have the frame field (makeCloud below); normals and covariances follow the config.
+  const hpds::NormalConfig &normals = config_.hpds.normals;
+  r.fields_not_carried = hpds::fieldsNotCarried(frame.points.layout(), normals.enabled, /*with_frame=*/false,
+                                                normals.enabled && normals.covariances);
   frame.stamp = msg.header.stamp.toSec();
   if (!target.empty()) frame.sensor_to_fixed = sensor_to_target;
 

@@ -204,10 +204,19 @@ TEST(FrameProcessor, InputFieldsWithHpdsNamesAreReported) {
   FrameProcessor processor(config);
   const auto r = processor.process(toMsg(cloud, 1.0), Eigen::Isometry3d::Identity(), OutputRequest::all());
   ASSERT_TRUE(r.processed);
-  EXPECT_EQ(r.fields_not_carried, (std::vector<std::string>{"curvature", "level"}));
+  // Normals are off, so hpds writes no curvature: the input's is carried like any field; its level gives way.
+  EXPECT_EQ(r.fields_not_carried, (std::vector<std::string>{"level"}));
   const hpds::PointBuffer out = hpds_test::toBuffer(r.output);
   EXPECT_NE(out.layout().find("ring"), nullptr);
-  EXPECT_EQ(out.layout().find("curvature"), nullptr) << "normals are off: no curvature field at all";
+  ASSERT_NE(out.layout().find("curvature"), nullptr) << "the input's curvature, carried";
+  EXPECT_EQ(out.layout().find("curvature")->type, hpds::FieldType::Float32);
+
+  // With normals on, hpds writes its own curvature: that input field is then reported.
+  config.hpds.normals.enabled = true;
+  FrameProcessor with_normals(config);
+  const auto n = with_normals.process(toMsg(cloud, 1.0), Eigen::Isometry3d::Identity(), OutputRequest::all());
+  ASSERT_TRUE(n.processed);
+  EXPECT_EQ(n.fields_not_carried, (std::vector<std::string>{"curvature", "level"}));
 }
 
 // The start-up log line: with the shipped config the spacing asked is the radius got, and the line says why.

@@ -11,18 +11,25 @@ namespace hpds {
 namespace {
 constexpr const char *kCovarianceNames[6] = {"cov_xx", "cov_xy", "cov_xz", "cov_yy", "cov_yz", "cov_zz"};
 
-bool isOwnName(const std::string &n) {
-  for (const char *c : kCovarianceNames)
-    if (n == c) return true;
-  return n == "x" || n == "y" || n == "z" || n == "level" || n == "normal_x" || n == "normal_y" || n == "normal_z" ||
-         n == "curvature" || n == "frame";
+/// Whether an output with these parts writes a field named n itself. Only those input fields give way: an input's
+/// own normals (PointXYZINormal, a PLY from another estimator) are data like any other field when hpds writes none.
+bool isOwnName(const std::string &n, bool with_normals, bool with_frame, bool with_covariances) {
+  if (with_covariances)
+    for (const char *c : kCovarianceNames)
+      if (n == c) return true;
+  if (with_normals && (n == "normal_x" || n == "normal_y" || n == "normal_z" || n == "curvature")) return true;
+  if (with_frame && n == "frame") return true;
+  return n == "x" || n == "y" || n == "z" || n == "level";
 }
 }  // namespace
 
-std::vector<std::string> fieldsNotCarried(const PointLayout &input) {
+std::vector<std::string> fieldsNotCarried(const PointLayout &input, bool with_normals, bool with_frame,
+                                          bool with_covariances) {
   std::vector<std::string> names;
   for (const auto &f : input.fields)
-    if (isOwnName(f.name) && f.name != "x" && f.name != "y" && f.name != "z") names.push_back(f.name);
+    if (isOwnName(f.name, with_normals, with_frame, with_covariances) && f.name != "x" && f.name != "y" &&
+        f.name != "z")
+      names.push_back(f.name);
   return names;
 }
 
@@ -43,7 +50,7 @@ PointLayout outputLayout(const PointLayout &input, bool with_normals, bool with_
   if (with_frame) want("frame", FieldType::UInt32);
   want("level", FieldType::UInt8);
   for (const auto &f : input.fields)
-    if (!isOwnName(f.name)) want(f.name, f.type, f.count);
+    if (!isOwnName(f.name, with_normals, with_frame, with_covariances)) want(f.name, f.type, f.count);
   std::stable_sort(rest.begin(), rest.end(), [](const PointField &a, const PointField &b) {
     return fieldTypeSize(a.type) > fieldTypeSize(b.type);
   });
@@ -81,7 +88,8 @@ PointBuffer buildOutputCloud(const Hierarchy &h, const std::vector<SampleId> &id
   // Field pairs resolved once, so the per-sample loop only copies bytes.
   std::vector<std::pair<const PointField *, const PointField *>> carried;
   for (const auto &f : in.fields)
-    if (!isOwnName(f.name)) carried.emplace_back(out.find(f.name), &f);
+    if (!isOwnName(f.name, normals != nullptr, with_frame, covariances != nullptr))
+      carried.emplace_back(out.find(f.name), &f);
   const PointField *fx = out.find("x"), *fy = out.find("y"), *fz = out.find("z"), *fl = out.find("level");
   const bool doubles = fx->type == FieldType::Float64;
   const PointField *fnx = out.find("normal_x"), *fny = out.find("normal_y"), *fnz = out.find("normal_z"),

@@ -301,8 +301,7 @@ void HpdsServer::warnFieldNotCarriedOnce(const std::string &name) {
     if (!fields_not_carried_.insert(name).second) return;
   }
   ROS_WARN_STREAM_NAMED("hpds", "hpds: input field '" << name << "' is not in the outputs: hpds writes its own '"
-                                                      << name << "' or keeps the name for it; rename the field in "
-                                                      << "the input to keep it");
+                                                      << name << "'; rename the field in the input to keep it");
 }
 
 OutputRequest HpdsServer::subscribedOutputs() const {

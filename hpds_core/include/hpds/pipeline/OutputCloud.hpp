@@ -1,8 +1,9 @@
 // OutputCloud: hierarchy samples as a point cloud with the layout every consumer (PLY, PointCloud2) shares.
 //
 // Layout (outputLayout): float32 x y z at offsets 0, 4, 8; then [float32 normal_x normal_y normal_z curvature],
-// [float32 cov_xx cov_xy cov_xz cov_yy cov_yz cov_zz (SampleCovariance.hpp)], [uint32 frame], uint8 level and every input field except x/y/z and the names taken above (same name, type, count
-// and bytes), ordered by decreasing element size. Every field sits at an offset that is a multiple of its element
+// [float32 cov_xx cov_xy cov_xz cov_yy cov_yz cov_zz (SampleCovariance.hpp)], [uint32 frame], uint8 level and every
+// input field except x/y/z and the names this output writes itself (same name, type, count and bytes), ordered by
+// decreasing element size. Every field sits at an offset that is a multiple of its element
 // size and point_step is a multiple of 4 and of the largest element size, so records can be read as aligned structs
 // (as PCL's padded point types are); the padding bytes are zero. Consumers find fields by name, not position.
 #pragma once
@@ -17,10 +18,12 @@
 
 namespace hpds {
 
-/// The input fields the output does not carry because their names are hpds's own (level, normal_x/y/z, curvature,
-/// frame; also when hpds does not write them this time), in input order: callers say so rather than drop them
-/// silently. Rename such a field to keep it.
-[[nodiscard]] std::vector<std::string> fieldsNotCarried(const PointLayout &input);
+/// The input fields an output with these parts does not carry because it writes a field of that name itself (level
+/// always; normal_x/y/z and curvature with normals, cov_* with covariances, frame with the frame field), in input
+/// order: callers say so rather than drop them silently. Every other input field is carried, an input's own normals
+/// included when the output has none. Rename such a field to keep it.
+[[nodiscard]] std::vector<std::string> fieldsNotCarried(const PointLayout &input, bool with_normals, bool with_frame,
+                                                        bool with_covariances);
 
 /// x y z are float32, or float64 when `float64_xyz` or when the input's x, y and z are all float64 (a float32 keeps
 /// about 7 digits: 0.5 m at 5e6 m, so georeferenced coordinates need float64).
