@@ -176,6 +176,30 @@ TEST(Downsample, NormalsFaceTheOriginAndAreNanWhereNotEstimable) {
   EXPECT_GT(valid, s.size() / 2);
 }
 
+// A cloud kept in another frame: the sensor was at `viewpoint` there, and normals face it (PCL's sensor_origin_).
+TEST(Downsample, NormalsFaceAViewpointGivenAndRangesAreMeasuredFromIt) {
+  std::vector<Eigen::Vector3f> points;
+  for (int i = 0; i < 60; ++i)
+    for (int j = 0; j < 60; ++j) points.emplace_back(10.0f, -1.5f + 0.05f * float(i), -1.5f + 0.05f * float(j));
+  HpdsConfig config = withNormals();
+  const Samples at_origin = downsample(points, config);
+  const Samples behind = downsample(points, config, Eigen::Vector3d(20.0, 0.0, 0.0));
+  ASSERT_EQ(behind.index, at_origin.index);  // where the sensor was changes no sample
+  std::size_t valid = 0;
+  for (std::size_t i = 0; i < behind.size(); ++i) {
+    if (std::isnan(behind.normal[i].x())) continue;
+    ++valid;
+    EXPECT_GT(behind.normal[i].x(), 0.99f) << i;  // the sensor at x = 20 sees the patch's +x side
+    EXPECT_EQ(behind.normal[i], -at_origin.normal[i]);
+  }
+  EXPECT_GT(valid, behind.size() / 2);
+  // input.max_range 5 m: every point is 10 m from the origin but within 5 m of a viewpoint at x = 8.
+  config.input.max_range = 5.0;
+  EXPECT_EQ(downsample(points, config).size(), 0u);
+  EXPECT_EQ(downsample(points, config, Eigen::Vector3d(8.0, 0.0, 0.0)).size(), at_origin.size());
+  EXPECT_THROW((void)downsample(points, config, Eigen::Vector3d(NAN, 0.0, 0.0)), std::invalid_argument);
+}
+
 TEST(Downsample, SameInputAndSeedSameSamplesWhateverTheThreads) {
   const std::vector<Eigen::Vector3f> points = xyzOf(syntheticFrame().frame.points);
   HpdsConfig one = withNormals(), many = withNormals(), other = withNormals();

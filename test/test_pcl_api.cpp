@@ -99,6 +99,28 @@ TEST(PclDownsample, NormalsOnlyWhenAskedForAndTheSamplesDoNotDependOnIt) {
   EXPECT_GT(valid, with->size() / 2);
 }
 
+// As PCL's NormalEstimation, the normals face the cloud's sensor_origin_: a frame saved in a map frame keeps its
+// sensor position there.
+TEST(PclDownsample, NormalsFaceTheCloudsSensorOrigin) {
+  pcl::PointCloud<pcl::PointXYZ> cloud;
+  for (int i = 0; i < 60; ++i)
+    for (int j = 0; j < 60; ++j) cloud.push_back(pcl::PointXYZ(10.0f, -1.5f + 0.05f * float(i), -1.5f + 0.05f * float(j)));
+  pcl::PointCloud<pcl::Normal> toward_origin, toward_sensor;
+  (void)downsample(cloud, config(), &toward_origin);
+  cloud.sensor_origin_ = Eigen::Vector4f(20.0f, 0.0f, 0.0f, 0.0f);
+  const auto out = downsample(cloud, config(), &toward_sensor);
+  EXPECT_EQ(out->sensor_origin_, cloud.sensor_origin_);
+  ASSERT_EQ(toward_sensor.size(), toward_origin.size());
+  std::size_t valid = 0;
+  for (std::size_t i = 0; i < toward_sensor.size(); ++i) {
+    if (std::isnan(toward_sensor[i].normal_x)) continue;
+    ++valid;
+    EXPECT_LT(toward_origin[i].normal_x, -0.99f) << i;
+    EXPECT_GT(toward_sensor[i].normal_x, 0.99f) << i;
+  }
+  EXPECT_GT(valid, toward_sensor.size() / 2);
+}
+
 TEST(PclDownsample, CovariancesOnlyWhenAskedForInGicpsType) {
   const pcl::PointCloud<pcl::PointXYZI> cloud = syntheticCloud();
   HpdsConfig asked = config();

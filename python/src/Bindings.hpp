@@ -10,6 +10,8 @@
 
 #include <string>
 
+#include <Eigen/Core>
+
 #include "hpds/config/Config.hpp"
 #include "hpds/points/PointBuffer.hpp"
 
@@ -25,7 +27,8 @@ void bindIo(pybind11::module_ &m);
 void bindTiling(pybind11::module_ &m);
 
 /// A point cloud file read as `hpds sample` reads it (.pcd/.ply through PCL when built with it, KITTI .bin).
-[[nodiscard]] PointBuffer readCloudFile(const std::string &path);
+/// `viewpoint` (optional): where the sensor was among the points (a PCD's VIEWPOINT; else the origin).
+[[nodiscard]] PointBuffer readCloudFile(const std::string &path, Eigen::Vector3d *viewpoint = nullptr);
 
 /// The config a Python call names: the YAML file at `path` when it is not empty, else `yaml_text` over the
 /// defaults (empty: the defaults). Validated; std::invalid_argument names the key (or the file).

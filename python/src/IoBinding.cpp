@@ -16,10 +16,11 @@ namespace py = pybind11;
 
 namespace hpds::python {
 
-PointBuffer readCloudFile(const std::string &path) {
+PointBuffer readCloudFile(const std::string &path, Eigen::Vector3d *viewpoint) {
 #ifdef HPDS_PYTHON_WITH_PCL
-  return readPointCloud(path);
+  return readPointCloud(path, viewpoint);
 #else
+  if (viewpoint) viewpoint->setZero();
   std::string ext = path.size() >= 4 ? path.substr(path.size() - 4) : "";
   std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return std::tolower(c); });
   if (ext != ".bin")

@@ -122,7 +122,7 @@ void bindTiling(py::module_ &m) {
           TileBucketer bucketer(config, grid);
           for (std::size_t f = 0; f < inputs.size(); ++f) {
             Frame frame;
-            frame.points = readCloudFile(inputs[f]);
+            frame.points = readCloudFile(inputs[f], &frame.viewpoint);
             frame.sensor_to_fixed = iso[f];
             try {
               totals += bucketer.addFrame(frame, first_frame + static_cast<std::uint32_t>(f));

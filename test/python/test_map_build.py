@@ -300,6 +300,23 @@ class MapBuild(unittest.TestCase):
         self.assertEqual(tile_files(self.out("mixed")), [])
         self.assertFalse(os.path.exists(os.path.join(self.out("mixed"), ".hpds_work")))
 
+    def test_a_pcd_viewpoint_is_refused_not_dropped(self):
+        # `hpds sample` turns normals toward a PCD's VIEWPOINT; bucket files keep only the pose, so a tiled build
+        # refuses such a frame rather than turn its normals toward the pose's origin without a word.
+        with open(self.frames[1], "rb") as f:
+            data = f.read()
+        start = data.index(b"VIEWPOINT")
+        end = data.index(b"\n", start)
+        moved = self.out("moved_viewpoint.pcd")
+        with open(moved, "wb") as f:
+            f.write(data[:start] + b"VIEWPOINT 5 0 0 1 0 0 0" + data[end:])
+        with self.assertRaises(BuildError) as e:
+            build([self.frames[0], moved], self.two_poses("poses_viewpoint.txt"), self.out("viewpoint"), TILE,
+                  self.config_yaml, SerialRunner(), chunk_frames=1, log=lambda m: None)
+        self.assertIn("moved_viewpoint.pcd", str(e.exception))
+        self.assertIn("viewpoint", str(e.exception))
+        self.assertEqual(tile_files(self.out("viewpoint")), [])
+
     def test_float32_rounding_is_warned_and_float64_xyz_avoids_it(self):
         # 1e7 m along x: float32 x y z round by 0.6 m, against an output radius of 0.11 m.
         poses = self.two_poses("poses_far.txt", dx=1e7)

@@ -3,7 +3,8 @@
 // (frames with poses, map mode).
 //
 // Contract
-// - `points` are in the sensor frame, metres; the sensor (the viewpoint normals face) is at the origin. NaN/Inf
+// - `points` are in metres; the sensor (the viewpoint normals face, and input.min_range/max_range are measured from)
+//   is at the origin, or at `viewpoint` in the overload that takes one (a cloud kept in another frame). NaN/Inf
 //   points, exact (0,0,0) no-returns (input.skip_zero_points) and points outside input.min_range/max_range are
 //   skipped; they never appear in the result. So are points beyond the exact cell-key range of the finest level
 //   (|coordinate| >= 2^30 cells of level hierarchy.max_depth: 1.55e7 m at the defaults; 8.4e6 to 1.7e7 m for any
@@ -44,6 +45,9 @@ struct Samples {
 
 /// Downsamples `points` with `config` (see the contract).
 [[nodiscard]] Samples downsample(const std::vector<Eigen::Vector3f> &points, const HpdsConfig &config = HpdsConfig{});
+/// The same with the sensor at `viewpoint` (finite; std::invalid_argument otherwise), in the points' frame.
+[[nodiscard]] Samples downsample(const std::vector<Eigen::Vector3f> &points, const HpdsConfig &config,
+                                 const Eigen::Vector3d &viewpoint);
 
 /// Reads a config file in config/hpds.yaml's format over the defaults, with the same validation as the CLI and the
 /// node. Throws std::invalid_argument naming the key (or the file, when it cannot be read or parsed).

@@ -1,8 +1,9 @@
 // hpds::downsample for PCL clouds (target hpds::pcl): the one-call API of hpds/hpds.hpp over pcl::PointCloud.
 //
 // Contract
-// - Any PCL point type with x/y/z. The cloud is in the sensor frame (normals face the origin); NaN points are
-//   skipped, as are the other points hpds::downsample skips.
+// - Any PCL point type with x/y/z. Normals face the cloud's sensor_origin_ (the origin unless set; as PCL's
+//   NormalEstimation does), and input.min_range/max_range are measured from it; NaN points are skipped, as are the
+//   other points hpds::downsample skips.
 // - Returns the real input points, every field copied (intensity, ring, time, ...), in sample order: the same
 //   samples, in the same order, as hpds::downsample on the cloud's x/y/z. header is the input's; the result is
 //   unorganised (height 1) and dense.
@@ -36,7 +37,7 @@ typename pcl::PointCloud<PointT>::Ptr downsample(const pcl::PointCloud<PointT> &
   HpdsConfig run = config;
   run.normals.enabled = normals != nullptr || covariances != nullptr;
   run.normals.covariances = covariances != nullptr;
-  const Samples samples = downsample(xyz, run);
+  const Samples samples = downsample(xyz, run, cloud.sensor_origin_.template head<3>().template cast<double>());
 
   typename pcl::PointCloud<PointT>::Ptr out(new pcl::PointCloud<PointT>);
   out->header = cloud.header;

@@ -33,11 +33,19 @@ Frame frameOf(const std::vector<Eigen::Vector3f> &points) {
 }  // namespace
 
 Samples downsample(const std::vector<Eigen::Vector3f> &points, const HpdsConfig &config) {
+  return downsample(points, config, Eigen::Vector3d::Zero());
+}
+
+Samples downsample(const std::vector<Eigen::Vector3f> &points, const HpdsConfig &config,
+                   const Eigen::Vector3d &viewpoint) {
+  if (!viewpoint.allFinite()) throw std::invalid_argument("downsample: viewpoint is not finite");
   if (points.size() > std::numeric_limits<std::uint32_t>::max())
     throw std::invalid_argument("downsample: " + std::to_string(points.size()) +
                                 " points, at most 2^32 - 1 fit the sample index");
   Pipeline pipeline(config);
-  pipeline.addFrame(frameOf(points));
+  Frame frame = frameOf(points);
+  frame.viewpoint = viewpoint;
+  pipeline.addFrame(frame);
   const Hierarchy &hierarchy = pipeline.hierarchy();
   const std::vector<SampleId> ids = pipeline.outputSamples();
 
