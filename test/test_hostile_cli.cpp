@@ -294,6 +294,33 @@ TEST(HostileCli, TheSameFrameTwiceAddsNothingInMapMode) {
   ASSERT_EQ(hpds("verify " + q(tmp / "twice.ply") + " --cell-size 4 --input " + q(tmp / "f.pcd"), &log), 0) << log;
 }
 
+// Clouds that are already in one frame (registered tiles, georeferenced scans) merged in map mode without --poses:
+// each frame's sensor is taken at the origin, so every tile farther than map.evict_distance from it was evicted by
+// the next one, and the map written held the last tile only, with exit status 0 and nothing on stderr.
+TEST(HostileCli, AMapThatLostSamplesToEvictionSaysSo) {
+  const auto tmp = test::scratchDir("hostile_evicted_map");
+  writePcd((tmp / "near.pcd").string(), typedCloud(FieldType::Float32, gridPoints(20, 0.5)));
+  writePcd((tmp / "far.pcd").string(), typedCloud(FieldType::Float32, gridPoints(20, 0.5, 300.0)));
+  const std::string tiles =
+      "sample " + q(tmp / "far.pcd") + " " + q(tmp / "near.pcd") + " --mode map --no-normals --spacing 0.2 -o ";
+  std::string log;
+  ASSERT_EQ(hpds(tiles + q(tmp / "evicted.ply"), &log), 0) << log;
+  EXPECT_NE(log.find("hpds: warning: "), std::string::npos) << log;
+  EXPECT_NE(log.find("evicted"), std::string::npos) << log;
+  EXPECT_NE(log.find("map.evict_distance"), std::string::npos) << log;
+  EXPECT_NE(log.find("no --poses"), std::string::npos) << log;  // why the sensor was at the origin
+  // Without eviction every tile is kept and nothing is said.
+  writeText(tmp / "keep.yaml", "map: {evict_distance: 0.0}\n");
+  ASSERT_EQ(hpds(tiles + q(tmp / "kept.ply") + " --config " + q(tmp / "keep.yaml"), &log), 0) << log;
+  EXPECT_EQ(log.find("warning"), std::string::npos) << log;
+  EXPECT_GT(readPointCloud((tmp / "kept.ply").string()).size(), readPointCloud((tmp / "evicted.ply").string()).size());
+  // With poses the sensor's positions are known, and the warning says what the map holds instead.
+  writeText(tmp / "poses.txt", "1 0 0 300 0 1 0 300 0 0 1 0\n1 0 0 0 0 1 0 0 0 0 1 0\n");
+  ASSERT_EQ(hpds(tiles + q(tmp / "posed.ply") + " --poses " + q(tmp / "poses.txt"), &log), 0) << log;
+  EXPECT_NE(log.find("evicted"), std::string::npos) << log;
+  EXPECT_EQ(log.find("no --poses"), std::string::npos) << log;
+}
+
 TEST(HostileCli, InvalidConfigsNameTheKeyAndExitOne) {
   const auto tmp = test::scratchDir("hostile_config");
   writePcd((tmp / "f.pcd").string(), typedCloud(FieldType::Float32, gridPoints(3, 1.0)));

@@ -245,8 +245,14 @@ int runReplay(const ReplayArgs &a) {
   std::cout << levelSummary(report);
   std::cout << "messages: " << messageSummary(clouds.size(), a.topic, s, wrong_type, target) << "\n";
   std::cout << "wrote " << a.output << "\n";
-  if (!to_bag)
+  if (!to_bag) {
     if (const std::string w = roundingWarning(ply, report.output_radius); !w.empty()) std::cerr << w << "\n";
+    // A bag holds what the node publishes; the PLY is meant as the final map, which eviction may have cut short.
+    if (const std::string w = evictionWarning(config.hpds, report.totals.evicted, pipeline.hierarchy().sampleCount(),
+                                              false);
+        !w.empty())
+      std::cerr << w << "\n";
+  }
   for (const std::string &name : not_carried)
     std::cerr << "hpds: warning: input field '" << name << "' is not in the output: hpds writes its own '" << name
               << "'; rename the field to keep it\n";

@@ -18,6 +18,21 @@ std::string roundingWarning(const PointBuffer &cloud, double output_radius) {
   return w.empty() ? w : "hpds: warning: " + w;
 }
 
+std::string evictionWarning(const HpdsConfig &config, std::uint64_t evicted, std::size_t remaining,
+                            bool sensor_at_origin) {
+  if (config.mode != Mode::Map || evicted == 0) return {};
+  std::ostringstream w;
+  w << "hpds: warning: " << evicted << " samples were evicted from the map (" << remaining
+    << " remain): map.evict_distance (" << config.map.evict_distance
+    << " m, 0 = off) drops those farther from the latest sensor position and map.max_samples ("
+    << config.map.max_samples << ", 0 = no cap) caps the count, so the map written is what was left around the last "
+    << "frame; set both to 0 in a --config to keep every sample";
+  if (sensor_at_origin)
+    w << " (no --poses: every frame's sensor was taken at the origin, so frames farther than map.evict_distance from "
+         "it evicted each other; give --poses, or set map.evict_distance: 0 for clouds already in one frame)";
+  return w.str();
+}
+
 void stageJsonFile(std::optional<AtomicFile> &file, const std::string &path, const RunReport &report) {
   if (path.empty()) return;
   file.emplace(path);

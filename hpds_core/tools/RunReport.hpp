@@ -48,6 +48,13 @@ struct RunReport {
 /// 1 % of the output radius: georeferenced coordinates, which want output.float64_xyz.
 [[nodiscard]] std::string roundingWarning(const PointBuffer &cloud, double output_radius);
 
+/// A warning line (empty when nothing was evicted) for a map-mode run whose map lost samples to map.evict_distance
+/// or map.max_samples: the map it writes is then only what was left around the last frame, which a run that wanted
+/// the whole map would otherwise learn from a count at the end of the summary. `sensor_at_origin`: the frames had no
+/// poses, so the distance was measured from the fixed frame's origin.
+[[nodiscard]] std::string evictionWarning(const HpdsConfig &config, std::uint64_t evicted, std::size_t remaining,
+                                          bool sensor_at_origin);
+
 /// With `path` set: `file` holds the report's JSON (toJson) written and synced under its temporary name, to be
 /// committed with the run's other outputs once all are written; with `path` empty, `file` stays empty.
 void stageJsonFile(std::optional<AtomicFile> &file, const std::string &path, const RunReport &report);

@@ -199,6 +199,10 @@ int runSample(const SampleArgs &a) {
   if (config.normals.enabled) std::cout << ", " << report.invalid_normals << " without a valid normal";
   std::cout << "\n";
   if (const std::string w = roundingWarning(output, report.output_radius); !w.empty()) std::cerr << w << "\n";
+  if (const std::string w = evictionWarning(config, report.totals.evicted, pipeline.hierarchy().sampleCount(),
+                                            poses.empty());
+      !w.empty())
+    std::cerr << w << "\n";
   if (report.totals.out_of_range > 0)
     std::cerr << "hpds: warning: " << report.totals.out_of_range
               << " points lie beyond the exact key range of the finest level (|coordinate| / cell edge >= 2^30) and "
