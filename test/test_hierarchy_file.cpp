@@ -481,5 +481,44 @@ TEST(MapFileCli, SaveThenLoadContinuesTheMap) {
   }
 }
 
+// A map built down to level 6 (normals on), continued without normals (levels 0..5) and saved: level 6 of the saved
+// map then covers the first run's frames only. The load-time check of a later run sees level 6 populated and says
+// nothing, so a finer spacing read from that map had holes wherever the shallow run drove (on a synthetic drive,
+// half the level-6 samples of one uninterrupted run). The run that saves such a map is the one that can tell.
+TEST(MapFileCli, SavingAMapContinuedShallowerThanItWasBuiltSaysSo) {
+  const auto tmp = test::scratchDir("map_cli_shallow");
+  std::string log;
+  ASSERT_EQ(runHpds("synth -o " + shellQuote(tmp / "s") + " --frames 2 --beams 8 --azimuth-steps 600", &log), 0) << log;
+  auto frame = [&](int i) { return shellQuote(tmp / "s" / ("frame_00000" + std::to_string(i) + ".pcd")); };
+  const auto poses = readKittiPoses((tmp / "s" / "poses.txt").string());
+  writeKittiPoses((tmp / "p0.txt").string(), {poses[0]});
+  writeKittiPoses((tmp / "p1.txt").string(), {poses[1]});
+  const std::string common = " --mode map --max-depth 6";
+  ASSERT_EQ(runHpds("sample " + frame(0) + " --poses " + shellQuote(tmp / "p0.txt") + common + " -o " +
+                        shellQuote(tmp / "deep.ply") + " --save-map " + shellQuote(tmp / "deep.hpdsmap"),
+                    &log),
+            0)
+      << log;
+  const std::string shallow = "sample " + frame(1) + " --poses " + shellQuote(tmp / "p1.txt") + common +
+                              " --no-normals -o " + shellQuote(tmp / "shallow.ply") + " --load-map " +
+                              shellQuote(tmp / "deep.hpdsmap");
+  // Nothing saved: nothing to say.
+  ASSERT_EQ(runHpds(shallow, &log), 0) << log;
+  EXPECT_EQ(log.find("warning"), std::string::npos) << log;
+  ASSERT_EQ(runHpds(shallow + " --save-map " + shellQuote(tmp / "shallow.hpdsmap"), &log), 0) << log;
+  EXPECT_NE(log.find("hpds: warning: the loaded map holds levels down to 6, but this run built levels 0..5 only"),
+            std::string::npos)
+      << log;
+  EXPECT_NE(log.find("map.keep_depth 6"), std::string::npos) << log;
+  // Saved at its own depth: nothing to say.
+  ASSERT_EQ(runHpds("sample " + frame(1) + " --poses " + shellQuote(tmp / "p1.txt") + common + " -o " +
+                        shellQuote(tmp / "same.ply") + " --load-map " + shellQuote(tmp / "deep.hpdsmap") +
+                        " --save-map " + shellQuote(tmp / "same.hpdsmap"),
+                    &log),
+            0)
+      << log;
+  EXPECT_EQ(log.find("warning"), std::string::npos) << log;
+}
+
 }  // namespace
 }  // namespace hpds

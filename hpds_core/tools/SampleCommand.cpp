@@ -84,8 +84,10 @@ int runSample(const SampleArgs &a) {
   if ((!a.load_map.empty() || !a.save_map.empty()) && config.mode != Mode::Map)
     throw std::invalid_argument("--load-map/--save-map need --mode map (scan mode keeps no map)");
   Pipeline pipeline(config);
+  int loaded_deepest = -1;
   if (!a.load_map.empty()) {
     loadMap(a.load_map, pipeline);
+    loaded_deepest = deepestPopulatedLevel(pipeline.hierarchy());
     if (const std::string w = shallowMapWarning(pipeline); !w.empty()) std::cerr << "hpds: warning: " << w << "\n";
   }
   RunReport report = reportFor("sample", pipeline);
@@ -199,6 +201,9 @@ int runSample(const SampleArgs &a) {
   if (config.normals.enabled) std::cout << ", " << report.invalid_normals << " without a valid normal";
   std::cout << "\n";
   if (const std::string w = roundingWarning(output, report.output_radius); !w.empty()) std::cerr << w << "\n";
+  if (!a.save_map.empty())
+    if (const std::string w = shallowSaveWarning(pipeline, loaded_deepest); !w.empty())
+      std::cerr << "hpds: warning: " << w << "\n";
   if (const std::string w = evictionWarning(config, report.totals.evicted, pipeline.hierarchy().sampleCount(),
                                             poses.empty());
       !w.empty())

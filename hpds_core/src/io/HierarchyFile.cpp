@@ -409,19 +409,35 @@ void saveMap(AtomicFile &file, const Pipeline &pipeline) {
   saveHierarchy(file, pipeline.hierarchy(), pipeline.framesProcessed());
 }
 
+int deepestPopulatedLevel(const Hierarchy &hierarchy) {
+  int deepest = -1;
+  for (int l = 0; l <= hierarchy.maxDepth(); ++l)
+    if (hierarchy.countAtLevel(l) > 0) deepest = l;
+  return deepest;
+}
+
 std::string shallowMapWarning(const Pipeline &pipeline) {
-  const Hierarchy &h = pipeline.hierarchy();
-  if (h.sampleCount() == 0) return {};
-  int deepest = 0;
-  for (int l = 0; l <= h.maxDepth(); ++l)
-    if (h.countAtLevel(l) > 0) deepest = l;
-  if (deepest >= pipeline.buildDepth()) return {};
+  const int deepest = deepestPopulatedLevel(pipeline.hierarchy());
+  if (deepest < 0 || deepest >= pipeline.buildDepth()) return {};
   return "the loaded map holds levels 0.." + std::to_string(deepest) + " only, and this run builds down to level " +
          std::to_string(pipeline.buildDepth()) + ": levels " + std::to_string(deepest + 1) + ".." +
          std::to_string(pipeline.buildDepth()) +
          " will hold only the new frames' samples, so their coverage does not reach the earlier frames' points; build "
          "the map with map.keep_depth " + std::to_string(pipeline.buildDepth()) +
          " to continue it at this spacing, or continue at its own";
+}
+
+std::string shallowSaveWarning(const Pipeline &pipeline, int loaded_deepest) {
+  const int built = pipeline.buildDepth();
+  if (loaded_deepest <= built) return {};
+  const std::string deeper = built + 1 == loaded_deepest
+                                 ? "level " + std::to_string(loaded_deepest)
+                                 : "levels " + std::to_string(built + 1) + ".." + std::to_string(loaded_deepest);
+  return "the loaded map holds levels down to " + std::to_string(loaded_deepest) + ", but this run built levels 0.." +
+         std::to_string(built) + " only: in the saved map, " + deeper +
+         " will not cover this run's frames, and a later run that reads " + (built + 1 == loaded_deepest ? "it" : "them") +
+         " (a finer spacing, normals) gets holes there without a warning; set map.keep_depth " +
+         std::to_string(loaded_deepest) + " to continue the map at its full depth";
 }
 
 void loadMap(const std::string &path, Pipeline &pipeline) {

@@ -71,6 +71,15 @@ void saveMap(AtomicFile &file, const Pipeline &pipeline);
 /// new frames' samples, so their coverage does not reach the earlier frames' points (map.keep_depth keeps them).
 [[nodiscard]] std::string shallowMapWarning(const Pipeline &pipeline);
 
+/// The deepest level that holds a sample, or -1 when the hierarchy is empty.
+[[nodiscard]] int deepestPopulatedLevel(const Hierarchy &hierarchy);
+
+/// Before saving a map that was loaded when it held samples down to `loaded_deepest` (deepestPopulatedLevel then):
+/// a warning (empty when there is nothing to say) when `pipeline` built fewer levels than that. The saved map's
+/// deeper levels then cover the earlier runs' frames only, and the load-time check of a later run that reads them
+/// (shallowMapWarning) finds them populated and cannot tell.
+[[nodiscard]] std::string shallowSaveWarning(const Pipeline &pipeline, int loaded_deepest);
+
 /// Map mode only: loads `path`, checked against the pipeline's hierarchy config, and replaces the pipeline's map with
 /// it (strong guarantee: on any error the pipeline is unchanged). Throws std::runtime_error for file problems and
 /// std::invalid_argument when the pipeline is not in map mode.
