@@ -472,6 +472,10 @@ TEST(MapFileCli, SaveThenLoadContinuesTheMap) {
       {frame(0) + common + " --load-map " + shellQuote(tmp / "nope.hpdsmap"), "nope.hpdsmap: file not found"},
       {frame(0) + common + " --load-map " + shellQuote(tmp / "junk.hpdsmap"), "junk.hpdsmap: not an hpds map file"},
       {frame(0) + " --mode map --max-depth 5 --load-map " + shellQuote(tmp / "m.hpdsmap"), "max_depth"},
+      // Another spacing derives another cell: the message said the cells differ, not how to read the map anyway.
+      {frame(0) + common + " --spacing 0.15 --load-map " + shellQuote(tmp / "m.hpdsmap"),
+       "to read it at another spacing, set hierarchy.cell_size: 3.6950417228136052 and hierarchy.max_depth: 6 "
+       "(--cell-size 3.6950417228136052 --max-depth 6)"},
       {frame(0) + common + " --save-map " + shellQuote(tmp / "nodir" / "m.hpdsmap"), "m.hpdsmap"},
   };
   for (const Case &c : cases) {

@@ -235,10 +235,18 @@ LoadedHierarchy parse(Source &src, std::uint64_t total_size, const std::string &
     fail(name, std::string("invalid record layout: ") + e.what());
   }
 
-  if (expected && (expected->cell_size != cell_size || expected->max_depth != static_cast<int>(max_depth)))
+  if (expected && (expected->cell_size != cell_size || expected->max_depth != static_cast<int>(max_depth))) {
+    // The configuration's cell is usually derived from output.spacing, so a map read at another spacing fails here
+    // although it can be read at any spacing with its own cell given: say how, with values that round-trip.
+    char keys[256];
+    std::snprintf(keys, sizeof keys,
+                  "to read it at another spacing, set hierarchy.cell_size: %.17g and hierarchy.max_depth: %u "
+                  "(--cell-size %.17g --max-depth %u)",
+                  cell_size, max_depth, cell_size, max_depth);
     fail(name, "the map was built with " + describeConfig(cell_size, static_cast<int>(max_depth)) +
                    " but the configuration has " + describeConfig(expected->cell_size, expected->max_depth) +
-                   " (hierarchy.cell_size and hierarchy.max_depth must match the map's)");
+                   " (hierarchy.cell_size and hierarchy.max_depth must match the map's; " + keys + ")");
+  }
 
   const std::uint64_t entry_bytes = kEntryFixedBytes + point_step;
   const std::uint64_t body_bytes = total_size - header_size - 4;
