@@ -9,6 +9,7 @@
 #include <map>
 #include <numeric>
 #include <random>
+#include <set>
 #include <tuple>
 
 #include "hpds/sampling/CellKey.hpp"
@@ -470,6 +471,34 @@ TEST(Hierarchy, EvictionKeepsGridsConsistentAndLaterInsertionsPoisson) {
   h.evictToCap(c, 100);
   EXPECT_EQ(h.sampleCount(), 100u);
   expectGuarantees(h, {});
+}
+
+// The cap keeps exactly the nearest samples: the farthest are evicted first, ties (equal distances, which points on
+// a lattice around a lattice centre have by the hundred) by id. Against a ranking of every live sample.
+TEST(Hierarchy, EvictionToTheCapRemovesTheFarthestByBruteForce) {
+  std::mt19937_64 rng(11);
+  for (int trial = 0; trial < 12; ++trial) {
+    Hierarchy h(1.0, 4);
+    std::vector<double> xyz;
+    std::uniform_int_distribution<int> cell(-40, 40);
+    for (int i = 0; i < 3000; ++i)  // lattice points 0.125 m apart: many share a distance to the lattice centre
+      for (int a = 0; a < 3; ++a) xyz.push_back(0.125 * cell(rng) * (a == 2 ? 0.25 : 1.0));
+    insertAll(h, xyz, shuffledOrder(3000, rng));
+    const double center[3] = {0.125 * cell(rng), 0.125 * cell(rng), 0.0};
+    std::vector<std::pair<double, SampleId>> ranked;
+    for (SampleId id = 0; id < h.idBound(); ++id)
+      if (h.isLive(id)) ranked.emplace_back(dist2(h.position(id), center), id);
+    std::sort(ranked.begin(), ranked.end(),
+              [](const auto &a, const auto &b) { return a.first != b.first ? a.first > b.first : a.second < b.second; });
+    const std::size_t cap = trial == 0 ? 0 : std::uniform_int_distribution<std::size_t>(1, ranked.size())(rng);
+    ASSERT_EQ(h.evictToCap(center, cap), ranked.size() - cap);
+    std::set<SampleId> want, got;
+    for (std::size_t i = ranked.size() - cap; i < ranked.size(); ++i) want.insert(ranked[i].second);
+    for (SampleId id = 0; id < h.idBound(); ++id)
+      if (h.isLive(id)) got.insert(id);
+    ASSERT_EQ(got, want) << "trial " << trial << ", cap " << cap;
+    EXPECT_EQ(h.evictToCap(center, cap), 0u);
+  }
 }
 
 TEST(Hierarchy, BallQueryMatchesBruteForce) {

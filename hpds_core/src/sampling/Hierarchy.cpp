@@ -373,17 +373,37 @@ std::size_t Hierarchy::evictOutside(const double center[3], double distance) {
 
 std::size_t Hierarchy::evictToCap(const double center[3], std::size_t max_samples) {
   if (live_ <= max_samples) return 0;
-  std::vector<std::pair<double, SampleId>> by_distance;
-  by_distance.reserve(live_);
+  const std::size_t excess = live_ - max_samples;
+  // Farthest first, ties broken by id (deterministic). A list of every sample's distance would cost 16 B per sample
+  // at the cap (160 MB at map.max_samples' default, every frame once it is reached); a histogram over the top 16 bits
+  // of the squared distance (non-negative doubles order as their bit patterns) finds the boundary bin instead, and
+  // only that bin's samples are ranked.
+  auto binOf = [](double d2) {
+    std::uint64_t bits;
+    std::memcpy(&bits, &d2, sizeof bits);
+    return static_cast<std::uint32_t>(bits >> 48);
+  };
+  std::vector<std::uint32_t> count(std::size_t{1} << 16, 0);
+  for (SampleId id = 0; id < level_.size(); ++id)
+    if (level_[id] != kFreeSlotLevel) ++count[binOf(distance2(position(id), center))];
+  std::uint32_t edge = static_cast<std::uint32_t>(count.size() - 1);
+  std::size_t beyond = 0;  // samples in bins above `edge`: all evicted
+  while (beyond + count[edge] < excess) beyond += count[edge--];
+  std::vector<std::pair<double, SampleId>> at_edge;
+  at_edge.reserve(count[edge]);
   for (SampleId id = 0; id < level_.size(); ++id) {
     if (level_[id] == kFreeSlotLevel) continue;
-    by_distance.emplace_back(distance2(position(id), center), id);
+    const double d2 = distance2(position(id), center);
+    const std::uint32_t bin = binOf(d2);
+    if (bin > edge)
+      release(id);
+    else if (bin == edge)
+      at_edge.emplace_back(d2, id);
   }
-  const std::size_t excess = live_ - max_samples;
-  // Farthest first; ties broken by id so the outcome is deterministic.
-  std::nth_element(by_distance.begin(), by_distance.begin() + static_cast<std::ptrdiff_t>(excess), by_distance.end(),
+  const std::size_t rest = excess - beyond;
+  std::nth_element(at_edge.begin(), at_edge.begin() + static_cast<std::ptrdiff_t>(rest), at_edge.end(),
                    [](const auto &a, const auto &b) { return a.first != b.first ? a.first > b.first : a.second < b.second; });
-  for (std::size_t i = 0; i < excess; ++i) release(by_distance[i].second);
+  for (std::size_t i = 0; i < rest; ++i) release(at_edge[i].second);
   return excess;
 }
 
