@@ -133,8 +133,13 @@ void FrameProcessor::saveMap(const std::string &path) const {
   hpds::saveMap(path, pipeline_);
 }
 
+std::string FrameProcessor::shallowSaveWarning() const {
+  return hpds::shallowSaveWarning(pipeline_, loaded_deepest_);
+}
+
 void FrameProcessor::loadMap(const std::string &path) {
   hpds::loadMap(path, pipeline_);  // strong guarantee: throws before anything changes
+  loaded_deepest_ = hpds::deepestPopulatedLevel(pipeline_.hierarchy());
   // The loaded map has not been published as a local map yet: send one with the next frame.
   local_map_sent_ = false;
   last_local_map_stamp_ = 0.0;

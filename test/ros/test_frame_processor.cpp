@@ -530,6 +530,43 @@ TEST(FrameProcessor, SavedMapLoadsIntoAnotherProcessorAndContinuesIdentically) {
   fs::remove_all(dir);
 }
 
+// A map continued with fewer levels than it was loaded with (normals off: levels 0..4 instead of 0..6) is saved, but
+// the processor says that its deeper levels miss the frames since (the CLI's --save-map says the same).
+TEST(FrameProcessor, SavingAMapContinuedShallowerSaysSo) {
+  hpds::SyntheticLidarConfig lidar_config = smallLidar();
+  lidar_config.frames = 3;
+  const hpds::SyntheticLidar lidar(lidar_config);
+  NodeConfig deep;
+  deep.hpds.mode = hpds::Mode::Map;
+  deep.hpds.output.level = 4;
+  deep.hpds.hierarchy.max_depth = 6;
+  deep.ros.fixed_frame = "odom";
+  NodeConfig shallow = deep;
+  shallow.hpds.normals.enabled = false;
+  const fs::path dir = fs::temp_directory_path() / ("hpds_fp_shallow_" + std::to_string(::getpid()));
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  const std::string file = (dir / "m.hpdsmap").string();
+  auto frame = [&](int i) { return toMsg(lidar.frame(i).frame.points, 10.0 + 0.1 * i); };
+
+  FrameProcessor a(deep);
+  ASSERT_TRUE(a.process(frame(0), lidar.pose(0), OutputRequest::all()).processed);
+  a.saveMap(file);
+  EXPECT_EQ(a.shallowSaveWarning(), "") << "nothing was loaded";
+
+  FrameProcessor b(shallow);
+  b.loadMap(file);
+  ASSERT_TRUE(b.process(frame(1), lidar.pose(1), OutputRequest::all()).processed);
+  const std::string w = b.shallowSaveWarning();
+  EXPECT_NE(w.find("levels 5..6"), std::string::npos) << w;
+  EXPECT_NE(w.find("map.keep_depth 6"), std::string::npos) << w;
+
+  FrameProcessor c(deep);  // the same depth as the map: nothing to say
+  c.loadMap(file);
+  EXPECT_EQ(c.shallowSaveWarning(), "");
+  fs::remove_all(dir);
+}
+
 TEST(FrameProcessor, ScanModeHasNoMapToSaveOrLoad) {
   NodeConfig config;
   FrameProcessor p(config);

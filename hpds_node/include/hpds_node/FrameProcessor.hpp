@@ -123,6 +123,9 @@ class FrameProcessor {
   /// std::runtime_error ("<path>: <problem>") for a missing, corrupt, truncated or incompatible file, leaving the
   /// processor unchanged.
   void loadMap(const std::string &path);
+  /// Map mode, after a loadMap: what a save would lose (hpds::shallowSaveWarning: this run builds fewer levels than
+  /// the loaded map held, so its deeper levels would not cover the frames since), or empty.
+  [[nodiscard]] std::string shallowSaveWarning() const;
 
   /// Scan mode with several workers: the index (and with it the insertion-order seed) of the next frame, so that a
   /// frame's output depends on its place in the stream, not on which worker's processor runs it.
@@ -142,6 +145,7 @@ class FrameProcessor {
   hpds::Pipeline pipeline_;
   ProcessorStats stats_;
   bool local_map_sent_ = false;
+  int loaded_deepest_ = -1;  ///< deepest populated level of the last map loaded (-1: none)
   double last_local_map_stamp_ = 0.0;
 };
 

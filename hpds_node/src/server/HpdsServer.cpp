@@ -189,6 +189,12 @@ std::pair<bool, std::string> HpdsServer::runMapCommand(bool save) {
       processor.saveMap(path);
       msg << "saved " << pipeline.hierarchy().sampleCount() << " samples (next frame index "
           << pipeline.framesProcessed() << ") to '" << path << "'";
+      // Saved all the same (it is what the run has), but the caller, the shutdown log and the log all hear why the
+      // map is weaker than the one loaded.
+      if (const std::string w = processor.shallowSaveWarning(); !w.empty()) {
+        ROS_WARN_STREAM_NAMED("hpds", "hpds: " << w);
+        msg << "; warning: " << w;
+      }
     } else {
       processor.loadMap(path);
       if (const std::string w = hpds::shallowMapWarning(processor.pipeline()); !w.empty())
