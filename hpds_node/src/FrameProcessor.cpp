@@ -188,11 +188,11 @@ ProcessedFrame FrameProcessor::process(const sensor_msgs::PointCloud2 &msg, cons
   if (wants.output) {
     const auto ids = map_mode ? samplesHit(0, L, 2.0 * h.radius(L))
                               : pipeline_.outputSamples();
-    toMsg(ids, header, r.output, &r.position_rounding);
+    toMsg(ids, header, r.output, &r.position_rounding, &r.seconds_normals);
     r.has_output = true;
   }
   if (map_mode && wants.new_samples) {
-    toMsg(pipeline_.atOutputLevels(inserted.new_samples), header, r.new_samples, &r.position_rounding);
+    toMsg(pipeline_.atOutputLevels(inserted.new_samples), header, r.new_samples, &r.position_rounding, &r.seconds_normals);
     r.has_new_samples = true;
   }
   for (std::size_t i = 0; i < config_.ros.publish_levels.size(); ++i) {
@@ -206,7 +206,7 @@ ProcessedFrame FrameProcessor::process(const sensor_msgs::PointCloud2 &msg, cons
         if (h.level(id) == d) ids.push_back(id);
     }
     r.levels.emplace_back(d, sensor_msgs::PointCloud2());
-    toMsg(ids, header, r.levels.back().second, &r.position_rounding);
+    toMsg(ids, header, r.levels.back().second, &r.position_rounding, &r.seconds_normals);
   }
   if (map_mode && config_.ros.local_map_rate > 0.0) {
     // Driven by frame stamps, not a wall/ROS timer, so that the replay emits exactly what the node does; the map
@@ -217,7 +217,7 @@ ProcessedFrame FrameProcessor::process(const sensor_msgs::PointCloud2 &msg, cons
       const Eigen::Vector3d c = frame.sensor_to_fixed.translation();
       const double center[3] = {c.x(), c.y(), c.z()};
       toMsg(pipeline_.outputSamplesNear(center, config_.ros.local_map_radius), header, r.local_map,
-            &r.position_rounding);
+            &r.position_rounding, &r.seconds_normals);
       r.has_local_map = true;
     }
     if (due) {
@@ -239,8 +239,10 @@ ProcessedFrame FrameProcessor::process(const sensor_msgs::PointCloud2 &msg, cons
 }
 
 void FrameProcessor::toMsg(const std::vector<hpds::SampleId> &ids, const std_msgs::Header &header,
-                           sensor_msgs::PointCloud2 &out, double *rounding) const {
-  const hpds::PointBuffer cloud = pipeline_.makeCloud(ids, /*with_frame_field=*/false);
+                           sensor_msgs::PointCloud2 &out, double *rounding, double *seconds_normals) const {
+  double normals = 0.0;
+  const hpds::PointBuffer cloud = pipeline_.makeCloud(ids, /*with_frame_field=*/false, &normals);
+  *seconds_normals += normals;
   *rounding = std::max(*rounding, hpds::positionRounding(cloud));
   toRosCloud(cloud, header, out);
 }

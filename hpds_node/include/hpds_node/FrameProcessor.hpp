@@ -75,6 +75,7 @@ struct ProcessedFrame {
   sensor_msgs::PointCloud2 output, new_samples, local_map;
   std::vector<std::pair<int, sensor_msgs::PointCloud2>> levels;  ///< (D, cloud) for the requested levels
   double seconds = 0.0;                                          ///< conversion + pipeline + outputs
+  double seconds_normals = 0.0;  ///< of `seconds`: the outputs' normals (and covariances)
   /// [m] How far the outputs' float32 x y z may round positions (hpds::positionRounding; 0: float64).
   double position_rounding = 0.0;
 };
@@ -137,9 +138,10 @@ class FrameProcessor {
 
  private:
   [[nodiscard]] std::vector<hpds::SampleId> samplesHit(int min_level, int max_level, double hit_radius) const;
-  /// The output cloud of ids into `out`; raises *rounding to its position rounding.
+  /// The output cloud of ids into `out`; raises *rounding to its position rounding, adds its normals' time to
+  /// *seconds_normals.
   void toMsg(const std::vector<hpds::SampleId> &ids, const std_msgs::Header &header, sensor_msgs::PointCloud2 &out,
-             double *rounding) const;
+             double *rounding, double *seconds_normals) const;
 
   NodeConfig config_;
   hpds::Pipeline pipeline_;
