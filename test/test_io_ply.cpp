@@ -145,6 +145,50 @@ TEST(PlyRoundTrip, ColoursPclCannotPackKeepTheirFieldsAndBytes) {
   }
 }
 
+// PCL's packed colour (PointXYZRGB's float rgb, PointXYZRGBA's uint rgba) goes out as uchar red green blue [alpha],
+// which viewers show as colours (a float rgb is a meaningless scalar to them), and comes back packed.
+TEST(PlyRoundTrip, PackedRgbIsWrittenAsColourChannelsAndReadsBackPacked) {
+  const ScratchDir scratch("io_ply_rgb");
+  for (const bool alpha : {false, true}) {
+    SCOPED_TRACE(alpha ? "rgba" : "rgb");
+    const std::string name = alpha ? "rgba" : "rgb";
+    PointLayout layout = xyzLayout();
+    layout.append(name, alpha ? FieldType::UInt32 : FieldType::Float32);
+    layout.append("intensity", FieldType::Float32);
+    PointBuffer src(layout, 5);
+    for (std::size_t i = 0; i < src.size(); ++i) {
+      std::uint8_t *rec = src.record(i);
+      for (int a = 0; a < 3; ++a) writeFromDouble(rec, layout.fields[a], double(i) + 0.5 * a);
+      const std::uint8_t bgra[4] = {static_cast<std::uint8_t>(10 + i), static_cast<std::uint8_t>(100 + i),
+                                    static_cast<std::uint8_t>(250 - i), static_cast<std::uint8_t>(alpha ? 7 * i : 255)};
+      std::memcpy(rec + layout.find(name)->offset, bgra, 4);
+      writeFromDouble(rec, *layout.find("intensity"), 3.0 * double(i));
+    }
+    const std::string path = (scratch.path / (name + ".ply")).string();
+    writePly(path, src);
+    const std::string bytes = readBytes(path);
+    const std::string header = bytes.substr(0, bytes.find("end_header"));
+    EXPECT_NE(header.find("property uchar red\nproperty uchar green\nproperty uchar blue\n" +
+                          std::string(alpha ? "property uchar alpha\n" : "property float intensity\n")),
+              std::string::npos)
+        << header;
+    EXPECT_EQ(header.find("property float rgb"), std::string::npos) << header;
+    EXPECT_EQ(header.find("property uint rgba"), std::string::npos) << header;
+
+    const PointBuffer back = readPointCloud(path);
+    ASSERT_EQ(back.size(), src.size());
+    const PointField *colour = back.layout().find(name);
+    ASSERT_NE(colour, nullptr) << "read back as PCL's packed " << name;
+    ASSERT_EQ(fieldTypeSize(colour->type), 4u);
+    for (std::size_t i = 0; i < src.size(); ++i) {
+      const std::uint8_t *want = src.record(i) + layout.find(name)->offset;
+      const std::uint8_t *got = back.record(i) + colour->offset;
+      EXPECT_EQ(std::memcmp(want, got, alpha ? 4 : 3), 0) << "point " << i;  // rgb's fourth byte is padding
+      EXPECT_EQ(readAsDouble(back.record(i), *back.layout().find("intensity")), 3.0 * double(i));
+    }
+  }
+}
+
 // The reader of those files walks elements before the vertex (with list properties), handles ascii and big-endian
 // data and refuses what does not add up.
 TEST(PlyRead, OwnVertexReaderFormatsAndBadInput) {

@@ -49,6 +49,16 @@ bool isValidPropertyName(const std::string &name) {
   return true;
 }
 
+// 3 for a PCL packed "rgb", 4 for "rgba" (one 4-byte float or uint field), written as colour channels, unless the
+// cloud has a field of a channel's own name (then both stay as they are); else 0.
+int packedColourChannels(const PointLayout &layout, const PointField &f) {
+  const int channels = f.name == "rgb" ? 3 : f.name == "rgba" ? 4 : 0;
+  if (channels == 0 || f.count != 1 || (f.type != FieldType::Float32 && f.type != FieldType::UInt32)) return 0;
+  for (const char *channel : {"red", "green", "blue", "alpha"})
+    if (layout.find(channel)) return 0;
+  return channels;
+}
+
 // `name` with every byte outside printable ASCII shown as '?', for messages.
 std::string printable(std::string name) {
   for (char &c : name)
@@ -97,7 +107,29 @@ PlyPlan planPly(const std::string &path, const PointBuffer &cloud) {
   std::set<std::string> names;
   std::vector<Span> spans;
   std::size_t out_step = 0;
+  auto addSpan = [&spans, &out_step](std::uint32_t offset, std::uint32_t bytes) {
+    // Adjacent bytes merge into one span so that the copy loop below stays short for typical layouts.
+    if (!spans.empty() && spans.back().offset + spans.back().bytes == offset)
+      spans.back().bytes += bytes;
+    else
+      spans.push_back({offset, bytes});
+    out_step += bytes;
+  };
   for (const PointField &f : layout.fields) {
+    if (packedColourChannels(layout, f) > 0) {
+      // PCL's packed colour (bytes b g r [a] of a little-endian 4-byte field) as the uchar red green blue [alpha]
+      // properties that CloudCompare and MeshLab show as colours, and PCL reads back into rgb / rgba, as PCL's own
+      // PLY writer does; a float named rgb would be a meaningless scalar to them.
+      const int channels = packedColourChannels(layout, f);
+      static constexpr const char *kChannel[4] = {"red", "green", "blue", "alpha"};
+      static constexpr std::uint32_t kByte[4] = {2, 1, 0, 3};
+      for (int c = 0; c < channels; ++c) {
+        names.insert(kChannel[c]);
+        header += std::string("property uchar ") + kChannel[c] + "\n";
+        addSpan(f.offset + kByte[c], 1);
+      }
+      continue;
+    }
     if (!isValidPropertyName(f.name))
       fail(path, "cannot write PLY: field name '" + printable(f.name) +
                      "' is not a valid PLY property name (printable ASCII without spaces)");
@@ -114,13 +146,7 @@ PlyPlan planPly(const std::string &path, const PointBuffer &cloud) {
         fail(path, "cannot write PLY: the header would exceed " + std::to_string(io_detail::kMaxHeaderBytes) +
                        " bytes (too many properties), which readers refuse");
     }
-    // Adjacent fields merge into one span so that the copy loop below stays short for typical layouts.
-    const auto bytes = static_cast<std::uint32_t>(elem * f.count);
-    if (!spans.empty() && spans.back().offset + spans.back().bytes == f.offset)
-      spans.back().bytes += bytes;
-    else
-      spans.push_back({f.offset, bytes});
-    out_step += bytes;
+    addSpan(f.offset, static_cast<std::uint32_t>(elem * f.count));
   }
   header += kEndHeader;
   return PlyPlan{std::move(header), std::move(spans), out_step};

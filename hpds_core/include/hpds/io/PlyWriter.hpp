@@ -4,6 +4,9 @@
 // - Writes `format binary_little_endian 1.0` with one `element vertex N` and one property per field, in layout order,
 //   typed char uchar short ushort int uint float double after the field's datatype. A field with count > 1 becomes
 //   properties name_0 ... name_{count-1}. Only the fields' bytes are written: padding inside a record is skipped.
+// - PCL's packed colour, a 4-byte float/uint field `rgb` or `rgba`, is written as `uchar red green blue` (and `alpha`
+//   for rgba), as PCL's own writer does, so that viewers show colours; `rgb`'s fourth byte is not written. (Not when
+//   the cloud also has a field named red, green, blue or alpha: then every field is written as it is.)
 // - An organised cloud (height > 1) also gets `obj_info num_cols W` / `obj_info num_rows H`, which PCL's reader uses to
 //   restore width/height.
 // - Read back through readPointCloud the values are identical, with PCL's naming conventions applied by its reader:
