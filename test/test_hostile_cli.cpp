@@ -462,7 +462,6 @@ TEST(HostileCli, PlyThatTripsPclsAssertIsRefused) {
   EXPECT_EQ(hpds("sample " + q(input) + " -o " + q(tmp / "o.ply"), &log), 1) << log;
 }
 
-
 // `hpds verify` on a raw scan (no level field) or on a file whose levels are not hpds's said only
 // "verifySampling: sampling has no 'level' field", naming neither the file nor what to give instead.
 TEST(HostileCli, VerifyNamesTheFileThatIsNotASampling) {
@@ -477,7 +476,6 @@ TEST(HostileCli, VerifyNamesTheFileThatIsNotASampling) {
       {"verify " + q(tmp / "deep.ply") + " --cell-size 4", 1, "deep.ply: sample 1 has level 99"},
   });
 }
-
 
 // A PCD saved in a map frame keeps the sensor position in VIEWPOINT, and PCL's NormalEstimation faces it
 // (use_sensor_origin_). hpds ignored it and turned every normal toward (0,0,0): here a floor 10 m above the origin,
