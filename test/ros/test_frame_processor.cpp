@@ -588,6 +588,11 @@ std::size_t residentBytes() {
 }
 
 TEST(FrameProcessor, OneHugeFrameDoesNotStayInTheResidentSet) {
+#if defined(__SANITIZE_ADDRESS__)
+  // What is measured is glibc's allocator handing memory back; under ASan its own allocator holds freed blocks in a
+  // quarantine by design. `make test` runs the check.
+  GTEST_SKIP() << "resident-set check of glibc's allocator: not meaningful under AddressSanitizer";
+#endif
   // Found leaving a node running: after one 1.5 M point frame its resident set stayed ~100 MB above what it was
   // before (31 -> 131 MB, and there for good, hours of small frames later), although the pipeline had given its
   // scratch back (the diagnostics' memory in use back to 0.9 MB): glibc keeps freed blocks in its heaps.
