@@ -268,6 +268,23 @@ TEST(HostileCli, NanInfEverywhereOriginOnlyAndEmptyFrames) {
   EXPECT_EQ(readPointCloud((tmp / "m1.ply").string()).size(), readPointCloud((tmp / "m2.ply").string()).size());
 }
 
+// An input field named `frame` (a frame counter some pipelines add) never reaches the output, even where hpds writes
+// no frame field of its own: `hpds verify` would read it as hpds's scan-frame index and split the map by it.
+TEST(HostileCli, AnInputFrameFieldIsNotTakenForHpdssOwn) {
+  const auto tmp = test::scratchDir("hostile_frame_field");
+  std::string body;
+  for (int i = 0; i < 30; ++i)
+    for (int j = 0; j < 30; ++j) body += std::to_string(0.1 * i) + " " + std::to_string(0.1 * j) + " 2 " + std::to_string((i + j) % 3) + "\n";
+  writeText(tmp / "f.pcd", "VERSION 0.7\nFIELDS x y z frame\nSIZE 4 4 4 4\nTYPE F F F U\nCOUNT 1 1 1 1\nWIDTH 900\n"
+                           "HEIGHT 1\nPOINTS 900\nDATA ascii\n" + body);
+  std::string log;
+  ASSERT_EQ(hpds("sample " + q(tmp / "f.pcd") + " --mode map --no-normals --spacing 0.2 -o " + q(tmp / "m.ply"), &log), 0)
+      << log;
+  EXPECT_NE(log.find("input field 'frame'"), std::string::npos) << log;
+  EXPECT_EQ(readPointCloud((tmp / "m.ply").string()).layout().find("frame"), nullptr);
+  ASSERT_EQ(hpds("verify " + q(tmp / "m.ply") + " --spacing 0.2 --input " + q(tmp / "f.pcd"), &log), 0) << log;
+}
+
 TEST(HostileCli, TheSameFrameTwiceAddsNothingInMapMode) {
   const auto tmp = test::scratchDir("hostile_dup");
   const SyntheticLidar lidar([] {
@@ -490,7 +507,7 @@ TEST(HostileCli, NormalsFaceThePcdViewpoint) {
   const std::string head = "VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH " +
                            std::to_string(n) + "\nHEIGHT 1\nVIEWPOINT ";
   const std::string tail = "\nPOINTS " + std::to_string(n) + "\nDATA ascii\n" + body;
-  writeText(tmp / "floor.pcd", head + "1 1 20 1 0 0 0" + tail);
+  writeText(tmp / "floor.pcd", head + "+1 1 +20 1 0 0 0" + tail);  // PCL takes signed numbers
   std::string log;
   ASSERT_EQ(hpds("sample " + q(tmp / "floor.pcd") + " -o " + q(tmp / "o.ply") + " --spacing 0.2", &log), 0) << log;
   const PointBuffer out = readPointCloud((tmp / "o.ply").string());

@@ -189,6 +189,29 @@ TEST(PlyRoundTrip, PackedRgbIsWrittenAsColourChannelsAndReadsBackPacked) {
   }
 }
 
+// Both packed fields in one cloud would give the channels twice: both are then written as they are, and read back.
+TEST(PlyRoundTrip, RgbAndRgbaTogetherStayPacked) {
+  const ScratchDir scratch("io_ply_rgb_rgba");
+  PointLayout layout = xyzLayout();
+  layout.append("rgb", FieldType::Float32);
+  layout.append("rgba", FieldType::UInt32);
+  PointBuffer src(layout, 4);
+  for (std::size_t i = 0; i < src.size(); ++i)
+    for (std::size_t k = 0; k < layout.fields.size(); ++k)
+      writeFromDouble(src.record(i), layout.fields[k], double(i * 31 + k * 7));
+  const std::string path = (scratch.path / "both.ply").string();
+  writePly(path, src);
+  const std::string bytes = readBytes(path);
+  EXPECT_EQ(bytes.find("property uchar red"), std::string::npos);
+  const PointBuffer back = readPointCloud(path);
+  ASSERT_EQ(back.size(), src.size());
+  for (const char *name : {"rgb", "rgba"}) {
+    const PointField *g = back.layout().find(name);
+    ASSERT_NE(g, nullptr) << name;
+    expectSameValues(src, *layout.find(name), back, *g);
+  }
+}
+
 // The reader of those files walks elements before the vertex (with list properties), handles ascii and big-endian
 // data and refuses what does not add up.
 TEST(PlyRead, OwnVertexReaderFormatsAndBadInput) {

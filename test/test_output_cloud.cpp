@@ -52,7 +52,8 @@ PointLayout randomInputLayout(std::mt19937 &rng) {
     fields.push_back(PointField{"f" + std::to_string(i), 0, kTypes[rng() % 8],
                                 static_cast<std::uint32_t>(rng() % 5 == 0 ? 1 + rng() % 3 : 1)});
   if (rng() % 3 == 0) fields.push_back(PointField{"level", 0, FieldType::Float32, 1});  // one of the output's names
-  // Names the output writes only with normals, covariances or the frame field: carried when it does not.
+  // Names the output writes only with normals or covariances (carried when it does not), and frame (reserved always:
+  // `hpds verify` reads it as hpds's scan-frame index).
   if (rng() % 3 == 0) fields.push_back(PointField{"curvature", 0, FieldType::Float64, 1});
   if (rng() % 3 == 0) fields.push_back(PointField{"frame", 0, FieldType::UInt16, 1});
   if (rng() % 3 == 0) fields.push_back(PointField{"cov_xx", 0, FieldType::Float32, 1});
@@ -88,7 +89,9 @@ TEST(OutputCloud, LayoutIsAlignedForPackedInputs) {
           if (normals) expected.insert({"normal_x", "normal_y", "normal_z", "curvature"});
           if (covariances) expected.insert({"cov_xx", "cov_xy", "cov_xz", "cov_yy", "cov_yz", "cov_zz"});
           if (frame) expected.insert("frame");
-          const std::set<std::string> own = expected;  // the output's own fields replace inputs of those names
+          // The output's own fields replace inputs of those names; so does its reserved frame name.
+          std::set<std::string> own = expected;
+          own.insert("frame");
           std::vector<std::string> replaced;
           for (const PointField &f : in.fields) {
             if (own.count(f.name)) {
@@ -105,7 +108,7 @@ TEST(OutputCloud, LayoutIsAlignedForPackedInputs) {
           for (const PointField &f : out.fields) names.insert(f.name);
           EXPECT_EQ(names, expected);
           EXPECT_EQ(out.find("level")->type, FieldType::UInt8);
-          EXPECT_EQ(fieldsNotCarried(in, normals, frame, covariances), replaced);
+          EXPECT_EQ(fieldsNotCarried(in, normals, covariances), replaced);
         }
   }
 }
@@ -200,8 +203,8 @@ TEST(OutputCloud, InputNormalsAreCarriedWhenHpdsWritesNone) {
   const InsertResult inserted = h.insert(batch);
   ASSERT_EQ(inserted.accepted.size(), 3u);
 
-  EXPECT_EQ(fieldsNotCarried(in, false, false, false), std::vector<std::string>{});
-  EXPECT_EQ(fieldsNotCarried(in, true, false, false),
+  EXPECT_EQ(fieldsNotCarried(in, false, false), std::vector<std::string>{});
+  EXPECT_EQ(fieldsNotCarried(in, true, false),
             (std::vector<std::string>{"normal_x", "normal_y", "normal_z", "curvature"}));
   const std::vector<SampleNormal> ours(3, SampleNormal{{0.0f, 0.0f, 1.0f}, 0.5f, true});
   for (const bool with_normals : {false, true}) {

@@ -160,12 +160,9 @@ PcdHeader parsePcdHeader(const std::string &path, const FileBytes &file) {
         if (!isNumber(tok[i])) lineError("VIEWPOINT value " + quote(tok[i]) + " is not a number");
       // Normals are turned toward this position, so it must be a usable one (PCL would orient toward NaN).
       for (int a = 0; a < 3; ++a) {
-        const std::string_view t = tok[1 + a];
-        double v = 0.0;
-        const auto res = std::from_chars(t.data(), t.data() + t.size(), v);
-        if (res.ec != std::errc() || res.ptr != t.data() + t.size() || !std::isfinite(v))
-          lineError("VIEWPOINT position " + quote(t) + " is not a finite number");
-        h.viewpoint[a] = v;
+        const std::optional<double> v = parseNumber(tok[1 + a]);
+        if (!v || !std::isfinite(*v)) lineError("VIEWPOINT position " + quote(tok[1 + a]) + " is not a finite number");
+        h.viewpoint[a] = *v;
       }
     } else if (key == "POINTS") {
       if (!have_fields) lineError("POINTS before FIELDS");

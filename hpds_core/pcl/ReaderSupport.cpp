@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cctype>
 #include <cerrno>
+#include <cmath>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -67,16 +68,19 @@ bool iequals(std::string_view a, std::string_view b) {
 }
 
 // Any decimal number, including nan/inf (PCL writes "nan" for invalid points). Locale-independent.
-bool isNumber(std::string_view token) {
+std::optional<double> parseNumber(std::string_view token) {
   if (!token.empty() && token.front() == '+') token.remove_prefix(1);
-  if (token.empty()) return false;
+  if (token.empty()) return std::nullopt;
   double value = 0.0;
   const auto res = std::from_chars(token.data(), token.data() + token.size(), value);
-  // Out-of-range values still are numbers (they saturate); only malformed text is rejected.
-  return (res.ec == std::errc() || res.ec == std::errc::result_out_of_range) && res.ptr == token.data() + token.size();
+  if (res.ptr != token.data() + token.size()) return std::nullopt;
+  if (res.ec == std::errc::result_out_of_range)  // saturates: still a number, as the readers take it
+    return token.front() == '-' ? -INFINITY : INFINITY;
+  if (res.ec != std::errc()) return std::nullopt;
+  return value;
 }
 
-
+bool isNumber(std::string_view token) { return parseNumber(token).has_value(); }
 
 FileBytes openForReading(const std::string &path) {
   // Also keeps FIFOs and devices out: reading them could block forever.

@@ -43,6 +43,9 @@ using io_detail::kMaxHeaderBytes;
 [[nodiscard]] bool iequals(std::string_view a, std::string_view b);
 /// Any decimal number, including nan/inf (PCL writes "nan" for invalid points). Locale-independent.
 [[nodiscard]] bool isNumber(std::string_view token);
+/// The value of such a token (a leading '+' allowed, as PCL's readers take it; beyond double's range: +-inf), or
+/// nothing when it is not a number.
+[[nodiscard]] std::optional<double> parseNumber(std::string_view token);
 
 template <typename T>
 std::optional<T> parseInteger(std::string_view token) {

@@ -220,17 +220,18 @@ int runReplay(const ReplayArgs &a) {
       report.samples_per_level[d] = pipeline.hierarchy().countAtLevel(static_cast<int>(d));
   // The output and the stats are written and synced under temporary names, then put in place together (see
   // `hpds sample`): a failure leaves both previous files as they were.
+  // The final map's cloud (and its normals) is made before the write is timed, as `hpds sample` does.
+  if (!to_bag && !scan) {
+    double final_normals = 0.0;  // makeCloud sets its time; the frames' normals are in the report already
+    ply = pipeline.makeCloud(pipeline.outputSamples(), false, &final_normals);
+    report.seconds.normals += final_normals;
+  }
   const auto t_write = std::chrono::steady_clock::now();
   std::optional<AtomicFile> ply_file;
   if (to_bag) {
     out.close();
     bag_file->finish();
   } else {
-    if (!scan) {
-      double final_normals = 0.0;  // makeCloud sets its time; the frames' normals are in the report already
-      ply = pipeline.makeCloud(pipeline.outputSamples(), false, &final_normals);
-      report.seconds.normals += final_normals;
-    }
     report.output_points = ply.size();
     ply_file.emplace(a.output);
     writePly(*ply_file, ply);

@@ -1,4 +1,5 @@
 // `hpds sample INPUT... -o OUT.ply`: files in, hierarchy, PLY out.
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <iostream>
@@ -85,9 +86,11 @@ int runSample(const SampleArgs &a) {
     throw std::invalid_argument("--load-map/--save-map need --mode map (scan mode keeps no map)");
   Pipeline pipeline(config);
   int loaded_deepest = -1;
+  std::uint32_t loaded_frames = 0;
   if (!a.load_map.empty()) {
     loadMap(a.load_map, pipeline);
     loaded_deepest = deepestPopulatedLevel(pipeline.hierarchy());
+    loaded_frames = pipeline.framesProcessed();
     if (const std::string w = shallowMapWarning(pipeline); !w.empty()) std::cerr << "hpds: warning: " << w << "\n";
   }
   RunReport report = reportFor("sample", pipeline);
@@ -98,11 +101,13 @@ int runSample(const SampleArgs &a) {
   // Input fields the output cannot carry (it writes fields of those names), with the first input that had each.
   std::map<std::string, std::string> not_carried;
   std::mutex not_carried_mutex;
+  std::atomic<bool> any_viewpoint{false};  // a PCD's VIEWPOINT placed a sensor where no pose did
   auto runFrame = [&](Pipeline &p, std::size_t i, StageSeconds &seconds, PointBuffer *cloud) {
     auto t0 = std::chrono::steady_clock::now();
     Frame frame;
     frame.points = readPointCloud(a.inputs[i], &frame.viewpoint);
-    for (const std::string &name : fieldsNotCarried(frame.points.layout(), config.normals.enabled, frame_field,
+    if (!frame.viewpoint.isZero(0.0)) any_viewpoint = true;
+    for (const std::string &name : fieldsNotCarried(frame.points.layout(), config.normals.enabled,
                                                     config.normals.enabled && config.normals.covariances)) {
       const std::lock_guard<std::mutex> lock(not_carried_mutex);
       not_carried.try_emplace(name, a.inputs[i]);
@@ -202,10 +207,10 @@ int runSample(const SampleArgs &a) {
   std::cout << "\n";
   if (const std::string w = roundingWarning(output, report.output_radius); !w.empty()) std::cerr << w << "\n";
   if (!a.save_map.empty())
-    if (const std::string w = shallowSaveWarning(pipeline, loaded_deepest); !w.empty())
+    if (const std::string w = shallowSaveWarning(pipeline, loaded_deepest, loaded_frames); !w.empty())
       std::cerr << "hpds: warning: " << w << "\n";
   if (const std::string w = evictionWarning(config, report.totals.evicted, pipeline.hierarchy().sampleCount(),
-                                            poses.empty());
+                                            poses.empty() && !any_viewpoint);
       !w.empty())
     std::cerr << w << "\n";
   if (report.totals.out_of_range > 0)

@@ -134,12 +134,13 @@ void FrameProcessor::saveMap(const std::string &path) const {
 }
 
 std::string FrameProcessor::shallowSaveWarning() const {
-  return hpds::shallowSaveWarning(pipeline_, loaded_deepest_);
+  return hpds::shallowSaveWarning(pipeline_, loaded_deepest_, loaded_frames_);
 }
 
 void FrameProcessor::loadMap(const std::string &path) {
   hpds::loadMap(path, pipeline_);  // strong guarantee: throws before anything changes
   loaded_deepest_ = hpds::deepestPopulatedLevel(pipeline_.hierarchy());
+  loaded_frames_ = pipeline_.framesProcessed();
   // The loaded map has not been published as a local map yet: send one with the next frame.
   local_map_sent_ = false;
   last_local_map_stamp_ = 0.0;
@@ -159,10 +160,9 @@ ProcessedFrame FrameProcessor::process(const sensor_msgs::PointCloud2 &msg, cons
     ++stats_.malformed[static_cast<int>(r.malformed)];
     return r;
   }
-  // The node's clouds never have the frame field (makeCloud below); normals and covariances follow the config.
   const hpds::NormalConfig &normals = config_.hpds.normals;
-  r.fields_not_carried = hpds::fieldsNotCarried(frame.points.layout(), normals.enabled, /*with_frame=*/false,
-                                                normals.enabled && normals.covariances);
+  r.fields_not_carried =
+      hpds::fieldsNotCarried(frame.points.layout(), normals.enabled, normals.enabled && normals.covariances);
   frame.stamp = msg.header.stamp.toSec();
   if (!target.empty()) frame.sensor_to_fixed = sensor_to_target;
 

@@ -57,7 +57,10 @@ def load_config(config=None):
 
 
 def read_points(path):
-    """x, y, z of a .pcd, .ply (built with PCL) or KITTI .bin file as an (N, 3) float64 array."""
+    """x, y, z of a .pcd, .ply (built with PCL) or KITTI .bin file as an (N, 3) float64 array.
+
+    A PCD's VIEWPOINT is not returned: downsample() orients normals toward the origin of the points it is given, so
+    for a cloud saved in another frame subtract the sensor position first (`hpds sample` reads VIEWPOINT itself)."""
     return _hpds.read_points(os.fspath(path))
 
 

@@ -13,8 +13,8 @@
 // - The samples are those `hpds sample` writes for the same points and config (one frame, its mode and seed), in
 //   the same order: levels 0..D of the output level D (output.level / output.spacing).
 // - Deterministic: the same points and config give the same samples, whatever config.threads is.
-// - Throws std::invalid_argument for an invalid config (the message names the key, as the CLI does) or more than
-//   2^32 - 1 points.
+// - Throws std::invalid_argument for an invalid config (the message names the key, as the CLI does), a viewpoint
+//   that is not finite, or more than 2^32 - 1 points.
 // - Thread-safe: calls share no state; each call may use config.threads worker threads.
 #pragma once
 

@@ -435,9 +435,10 @@ std::string shallowMapWarning(const Pipeline &pipeline) {
          " to continue it at this spacing, or continue at its own";
 }
 
-std::string shallowSaveWarning(const Pipeline &pipeline, int loaded_deepest) {
+std::string shallowSaveWarning(const Pipeline &pipeline, int loaded_deepest, std::uint32_t loaded_frames) {
   const int built = pipeline.buildDepth();
-  if (loaded_deepest <= built) return {};
+  // A map saved as it was loaded lost nothing, whatever this run would build.
+  if (loaded_deepest <= built || pipeline.framesProcessed() <= loaded_frames) return {};
   const std::string deeper = built + 1 == loaded_deepest
                                  ? "level " + std::to_string(loaded_deepest)
                                  : "levels " + std::to_string(built + 1) + ".." + std::to_string(loaded_deepest);

@@ -61,7 +61,8 @@ void refuseFloat64Records(const std::string &path, const PointBuffer &cloud) {
   if (as_f32 * 10 > n && as_f64 * 100 <= n / 2)
     fail(path, "not a KITTI .bin file: " + std::to_string(as_f32) + " of " + std::to_string(n) +
                    " float32 records have a coordinate beyond 100 km or subnormal, but read as float64 x y z "
-                   "intensity the file is " + std::to_string(n / 2) + " plausible points; KITTI .bin is float32 "
+                   "intensity " + std::to_string(n / 2 - as_f64) + " of its " + std::to_string(n / 2) +
+                   " points are plausible; KITTI .bin is float32 "
                    "(with numpy: points.astype(numpy.float32).tofile(path))");
 }
 

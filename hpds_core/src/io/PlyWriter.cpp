@@ -50,10 +50,12 @@ bool isValidPropertyName(const std::string &name) {
 }
 
 // 3 for a PCL packed "rgb", 4 for "rgba" (one 4-byte float or uint field), written as colour channels, unless the
-// cloud has a field of a channel's own name (then both stay as they are); else 0.
+// cloud has a field of a channel's own name or both packed fields (whose channels would share names): then every
+// field stays as it is. Else 0.
 int packedColourChannels(const PointLayout &layout, const PointField &f) {
   const int channels = f.name == "rgb" ? 3 : f.name == "rgba" ? 4 : 0;
   if (channels == 0 || f.count != 1 || (f.type != FieldType::Float32 && f.type != FieldType::UInt32)) return 0;
+  if (layout.find("rgb") && layout.find("rgba")) return 0;
   for (const char *channel : {"red", "green", "blue", "alpha"})
     if (layout.find(channel)) return 0;
   return channels;
@@ -116,11 +118,10 @@ PlyPlan planPly(const std::string &path, const PointBuffer &cloud) {
     out_step += bytes;
   };
   for (const PointField &f : layout.fields) {
-    if (packedColourChannels(layout, f) > 0) {
+    if (const int channels = packedColourChannels(layout, f); channels > 0) {
       // PCL's packed colour (bytes b g r [a] of a little-endian 4-byte field) as the uchar red green blue [alpha]
       // properties that CloudCompare and MeshLab show as colours, and PCL reads back into rgb / rgba, as PCL's own
       // PLY writer does; a float named rgb would be a meaningless scalar to them.
-      const int channels = packedColourChannels(layout, f);
       static constexpr const char *kChannel[4] = {"red", "green", "blue", "alpha"};
       static constexpr std::uint32_t kByte[4] = {2, 1, 0, 3};
       for (int c = 0; c < channels; ++c) {

@@ -11,24 +11,22 @@ namespace hpds {
 namespace {
 constexpr const char *kCovarianceNames[6] = {"cov_xx", "cov_xy", "cov_xz", "cov_yy", "cov_yz", "cov_zz"};
 
-/// Whether an output with these parts writes a field named n itself. Only those input fields give way: an input's
-/// own normals (PointXYZINormal, a PLY from another estimator) are data like any other field when hpds writes none.
-bool isOwnName(const std::string &n, bool with_normals, bool with_frame, bool with_covariances) {
+/// Whether an output with these parts keeps the name n for a field of its own. An input's own normals
+/// (PointXYZINormal, a PLY from another estimator) and covariances are data like any other field when hpds writes
+/// none; level and frame stay reserved, since `hpds verify` and the quality tools read them as hpds's.
+bool isOwnName(const std::string &n, bool with_normals, bool with_covariances) {
   if (with_covariances)
     for (const char *c : kCovarianceNames)
       if (n == c) return true;
   if (with_normals && (n == "normal_x" || n == "normal_y" || n == "normal_z" || n == "curvature")) return true;
-  if (with_frame && n == "frame") return true;
-  return n == "x" || n == "y" || n == "z" || n == "level";
+  return n == "x" || n == "y" || n == "z" || n == "level" || n == "frame";
 }
 }  // namespace
 
-std::vector<std::string> fieldsNotCarried(const PointLayout &input, bool with_normals, bool with_frame,
-                                          bool with_covariances) {
+std::vector<std::string> fieldsNotCarried(const PointLayout &input, bool with_normals, bool with_covariances) {
   std::vector<std::string> names;
   for (const auto &f : input.fields)
-    if (isOwnName(f.name, with_normals, with_frame, with_covariances) && f.name != "x" && f.name != "y" &&
-        f.name != "z")
+    if (isOwnName(f.name, with_normals, with_covariances) && f.name != "x" && f.name != "y" && f.name != "z")
       names.push_back(f.name);
   return names;
 }
@@ -50,7 +48,7 @@ PointLayout outputLayout(const PointLayout &input, bool with_normals, bool with_
   if (with_frame) want("frame", FieldType::UInt32);
   want("level", FieldType::UInt8);
   for (const auto &f : input.fields)
-    if (!isOwnName(f.name, with_normals, with_frame, with_covariances)) want(f.name, f.type, f.count);
+    if (!isOwnName(f.name, with_normals, with_covariances)) want(f.name, f.type, f.count);
   std::stable_sort(rest.begin(), rest.end(), [](const PointField &a, const PointField &b) {
     return fieldTypeSize(a.type) > fieldTypeSize(b.type);
   });
@@ -88,7 +86,7 @@ PointBuffer buildOutputCloud(const Hierarchy &h, const std::vector<SampleId> &id
   // Field pairs resolved once, so the per-sample loop only copies bytes.
   std::vector<std::pair<const PointField *, const PointField *>> carried;
   for (const auto &f : in.fields)
-    if (!isOwnName(f.name, normals != nullptr, with_frame, covariances != nullptr))
+    if (!isOwnName(f.name, normals != nullptr, covariances != nullptr))
       carried.emplace_back(out.find(f.name), &f);
   const PointField *fx = out.find("x"), *fy = out.find("y"), *fz = out.find("z"), *fl = out.find("level");
   const bool doubles = fx->type == FieldType::Float64;

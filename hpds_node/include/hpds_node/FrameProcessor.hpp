@@ -147,7 +147,8 @@ class FrameProcessor {
   hpds::Pipeline pipeline_;
   ProcessorStats stats_;
   bool local_map_sent_ = false;
-  int loaded_deepest_ = -1;  ///< deepest populated level of the last map loaded (-1: none)
+  int loaded_deepest_ = -1;       ///< deepest populated level of the last map loaded (-1: none)
+  std::uint32_t loaded_frames_ = 0;  ///< its frame counter
   double last_local_map_stamp_ = 0.0;
 };
 

@@ -74,11 +74,13 @@ void saveMap(AtomicFile &file, const Pipeline &pipeline);
 /// The deepest level that holds a sample, or -1 when the hierarchy is empty.
 [[nodiscard]] int deepestPopulatedLevel(const Hierarchy &hierarchy);
 
-/// Before saving a map that was loaded when it held samples down to `loaded_deepest` (deepestPopulatedLevel then):
-/// a warning (empty when there is nothing to say) when `pipeline` built fewer levels than that. The saved map's
+/// Before saving a map that was loaded when it held samples down to `loaded_deepest` (deepestPopulatedLevel then)
+/// and whose frame counter was `loaded_frames` (framesProcessed then): a warning (empty when there is nothing to
+/// say) when `pipeline` has taken frames since and built fewer levels than that. The saved map's
 /// deeper levels then cover the earlier runs' frames only, and the load-time check of a later run that reads them
 /// (shallowMapWarning) finds them populated and cannot tell.
-[[nodiscard]] std::string shallowSaveWarning(const Pipeline &pipeline, int loaded_deepest);
+[[nodiscard]] std::string shallowSaveWarning(const Pipeline &pipeline, int loaded_deepest,
+                                             std::uint32_t loaded_frames);
 
 /// Map mode only: loads `path`, checked against the pipeline's hierarchy config, and replaces the pipeline's map with
 /// it (strong guarantee: on any error the pipeline is unchanged). Throws std::runtime_error for file problems and

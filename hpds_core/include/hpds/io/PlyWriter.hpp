@@ -10,7 +10,8 @@
 // - An organised cloud (height > 1) also gets `obj_info num_cols W` / `obj_info num_rows H`, which PCL's reader uses to
 //   restore width/height.
 // - Read back through readPointCloud the values are identical, with PCL's naming conventions applied by its reader:
-//   adjacent uchar red, green, blue(, alpha) fields are packed into one `rgb`/`rgba` field and nx/ny/nz are renamed
+//   adjacent uchar red, green, blue(, alpha) fields are packed into one `rgb`/`rgba` field (float32 rgb, uint32
+//   rgba: the colour bytes come back, a uint32 rgb or float32 rgba changes type) and nx/ny/nz are renamed
 //   normal_x/y/z. Any other uchar colour arrangement (a lone `red`, another order) comes back field by field as
 //   written (readPointCloud reads such files itself).
 // - Errors: std::runtime_error whose message starts with the path: I/O failure, a field name that cannot be a PLY

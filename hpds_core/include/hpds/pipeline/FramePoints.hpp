@@ -1,10 +1,11 @@
-// FramePoints: a frame's points filtered in the sensor frame and moved into the fixed frame. Step 2 of
+// FramePoints: a frame's points filtered in their own frame and moved into the fixed frame. Step 2 of
 // Pipeline::addFrame, shared with the tiled map build's bucketing pass (tiling/TileBucket.hpp), so that a point is
 // placed in the same tile that the tile's pipeline later inserts it into: both compute it with this one function.
 //
 // Contract
 // - Skips, counting each reason: NaN/Inf coordinates (also a finite point that a huge pose sends to Inf), exact
-//   (0,0,0) no-returns (input.skip_zero_points), points outside input.min_range/max_range (sensor frame).
+//   (0,0,0) no-returns (input.skip_zero_points), points outside input.min_range/max_range (their distance to
+//   frame.viewpoint, in the points' own frame).
 // - `xyz` is resized to 3 doubles per input point and receives the fixed-frame position of every kept point (the
 //   entries of skipped points are unspecified); `candidates` receives the indices of the kept points, in input order.
 // - Deterministic to the bit: one thread, one formula (R p + t in double precision, from the field values).

@@ -18,11 +18,11 @@
 
 namespace hpds {
 
-/// The input fields an output with these parts does not carry because it writes a field of that name itself (level
-/// always; normal_x/y/z and curvature with normals, cov_* with covariances, frame with the frame field), in input
-/// order: callers say so rather than drop them silently. Every other input field is carried, an input's own normals
+/// The input fields an output with these parts does not carry because it keeps the name for a field of its own
+/// (level and frame always; normal_x/y/z and curvature with normals, cov_* with covariances), in input order:
+/// callers say so rather than drop them silently. Every other input field is carried, an input's own normals
 /// included when the output has none. Rename such a field to keep it.
-[[nodiscard]] std::vector<std::string> fieldsNotCarried(const PointLayout &input, bool with_normals, bool with_frame,
+[[nodiscard]] std::vector<std::string> fieldsNotCarried(const PointLayout &input, bool with_normals,
                                                         bool with_covariances);
 
 /// x y z are float32, or float64 when `float64_xyz` or when the input's x, y and z are all float64 (a float32 keeps

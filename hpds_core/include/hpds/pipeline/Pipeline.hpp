@@ -17,8 +17,10 @@
 //   map.evict_distance from the latest sensor position are evicted before the frame is inserted, and the store is
 //   cut back to map.max_samples (farthest first), so memory is bounded by the cap plus one frame.
 // - Points are transformed by frame.sensor_to_fixed (identity = sensor frame). NaN/Inf coordinates, exact (0,0,0)
-//   no-returns (input.skip_zero_points) and points outside input.min_range/max_range are skipped and counted.
-// - A frame without x/y/z fields, with a pose that is not rigid (rigidPoseProblem, io/PoseFile.hpp), or (map mode)
+//   no-returns (input.skip_zero_points) and points outside input.min_range/max_range (measured from
+//   frame.viewpoint) are skipped and counted. Normals face, and eviction measures from, sensor_to_fixed * viewpoint.
+// - A frame without x/y/z fields, with a pose that is not rigid (rigidPoseProblem, io/PoseFile.hpp), a viewpoint
+//   that is not finite, or (map mode)
 //   whose field layout differs from the first frame's (or the loaded map's), throws std::invalid_argument before
 //   anything changes.
 // - Same config (seed) and same frames give identical samples, whatever `threads` is.

@@ -1,7 +1,8 @@
 // Frame: one sensor sweep as it enters the pipeline.
 //
 // Contract
-// - `points` are in the sensor frame, in metres, with x/y/z fields of any float or integer type plus any other fields.
+// - `points` are in metres, with x/y/z fields of any float or integer type plus any other fields: in the sensor frame,
+//   or in a frame where the sensor stood at `viewpoint` (below).
 // - `sensor_to_fixed` maps sensor coordinates into the fixed (map) frame; identity in scan mode or without poses.
 // - `viewpoint` is where the sensor was among `points` (a PCD's VIEWPOINT: a cloud saved in another frame keeps its
 //   sensor position there, and PCL's normal estimation faces it). sensor_to_fixed * viewpoint is the position that

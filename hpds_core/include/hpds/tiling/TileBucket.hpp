@@ -9,7 +9,8 @@
 // - A bucket keeps, per frame with points in the tile, the frame index, its pose and the kept points' input records
 //   (sensor frame, bytes as read) in input order.
 // - TileBucketer holds what its frames file (a bucketing task's frames); frames are added in increasing frame
-//   index and must share one point layout, as map mode requires (std::invalid_argument otherwise).
+//   index and must share one point layout, as map mode requires (std::invalid_argument otherwise). A frame with a
+//   viewpoint other than the origin is refused the same way: bucket files keep the pose only.
 // - Bucket file (version 1, little-endian): magic "HPDSBKT\0", u32 version, the layout (u32 point_step, u32 field
 //   count, per field u32 name length, name, u32 offset, u8 datatype, u32 count), u32 frame count, per frame u32 frame
 //   index, f64[12] pose (row-major 3x4), u64 point count, the records; then the CRC-32 of all bytes before it.
