@@ -5,8 +5,8 @@
 //   NormalEstimation does), and input.min_range/max_range are measured from it; NaN points are skipped, as are the
 //   other points hpds::downsample skips.
 // - Returns the real input points, every field copied (intensity, ring, time, ...), in sample order: the same
-//   samples, in the same order, as hpds::downsample on the cloud's x/y/z with sensor_origin_ as its viewpoint. header is the input's; the result is
-//   unorganised (height 1) and dense.
+//   samples, in the same order, as hpds::downsample on the cloud's x/y/z with sensor_origin_ as its viewpoint.
+//   header is the input's; the result is unorganised (height 1) and dense.
 // - `normals` (optional): resized and filled in the same order (normal_x/y/z and curvature; NaN where not
 //   estimable). Normals are estimated only when it is given, whatever config.normals.enabled says.
 // - `covariances` (optional): likewise, the samples' covariances for generalized ICP (Samples::covariance), in the

@@ -444,7 +444,8 @@ std::string shallowSaveWarning(const Pipeline &pipeline, int loaded_deepest, std
                                  : "levels " + std::to_string(built + 1) + ".." + std::to_string(loaded_deepest);
   return "the loaded map holds levels down to " + std::to_string(loaded_deepest) + ", but this run built levels 0.." +
          std::to_string(built) + " only: in the saved map, " + deeper +
-         " will not cover this run's frames, and a later run that reads " + (built + 1 == loaded_deepest ? "it" : "them") +
+         " will not cover this run's frames, and a later run that reads " +
+         (built + 1 == loaded_deepest ? "it" : "them") +
          " (a finer spacing, normals) gets holes there without a warning; set map.keep_depth " +
          std::to_string(loaded_deepest) + " to continue the map at its full depth";
 }

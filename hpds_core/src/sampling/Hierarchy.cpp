@@ -402,7 +402,9 @@ std::size_t Hierarchy::evictToCap(const double center[3], std::size_t max_sample
   }
   const std::size_t rest = excess - beyond;
   std::nth_element(at_edge.begin(), at_edge.begin() + static_cast<std::ptrdiff_t>(rest), at_edge.end(),
-                   [](const auto &a, const auto &b) { return a.first != b.first ? a.first > b.first : a.second < b.second; });
+                   [](const auto &a, const auto &b) {
+                     return a.first != b.first ? a.first > b.first : a.second < b.second;
+                   });
   for (std::size_t i = 0; i < rest; ++i) release(at_edge[i].second);
   return excess;
 }

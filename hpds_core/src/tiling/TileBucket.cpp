@@ -75,7 +75,8 @@ FrameCounters TileBucketer::addFrame(const Frame &frame, std::uint32_t frame_ind
   if (!frame.sensor_to_fixed.matrix().allFinite()) throw std::invalid_argument("frame pose is not finite");
   // Bucket files keep the pose only; a viewpoint dropped here would silently turn the frame's normals around.
   if (frame.viewpoint != Eigen::Vector3d::Zero())
-    throw std::invalid_argument("frame.viewpoint: tiled builds take points in the sensor frame (viewpoint at the origin)");
+    throw std::invalid_argument(
+        "frame.viewpoint: tiled builds take points in the sensor frame (viewpoint at the origin)");
 
   FrameCounters c;
   c.input = frame.points.size();
