@@ -28,8 +28,12 @@ std::string format(const char *pattern, double a, double b = 0.0, double c = 0.0
 }
 }  // namespace
 
-KeepUpCheck::KeepUpCheck(const hpds::HpdsConfig &config, std::size_t workers, std::size_t judge_after)
-    : config_(config), workers_(std::max<std::size_t>(1, workers)), judge_after_(std::max<std::size_t>(1, judge_after)) {}
+KeepUpCheck::KeepUpCheck(const hpds::HpdsConfig &config, std::size_t workers, std::size_t judge_after,
+                         double tf_timeout)
+    : config_(config),
+      workers_(std::max<std::size_t>(1, workers)),
+      judge_after_(std::max<std::size_t>(1, judge_after)),
+      tf_timeout_(tf_timeout) {}
 
 void KeepUpCheck::arrived(double wall_seconds) {
   // A burst (several messages at one instant) gives no period: only positive gaps count.
@@ -37,7 +41,9 @@ void KeepUpCheck::arrived(double wall_seconds) {
   last_arrival_ = wall_seconds;
 }
 
-std::string KeepUpCheck::processed(double seconds) {
+std::string KeepUpCheck::processed(double seconds, double waited) {
+  if (waited > 0.0) keep(waits_, waited);
+  if (!(seconds > 0.0)) return "";  // dropped after its wait: nothing processed
   if (!first_skipped_) {
     first_skipped_ = true;
     return "";
@@ -78,6 +84,16 @@ std::string KeepUpCheck::warning(bool on_drop) const {
               "absorbs bursts";
   } else {
     text += "no processing time measured yet (" + workers + ")";
+  }
+  // A worker waiting for a transform takes no next frame: when that is most of the period (a transform that never
+  // comes costs ros/tf_timeout per frame), no sampling setting helps.
+  if (!waits_.empty()) {
+    const double wait = median(waits_);
+    if (gaps_.empty() ? wait > 0.0 : wait > 0.5 * median(gaps_))
+      text += ". Frames also wait " + format("%.0f ms", 1e3 * wait) +
+              " each for their transforms (up to ros/tf_timeout, now " + format("%.3g s", tf_timeout_) +
+              "): check that tf has the sensor's frame in the fixed frame at the frames' stamps (frames without one "
+              "are counted as no_transform), or lower ros/tf_timeout";
   }
   const hpds::OutputResolution out = hpds::resolveOutput(config_);
   text += ". Dropped frames are counted in /diagnostics. To keep up, lower the cost of a frame: a larger output.spacing (now " +

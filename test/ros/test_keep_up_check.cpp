@@ -38,6 +38,27 @@ TEST(KeepUpCheck, SlowFramesAreReportedOnceWithTheNumbersAndWhatToSet) {
   EXPECT_TRUE(check.judged());
 }
 
+// A transform that never comes makes the worker wait ros/tf_timeout per frame, and the queue overflows: the warning
+// says so, instead of only advising sampling settings that cannot help.
+TEST(KeepUpCheck, WaitingForTransformsIsNamedWhenItTakesThePeriod) {
+  KeepUpCheck check(hpds::HpdsConfig{}, 1, 8, 0.1);
+  for (int i = 0; i < 6; ++i) {
+    check.arrived(0.05 * i);                // 20 Hz
+    EXPECT_EQ(check.processed(0.0, 0.1), "");  // dropped as no_transform after the full wait
+  }
+  const std::string w = check.dropped();
+  EXPECT_TRUE(contains(w, "wait 100 ms each for their transforms")) << w;
+  EXPECT_TRUE(contains(w, "ros/tf_timeout, now 0.1 s")) << w;
+
+  // A transform lagging 90 ms behind 10 Hz frames that take 14 ms: the worker keeps up, nothing is said.
+  KeepUpCheck lagging(hpds::HpdsConfig{}, 1, 8, 0.1);
+  for (int i = 0; i < 40; ++i) {
+    lagging.arrived(0.1 * i);
+    EXPECT_EQ(lagging.processed(0.014, 0.086), "") << i;
+  }
+  EXPECT_TRUE(lagging.judged());
+}
+
 TEST(KeepUpCheck, TheVerdictComesWithTheNinthFrame) {
   KeepUpCheck check(hpds::HpdsConfig{}, 1, 8);
   for (int i = 0; i < 8; ++i) {

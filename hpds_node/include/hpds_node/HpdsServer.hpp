@@ -87,8 +87,8 @@ class HpdsServer {
   /// The node's counts so far, for a log line written on `worker`: its own processor's live counts plus the other
   /// workers' as of their last frame (each worker counts only the frames it handled).
   [[nodiscard]] ProcessorStats statsSoFar(std::size_t worker) const;
-  /// Feeds a processed frame's time to keep_up_ and logs its one warning, if any.
-  void checkKeepUp(double frame_seconds);
+  /// Feeds a frame's processing time and its wait for a transform to keep_up_ and logs its one warning, if any.
+  void checkKeepUp(double frame_seconds, double waited);
   void diagnose(diagnostic_updater::DiagnosticStatusWrapper &status);
 
   // Map persistence.

@@ -1,17 +1,20 @@
 // KeepUpCheck: says once, early, that frames take longer to process than they take to arrive, and what to set.
 //
 // Contract
-// - arrived(t) takes the wall-clock time [s] of every received message, processed(seconds) the wall-clock time of
-//   every processed frame (conversion, pipeline, outputs), dropped() every frame dropped because the queue was full.
-//   Only the last 64 gaps and times are kept.
+// - arrived(t) takes the wall-clock time [s] of every received message; processed(seconds, waited) the time a worker
+//   spent processing every processed frame (conversion, pipeline, outputs) and before that waiting for its
+//   transform, and for a frame dropped for want of a transform only the wait (seconds 0); dropped() every frame
+//   dropped because the queue was full. Only the last 64 gaps and times are kept. The verdict weighs processing
+//   only: a wait for a lagging transform shrinks as the worker falls behind, so it is no cost of its own.
 // - Verdict: with the `judge_after`-th processed frame after the first (the first pays for allocations and is left
 //   out), the input period is the median gap between arrivals and the cost the median processing time. When
 //   cost > workers * period the queue must drop frames: processed() returns the warning. The verdict is taken once.
 // - dropped() returns the warning at the first overload drop, whatever the verdict (a load spike, a frame larger
 //   than the first ones), with the numbers measured so far.
 // - Each returns a non-empty text at most once over both: the warning names the measured period and cost, the share
-//   of frames lost and the settings that lower the cost, with their current values. No period before two arrivals
-//   at different times.
+//   of frames lost and the settings that lower the cost, with their current values; when frames wait for their
+//   transforms for more than half the input period, it says that too (a missing or late transform, ros/tf_timeout).
+//   No period before two arrivals at different times.
 // - Not thread-safe: the caller serialises the calls.
 #pragma once
 
@@ -25,12 +28,14 @@ namespace hpds_node {
 
 class KeepUpCheck {
  public:
-  /// `config`: what the frames run with (for the advice); `workers`: frames processed at once.
-  KeepUpCheck(const hpds::HpdsConfig &config, std::size_t workers, std::size_t judge_after = 8);
+  /// `config`: what the frames run with (for the advice); `workers`: frames processed at once; `tf_timeout`: the
+  /// longest wait for a transform [s] (ros/tf_timeout, for the advice).
+  KeepUpCheck(const hpds::HpdsConfig &config, std::size_t workers, std::size_t judge_after = 8,
+              double tf_timeout = 0.0);
 
   void arrived(double wall_seconds);
   /// The warning when this frame completes a failed verdict (see contract), else "".
-  [[nodiscard]] std::string processed(double seconds);
+  [[nodiscard]] std::string processed(double seconds, double waited = 0.0);
   /// The warning at the first overload drop (see contract), else "".
   [[nodiscard]] std::string dropped();
 
@@ -43,10 +48,11 @@ class KeepUpCheck {
   hpds::HpdsConfig config_;
   std::size_t workers_;
   std::size_t judge_after_;
+  double tf_timeout_;
   bool judged_ = false, warned_ = false, first_skipped_ = false;
   std::size_t costs_seen_ = 0;
   double last_arrival_ = -1.0;
-  std::deque<double> gaps_, costs_;
+  std::deque<double> gaps_, costs_, waits_;
 };
 
 }  // namespace hpds_node

@@ -48,7 +48,7 @@ HpdsServer::HpdsServer(ros::NodeHandle nh, ros::NodeHandle private_nh, const std
   NodeConfig per_worker = config_;
   if (workers > 1) per_worker.hpds.threads = 1;
   for (std::size_t w = 0; w < workers; ++w) processors_.push_back(std::make_unique<FrameProcessor>(per_worker));
-  keep_up_ = std::make_unique<KeepUpCheck>(config_.hpds, workers);
+  keep_up_ = std::make_unique<KeepUpCheck>(config_.hpds, workers, 8, config_.ros.tf_timeout);
   target_frame_ = processors_.front()->targetFrame();
   const bool map_mode = config_.hpds.mode == hpds::Mode::Map;
   // Before anything is advertised: a node that cannot load its map, or could not save it at the end of a run,
@@ -338,7 +338,7 @@ void HpdsServer::handle(const sensor_msgs::PointCloud2::ConstPtr &msg, std::size
   FrameProcessor &processor = *processors_[worker];
   const auto count = [&](DropReason r) { return statsSoFar(worker).dropped[int(r)]; };
   const OutputRequest wants = subscribedOutputs();
-  double seconds = 0.0;
+  double seconds = 0.0, waited = 0.0;  // processing, and waiting for the frame's transform
   // 1. Validate before any work.
   std::string why;
   const CloudError error = processor.check(*msg, &why);
@@ -353,7 +353,10 @@ void HpdsServer::handle(const sensor_msgs::PointCloud2::ConstPtr &msg, std::size
   } else {
     // 3. Sensor pose in the target frame at the message stamp.
     Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
-    if (!target_frame_.empty() && !waitForPose(target_frame_, msg->header, pose, &why)) {
+    const ros::WallTime wait_start = ros::WallTime::now();
+    const bool posed = target_frame_.empty() || waitForPose(target_frame_, msg->header, pose, &why);
+    waited = (ros::WallTime::now() - wait_start).toSec();
+    if (!posed) {
       processor.countDrop(DropReason::NoTransform);
       if (logAllowed("no_transform"))
         ROS_WARN_STREAM_NAMED("hpds", "hpds: dropped frame at " << msg->header.stamp << ": no transform '"
@@ -391,14 +394,15 @@ void HpdsServer::handle(const sensor_msgs::PointCloud2::ConstPtr &msg, std::size
     }
   }
   takeSnapshot(worker, seconds);
-  if (seconds > 0.0) checkKeepUp(seconds);
+  // A frame dropped for want of a transform still tells how long the worker waited for it.
+  if (seconds > 0.0 || waited > 0.0) checkKeepUp(seconds, waited);
 }
 
-void HpdsServer::checkKeepUp(double frame_seconds) {
+void HpdsServer::checkKeepUp(double frame_seconds, double waited) {
   std::string warning;
   {
     std::lock_guard<std::mutex> lock(keep_up_mutex_);
-    warning = keep_up_->processed(frame_seconds);
+    warning = keep_up_->processed(frame_seconds, waited);
   }
   if (!warning.empty()) ROS_WARN_STREAM_NAMED("hpds", warning);
 }
