@@ -167,8 +167,8 @@ TEST_F(QualityCli, SizeLikeFlagsAreBoundedAndPathsEscaped) {
   };
   const std::string map = shellQuote(*dir_ / "map.ply"), out = " -o " + shellQuote(*dir_ / "bounded");
   const std::vector<Case> cases = {
-      {"render " + map + out + " --width 20000", 2, "--width: must be an integer in 16..8192, got '20000'"},
-      {"render " + map + out + " --height 0", 2, "--height: must be an integer in 16..8192"},
+      {"render " + map + out + " --width 20000", 2, "--width: must be an integer in 18..8192, got '20000'"},
+      {"render " + map + out + " --height 0", 2, "--height: must be an integer in 18..8192"},
       {"render " + map + out + " --splat inf", 2, "--splat: must be a finite number in [0, 1e+06], got 'inf'"},
       {"render " + map + out + " --splat 1000", 1, "px a splat may have"},
       {"render " + map + out + " --frame 4294967297", 2, "--frame: must be an integer in 0..4294967295"},
@@ -202,6 +202,23 @@ TEST_F(QualityCli, SizeLikeFlagsAreBoundedAndPathsEscaped) {
       << log;
   const YAML::Node json = YAML::LoadFile((odd / "out" / "analysis.json").string());
   EXPECT_EQ(json["sampling"].as<std::string>(), (odd / "map.ply").string());
+}
+
+// The smallest --width/--height the flags accepted (16, 17) always failed once drawing began, with an error naming
+// an internal function ("renderPoints: image too small for its margin") and exit 1: the bound is now the smallest
+// picture that can be drawn, and every accepted size draws.
+TEST_F(QualityCli, EverySizeRenderAcceptsDraws) {
+  const std::string map = shellQuote(*dir_ / "map.ply");
+  std::string log;
+  for (const char *flag : {"--width", "--height"}) {
+    EXPECT_EQ(runHpds("render " + map + " -o " + shellQuote(*dir_ / "tiny") + " " + flag + " 17", &log), 2) << log;
+    EXPECT_NE(log.find(std::string(flag) + ": must be an integer in 18..8192, got '17'"), std::string::npos) << log;
+  }
+  EXPECT_FALSE(std::filesystem::exists(*dir_ / "tiny")) << "drew before refusing";
+  ASSERT_EQ(runHpds("render " + map + " -o " + shellQuote(*dir_ / "tiny") + " --width 18 --height 18 --view top", &log),
+            0)
+      << log;
+  EXPECT_TRUE(isPng(*dir_ / "tiny" / "render_level_top.png"));
 }
 
 }  // namespace

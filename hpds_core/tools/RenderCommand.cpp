@@ -196,9 +196,15 @@ void addRenderCommand(CLI::App &app) {
       ->check(finiteIn(-1e9, 1e9));
   cmd->add_option("--max-level", a->max_level, "draw levels 0..D only")->check(integerIn(-1, 21));
   cmd->add_option("--frame", a->frame, "scan-mode files: draw this frame only")->check(integerIn(0, 4294967295));
-  // A picture of 8192 x 8192 already takes 0.7 GB (colour and depth buffers).
-  cmd->add_option("--width", a->width, "[px] maximum image width")->capture_default_str()->check(integerIn(16, 8192));
-  cmd->add_option("--height", a->height, "[px] maximum image height")->capture_default_str()->check(integerIn(16, 8192));
+  // A picture of 8192 x 8192 already takes 0.7 GB (colour and depth buffers). The smallest one has a pixel or more
+  // inside its margins (renderPoints refuses less).
+  const int min_side = 2 * RenderOptions{}.margin_px + 2;
+  cmd->add_option("--width", a->width, "[px] maximum image width")
+      ->capture_default_str()
+      ->check(integerIn(min_side, 8192));
+  cmd->add_option("--height", a->height, "[px] maximum image height")
+      ->capture_default_str()
+      ->check(integerIn(min_side, 8192));
   cmd->add_option("--splat", a->splat, "[m] point disc radius (default: half the median spacing)")
       ->check(finiteIn(0.0, 1e6));
   cmd->add_option("--feature", a->feature, "curvature (the file's, else surface variation) | surface_variation | "
