@@ -221,5 +221,20 @@ TEST_F(QualityCli, EverySizeRenderAcceptsDraws) {
   EXPECT_TRUE(isPng(*dir_ / "tiny" / "render_level_top.png"));
 }
 
+// An unknown --feature was noticed only when the feature pictures were drawn, after the level and normal ones: the
+// run failed (exit 1) leaving six new pictures in the folder, beside whatever an earlier render had put there.
+TEST_F(QualityCli, AnUnknownFeatureIsRefusedBeforeAnythingIsDrawn) {
+  std::string log;
+  EXPECT_EQ(runHpds("render " + shellQuote(*dir_ / "map.ply") + " -o " + shellQuote(*dir_ / "bad_feature") +
+                        " --feature normals",
+                    &log),
+            1)
+      << log;
+  EXPECT_NE(log.find("--feature: expected curvature, surface_variation or sphericity, got 'normals'"),
+            std::string::npos)
+      << log;
+  EXPECT_FALSE(std::filesystem::exists(*dir_ / "bad_feature")) << "drew before refusing:\n" << log;
+}
+
 }  // namespace
 }  // namespace hpds

@@ -61,8 +61,6 @@ std::vector<double> featureValues(const SamplingCloud &c, const RenderArgs &a, d
     for (std::size_t i = 0; i < f.size(); ++i) f[i] = c.curvature[i];
   } else {
     const InsertionOrder kind = a.feature == "sphericity" ? InsertionOrder::Sphericity : InsertionOrder::SurfaceVariation;
-    if (a.feature != "sphericity" && a.feature != "surface_variation" && a.feature != "curvature")
-      throw std::invalid_argument("--feature: expected curvature, surface_variation or sphericity");
     const double radius = a.feature_radius > 0.0 ? a.feature_radius : 3.0 * spacing;
     // One point, or all at one spot: no spacing to derive a radius from, and no neighbourhood to have a feature.
     if (!(radius > 0.0)) return f;
@@ -90,6 +88,10 @@ void runRender(const RenderArgs &a) {
     if (colour != "level" && colour != "normal" && colour != "feature")
       throw std::invalid_argument("--color: expected level, normal or feature, got '" + colour + "'");
   for (const std::string &view : a.views) (void)parseView(view);
+  // Checked here, not where the feature pictures are drawn: that comes after the level and normal ones.
+  if (a.feature != "curvature" && a.feature != "surface_variation" && a.feature != "sphericity")
+    throw std::invalid_argument("--feature: expected curvature, surface_variation or sphericity, got '" + a.feature +
+                                "'");
   std::vector<std::string> pictures;
   for (const std::string &colour : a.colors)
     for (const std::string &view : a.views) pictures.push_back(a.prefix + "_" + colour + "_" + view + ".png");
