@@ -236,5 +236,20 @@ TEST_F(QualityCli, AnUnknownFeatureIsRefusedBeforeAnythingIsDrawn) {
   EXPECT_FALSE(std::filesystem::exists(*dir_ / "bad_feature")) << "drew before refusing:\n" << log;
 }
 
+// --grid-offset was the one number analyze took unchecked: nan or 1e300 placed the baseline grids nowhere, the
+// comparison ran on 0 or 1 baseline points in the patch and analysis.json was written with exit 0.
+TEST_F(QualityCli, GridOffsetIsAFractionOfACell) {
+  const std::string args = "analyze " + shellQuote(*dir_ / "map.ply") + " --cell-size 4 --no-plots --input " +
+                           shellQuote(*dir_ / "stream/frame_000000.pcd") + " -o " + shellQuote(*dir_ / "offset");
+  std::string log;
+  for (const char *bad : {"nan", "inf", "1e300", "-0.5", "1.5"}) {
+    EXPECT_EQ(runHpds(args + " --grid-offset " + bad, &log), 2) << bad << "\n" << log;
+    EXPECT_NE(log.find("--grid-offset: must be a finite number in [0, 1], got '" + std::string(bad) + "'"),
+              std::string::npos)
+        << log;
+  }
+  EXPECT_FALSE(std::filesystem::exists(*dir_ / "offset")) << "analysed before refusing";
+}
+
 }  // namespace
 }  // namespace hpds

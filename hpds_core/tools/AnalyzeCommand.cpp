@@ -435,7 +435,8 @@ void addAnalyzeCommand(CLI::App &app) {
       ->check(finiteIn(0.0, 1e4));
   cmd->add_option("--grid-offset", a->grid_offset,
                   "baseline grids start at this fraction of a cell; 0.5 keeps a flat ground at z = 0 mid-cell")
-      ->capture_default_str();
+      ->capture_default_str()
+      ->check(finiteIn(0.0, 1.0));
   cmd->add_option("--compare-level", a->compare_level, "level of the baseline comparison (default: the finest)")
       ->check(integerIn(-1, 21));
   cmd->add_option("--frame", a->frame, "scan-mode files: the frame to analyse (default: the first)")
