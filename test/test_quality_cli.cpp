@@ -251,5 +251,20 @@ TEST_F(QualityCli, GridOffsetIsAFractionOfACell) {
   EXPECT_FALSE(std::filesystem::exists(*dir_ / "offset")) << "analysed before refusing";
 }
 
+// --compare-level deeper than the sampling's levels was silently replaced by the deepest one (exit 0), and a level
+// with too few samples in the patch was refused only after every level's pictures had been written.
+TEST_F(QualityCli, ACompareLevelThatCannotBeComparedIsRefusedBeforeAnythingIsWritten) {
+  const std::string args = "analyze " + shellQuote(*dir_ / "map.ply") + " --cell-size 4 --no-plots --input " +
+                           shellQuote(*dir_ / "stream/frame_000000.pcd") + " -o ";
+  std::string log;
+  EXPECT_EQ(runHpds(args + shellQuote(*dir_ / "cmp_deep") + " --compare-level 7", &log), 1) << log;
+  EXPECT_NE(log.find("--compare-level 7: the sampling's deepest level is 5"), std::string::npos) << log;
+  EXPECT_FALSE(std::filesystem::exists(*dir_ / "cmp_deep")) << log;
+  EXPECT_EQ(runHpds(args + shellQuote(*dir_ / "cmp_coarse") + " --compare-level 0", &log), 1) << log;
+  EXPECT_NE(log.find("--compare-level 0: too few hpds samples in the patch to compare"), std::string::npos) << log;
+  const bool wrote = std::filesystem::exists(*dir_ / "cmp_coarse") && !std::filesystem::is_empty(*dir_ / "cmp_coarse");
+  EXPECT_FALSE(wrote) << "wrote pictures before refusing:\n" << log;
+}
+
 }  // namespace
 }  // namespace hpds

@@ -227,9 +227,12 @@ void runAnalyze(const AnalyzeArgs &a) {
     std::cout << "analysing frame " << *frame << " of the scan-mode file (--frame to choose another)\n";
   }
   if (cloud.xyz.empty()) throw std::invalid_argument(a.sampling + ": no samples to analyse");
+  const int max_level = cloud.maxLevel();
+  if (!a.inputs.empty() && a.compare_level > max_level)
+    throw std::invalid_argument("--compare-level " + std::to_string(a.compare_level) +
+                                ": the sampling's deepest level is " + std::to_string(max_level));
   fs::create_directories(a.out_dir);
   const fs::path out(a.out_dir);
-  const int max_level = cloud.maxLevel();
 
   // 1. Per level: counts and 3D nearest-neighbour spacing of the union U_D.
   std::vector<std::vector<Eigen::Vector3d>> unions(static_cast<std::size_t>(max_level) + 1);
@@ -251,6 +254,8 @@ void runAnalyze(const AnalyzeArgs &a) {
   spec_csv << "method,level,f_times_rD,f,power\n";
   std::ostringstream levels_json;
   std::vector<SetResult> level_sets;
+  // Each analysed level's patch points: their pictures are written once the comparison cannot fail any more.
+  std::vector<std::pair<std::size_t, std::vector<Eigen::Vector2d>>> level_pictures;
   std::cout << "level        r_D    count    union  min_nn/r  mean_nn/r  patch\n";
   for (int d = 0; d <= max_level; ++d) {
     const auto &u = unions[static_cast<std::size_t>(d)];
@@ -269,10 +274,7 @@ void runAnalyze(const AnalyzeArgs &a) {
     // Fewer points than this give spectra of pure noise; the RDF also needs a window of a few radii.
     if (pts.size() >= 30 && a.rdf_max * r < 0.45 * patch.window.size) analyseSet(s, pts, patch, a);
     s.count = pts.size();
-    if (s.analysed) {
-      writePeriodogramPng((out / ("periodogram_" + setName(s) + ".png")).string(), s.spectrum);
-      writePointsPng((out / ("points_" + setName(s) + ".png")).string(), pts, patch.window, r);
-    }
+    if (s.analysed) level_pictures.emplace_back(level_sets.size(), pts);
     writeSetCsvRows(rdf_csv, spec_csv, s);
     levels_csv << d << "," << num(r) << "," << counts[static_cast<std::size_t>(d)] << "," << u.size() << "," << num(mn)
                << "," << num(mean) << "," << pts.size() << "\n";
@@ -287,7 +289,7 @@ void runAnalyze(const AnalyzeArgs &a) {
 
   // 2. Figure 5: the baselines on the same input, each at hpds's patch count of the compared level.
   std::vector<SetResult> compare;
-  int cmp_level = a.compare_level >= 0 ? std::min(a.compare_level, max_level) : max_level;
+  const int cmp_level = a.compare_level >= 0 ? a.compare_level : max_level;
   if (!a.inputs.empty()) {
     const std::vector<Eigen::Vector3d> input = loadInputs(a.inputs, a.poses);
     // Only the patch's slab (plus a margin, so cells crossing the window edge see all their points) matters.
@@ -369,6 +371,12 @@ void runAnalyze(const AnalyzeArgs &a) {
                      patch.window, r);
     }
     writePointsPng((out / ("points_random_L" + std::to_string(cmp_level) + ".png")).string(), random_pick, patch.window, r);
+  }
+
+  for (const auto &[index, pts] : level_pictures) {
+    const SetResult &s = level_sets[index];
+    writePeriodogramPng((out / ("periodogram_" + setName(s) + ".png")).string(), s.spectrum);
+    writePointsPng((out / ("points_" + setName(s) + ".png")).string(), pts, patch.window, s.r);
   }
 
   {
