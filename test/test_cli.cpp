@@ -333,5 +333,23 @@ TEST(Cli, NanOnlyAndHugeCoordinateFramesAreCountedNotFatal) {
   EXPECT_EQ(readPointCloud((tmp / "huge8.ply").string()).size(), 3u);
 }
 
+// `--normals --no-normals` (or the other way round, as a flag appended to a command that had one) added up to
+// nothing and ran without normals, exit 0, whichever came last. Contradictory flags are a bad command line.
+TEST(Cli, NormalsAndNoNormalsTogetherAreRefused) {
+  const auto tmp = test::scratchDir("cli_normals_flags");
+  std::ofstream(tmp / "one.pcd") << "VERSION .7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 1\n"
+                                    "HEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS 1\nDATA ascii\n1 2 3\n";
+  const std::string run = "sample " + shellQuote(tmp / "one.pcd") + " -o " + shellQuote(tmp / "out.ply");
+  for (const char *flags :
+       {" --normals --no-normals", " --no-normals --normals", " --normals --no-normals --normals"}) {
+    std::string log;
+    EXPECT_EQ(runHpds(run + flags, &log), 2) << flags << "\n" << log;
+    EXPECT_NE(log.find("--normals and --no-normals contradict each other"), std::string::npos) << flags << "\n" << log;
+  }
+  EXPECT_FALSE(std::filesystem::exists(tmp / "out.ply"));
+  std::string log;
+  EXPECT_EQ(runHpds(run + " --normals --normals", &log), 0) << log;
+}
+
 }  // namespace
 }  // namespace hpds

@@ -69,10 +69,10 @@ void addSamplingOptions(CLI::App &app, SamplingOptions &o) {
                             "[m] output radius: samples at least S apart; exactly S unless --cell-size fixes the cell, "
                             "then the coarsest level with r_D <= S (output.spacing)");
   lvl->excludes(sp);
-  // A function flag, so that the config's value stays unless one of the two is given.
-  app.add_flag_function(
-      "--normals,!--no-normals", [&o](std::int64_t count) { o.normals = count > 0; },
-      "estimate PCA normals and curvature, or not (normals.enabled; default: the config's, on)");
+  // Every occurrence kept, so that the config's value stays unless one of the two is given, and both together are
+  // refused (a count would add them up to nothing).
+  app.add_flag("--normals,!--no-normals", o.normals_flags,
+               "estimate PCA normals and curvature, or not (normals.enabled; default: the config's, on)");
   app.add_flag("--covariances", o.covariances,
                "also write GICP covariances cov_xx..cov_zz (normals.covariances; implies --normals)");
   app.add_flag("--float64-xyz", o.float64_xyz,
@@ -93,8 +93,15 @@ HpdsConfig resolveConfig(const SamplingOptions &o) {
     c.output.level = -1;
     c.output.spacing = *o.spacing;
   }
-  if (o.normals) c.normals.enabled = *o.normals;
-  if (o.covariances && o.normals && !*o.normals)
+  std::optional<bool> normals;
+  for (const std::string &flag : o.normals_flags) {
+    const bool on = CLI::detail::to_flag_value(flag) > 0;
+    if (normals && *normals != on)
+      throw CLI::ValidationError("--normals and --no-normals contradict each other: give one of them");
+    normals = on;
+  }
+  if (normals) c.normals.enabled = *normals;
+  if (o.covariances && normals && !*normals)
     throw std::invalid_argument("--covariances needs normals: it cannot go with --no-normals");
   if (o.covariances) c.normals.enabled = c.normals.covariances = true;
   if (o.float64_xyz) c.output.float64_xyz = true;

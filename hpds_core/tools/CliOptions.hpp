@@ -5,6 +5,7 @@
 #include <CLI/CLI.hpp>
 #include <optional>
 #include <string>
+#include <vector>
 
 #include "hpds/config/Config.hpp"
 
@@ -16,7 +17,7 @@ struct SamplingOptions {
   std::optional<int> max_depth;
   std::optional<int> level;
   std::optional<double> spacing;
-  std::optional<bool> normals;
+  std::vector<std::string> normals_flags;  // each --normals / --no-normals given, as CLI11 records it, in order
   bool covariances = false;
   bool float64_xyz = false;
   std::optional<std::string> order;
@@ -36,7 +37,8 @@ struct SamplingOptions {
 /// --float64-xyz, --order, --seed, --mode, --threads.
 void addSamplingOptions(CLI::App &app, SamplingOptions &options);
 
-/// Defaults, then --config FILE, then the flags; throws std::invalid_argument naming the key on a bad value.
+/// Defaults, then --config FILE, then the flags; throws std::invalid_argument naming the key on a bad value, and
+/// CLI::ValidationError (a bad command line, exit status 2) on contradictory flags.
 [[nodiscard]] HpdsConfig resolveConfig(const SamplingOptions &options);
 
 /// The level-0 cell of a sampling to check: --cell-size C, or --spacing S [--max-depth M] for one written with a
