@@ -179,6 +179,9 @@ TEST_F(QualityCli, SizeLikeFlagsAreBoundedAndPathsEscaped) {
       {"analyze " + map + " --cell-size 4" + out + " --seed -1", 2, "--seed: must be an integer in 0..18446744073709551615"},
       {"analyze " + map + " --cell-size nan" + out, 2, "--cell-size: must be a finite number"},
       {"verify " + map + " --cell-size 0", 1, "--cell-size: must be > 0"},
+      // -5 was taken as -1 (check each frame), 2^64 - 1 passed as a frame number.
+      {"verify " + map + " --cell-size 4 --frame -5", 2, "--frame: must be an integer in -1..4294967295, got '-5'"},
+      {"verify " + map + " --cell-size 4 --frame 18446744073709551615", 2, "--frame: must be an integer in -1.."},
       {"synth -o " + shellQuote(*dir_ / "synth_bounded") + " --beams 2000", 2, "--beams: must be an integer in 1..1024"},
       {"synth -o " + shellQuote(*dir_ / "synth_bounded") + " --beams 1024 --azimuth-steps 100000", 1,
        "rays per frame, more than the 4194304"},

@@ -54,7 +54,8 @@ void addVerifyCommand(CLI::App &app) {
   cmd->add_option("--frame", a->frame,
                   "a scan-mode output of several frames (field 'frame'): check only this frame (-1 = each frame "
                   "on its own; --input needs one frame)")
-      ->capture_default_str();
+      ->capture_default_str()
+      ->check(integerIn(-1, 4294967295));
   cmd->add_option("--threads", a->threads, "worker threads, 0 = all cores")->capture_default_str()->check(integerIn(0, 1024));
   cmd->callback([a] {
     const double cell_size = resolveCellSize(a->cell);
