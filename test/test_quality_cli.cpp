@@ -269,5 +269,17 @@ TEST_F(QualityCli, ACompareLevelThatCannotBeComparedIsRefusedBeforeAnythingIsWri
   EXPECT_FALSE(wrote) << "wrote pictures before refusing:\n" << log;
 }
 
+// A cloud whose every point has a NaN coordinate (a sensor frame with no return) was "rendered" into nine blank
+// pictures with exit 0, where a crop with nothing inside is an error.
+TEST_F(QualityCli, ACloudWithNoFinitePointIsNotRenderedBlank) {
+  std::ofstream(*dir_ / "nan.pcd") << "VERSION .7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 2\n"
+                                      "HEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS 2\nDATA ascii\nnan nan nan\n1 nan 2\n";
+  std::string log;
+  EXPECT_EQ(runHpds("render " + shellQuote(*dir_ / "nan.pcd") + " -o " + shellQuote(*dir_ / "nan_render"), &log), 1)
+      << log;
+  EXPECT_NE(log.find("no points to render"), std::string::npos) << log;
+  EXPECT_FALSE(std::filesystem::exists(*dir_ / "nan_render")) << log;
+}
+
 }  // namespace
 }  // namespace hpds

@@ -117,14 +117,16 @@ void runRender(const RenderArgs &a) {
                                                  Eigen::Vector3d(a.crop[3], a.crop[4], a.crop[5]));
   SamplingCloud kept;
   for (std::size_t i = 0; i < c.xyz.size(); ++i) {
-    if (!box.isEmpty() && !box.contains(c.xyz[i])) continue;
+    if (!c.xyz[i].allFinite() || (!box.isEmpty() && !box.contains(c.xyz[i]))) continue;
     if (a.max_level >= 0 && !c.level.empty() && c.level[i] > a.max_level) continue;
     kept.xyz.push_back(c.xyz[i]);
     if (!c.level.empty()) kept.level.push_back(c.level[i]);
     if (!c.normal.empty()) kept.normal.push_back(c.normal[i]);
     if (!c.curvature.empty()) kept.curvature.push_back(c.curvature[i]);
   }
-  if (kept.xyz.empty()) throw std::invalid_argument(a.cloud + ": no points to render (check --crop / --max-level)");
+  if (kept.xyz.empty())
+    throw std::invalid_argument(a.cloud + ": no points to render (check --crop / --max-level; points with a NaN or "
+                                          "infinite coordinate are not drawn)");
   const double spacing = medianSpacing(kept.xyz);
   fs::create_directories(a.out_dir);
 
