@@ -256,6 +256,30 @@ TEST(Cli, VerifyCatchesABrokenSampling) {
   EXPECT_NE(log.find("FAILED"), std::string::npos) << log;
 }
 
+// A --spacing with another --max-depth than the sampling's derives another cell, under which every radius shrinks
+// and any sampling passes: `verify --spacing 0.1 --max-depth 0` passed a sampling of levels 0..5 whatever it held.
+TEST(Cli, VerifyRefusesLevelsDeeperThanItsSpacingMakes) {
+  const auto tmp = test::scratchDir("cli_verify_depth");
+  PointLayout l;
+  for (const char *axis : {"x", "y", "z"}) l.append(axis, FieldType::Float32);
+  PointBuffer plane(l, 0);
+  for (int i = 0; i < 150; ++i)
+    for (int j = 0; j < 150; ++j) {
+      plane.resize(plane.size() + 1);
+      const double p[3] = {0.02 * i, 0.02 * j, 1.0};
+      for (int a = 0; a < 3; ++a) writeFromDouble(plane.record(plane.size() - 1), l.fields[a], p[a]);
+    }
+  writePcd((tmp / "plane.pcd").string(), plane);
+  std::string log;
+  ASSERT_EQ(runHpds("sample " + shellQuote(tmp / "plane.pcd") + " --no-normals -o " + shellQuote(tmp / "s.ply"), &log),
+            0)
+      << log;
+  EXPECT_EQ(runHpds("verify " + shellQuote(tmp / "s.ply") + " --spacing 0.1", &log), 0) << log;
+  EXPECT_EQ(runHpds("verify " + shellQuote(tmp / "s.ply") + " --spacing 0.1 --max-depth 0", &log), 1) << log;
+  EXPECT_NE(log.find("holds level 5"), std::string::npos) << log;
+  EXPECT_NE(log.find("levels 0..0"), std::string::npos) << log;
+}
+
 TEST(Cli, BadInputGivesAClearErrorAndNonZeroExit) {
   const auto tmp = test::scratchDir("cli_bad");
   const std::string out = " -o " + shellQuote(tmp / "out.ply");

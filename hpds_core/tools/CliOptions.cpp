@@ -127,17 +127,29 @@ void addCellSizeOptions(CLI::App &app, CellSizeOptions &o) {
   depth->needs(spacing);
 }
 
+namespace {
+HpdsConfig spacingConfig(const CellSizeOptions &o) {
+  HpdsConfig c;
+  c.hierarchy.cell_size = 0.0;
+  c.hierarchy.max_depth = o.max_depth;
+  c.output.level = -1;
+  c.output.spacing = *o.spacing;
+  return c;
+}
+}  // namespace
+
+int deepestLevelFor(const CellSizeOptions &o) {
+  if (o.cell_size || !o.spacing) return -1;
+  return resolveOutput(spacingConfig(o)).level;
+}
+
 double resolveCellSize(const CellSizeOptions &o) {
   if (o.cell_size) {
     if (!(*o.cell_size > 0.0)) throw std::invalid_argument("--cell-size: must be > 0");
     return *o.cell_size;
   }
   if (!o.spacing) throw std::invalid_argument("--cell-size or --spacing is required (the sampling's level-0 cell)");
-  HpdsConfig c;
-  c.hierarchy.cell_size = 0.0;
-  c.hierarchy.max_depth = o.max_depth;
-  c.output.level = -1;
-  c.output.spacing = *o.spacing;
+  const HpdsConfig c = spacingConfig(o);
   if (!(*o.spacing > 0.0)) throw std::invalid_argument("--spacing: must be > 0");
   validateConfig(c);
   return resolveOutput(c).cell_size;

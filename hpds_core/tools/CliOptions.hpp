@@ -50,5 +50,8 @@ struct CellSizeOptions {
 };
 void addCellSizeOptions(CLI::App &app, CellSizeOptions &options);
 [[nodiscard]] double resolveCellSize(const CellSizeOptions &options);
+/// With --spacing: the output level its derived cell is made for (the deepest level such a sampling holds); with
+/// --cell-size: -1 (any level).
+[[nodiscard]] int deepestLevelFor(const CellSizeOptions &options);
 
 }  // namespace hpds::cli

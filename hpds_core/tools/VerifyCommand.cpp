@@ -67,6 +67,19 @@ void addVerifyCommand(CLI::App &app) {
       throw std::invalid_argument(a->sampling +
                                   ": no 'level' field, so not a sampling written by hpds sample (verify checks "
                                   "hpds sample's output; give it that, and the scan as --input)");
+    // A --spacing with another --max-depth than the sampling's derives another cell, against which a sampling can
+    // pass unchecked (its radii all shrunk): a level deeper than that cell's output level gives it away.
+    if (const int deepest = deepestLevelFor(a->cell); deepest >= 0) {
+      const PointField &lf = *all.layout().find("level");
+      double max_level = -1.0;
+      for (std::size_t i = 0; i < all.size(); ++i) max_level = std::max(max_level, readAsDouble(all.record(i), lf));
+      if (max_level > deepest)
+        throw std::invalid_argument(
+            a->sampling + ": holds level " + std::to_string(static_cast<long long>(max_level)) + ", but --spacing " +
+            std::to_string(*a->cell.spacing) + " with --max-depth " + std::to_string(a->cell.max_depth) +
+            " makes samplings of levels 0.." + std::to_string(deepest) +
+            ": give the --spacing and --max-depth it was sampled with (or its --cell-size)");
+    }
     const bool several = all.layout().find("frame") != nullptr;
     std::map<std::uint64_t, PointBuffer> frames = byFrame(std::move(all));
     if (a->frame >= 0) {
