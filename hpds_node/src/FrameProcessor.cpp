@@ -192,7 +192,8 @@ ProcessedFrame FrameProcessor::process(const sensor_msgs::PointCloud2 &msg, cons
     r.has_output = true;
   }
   if (map_mode && wants.new_samples) {
-    toMsg(pipeline_.atOutputLevels(inserted.new_samples), header, r.new_samples, &r.position_rounding, &r.seconds_normals);
+    toMsg(pipeline_.atOutputLevels(inserted.new_samples), header, r.new_samples, &r.position_rounding,
+          &r.seconds_normals);
     r.has_new_samples = true;
   }
   for (std::size_t i = 0; i < config_.ros.publish_levels.size(); ++i) {

@@ -26,6 +26,7 @@ using hpds_node::FrameProcessor;
 using hpds_node::NodeConfig;
 using hpds_node::OutputRequest;
 using sensor_msgs::PointCloud2;
+namespace fs = std::filesystem;
 
 hpds::SyntheticLidarConfig smallLidar() {
   hpds::SyntheticLidarConfig c;
@@ -34,6 +35,24 @@ hpds::SyntheticLidarConfig smallLidar() {
   c.frames = 4;
   c.speed = 2.0;
   return c;
+}
+
+// The persistence tests' map: levels 0..4 out of 0..6 in odom.
+NodeConfig persistedMapConfig() {
+  NodeConfig config;
+  config.hpds.mode = hpds::Mode::Map;
+  config.hpds.output.level = 4;
+  config.hpds.hierarchy.max_depth = 6;
+  config.ros.fixed_frame = "odom";
+  return config;
+}
+
+// A fresh empty folder for one test's map files.
+fs::path freshDir(const std::string &tag) {
+  const fs::path dir = fs::temp_directory_path() / ("hpds_fp_" + tag + "_" + std::to_string(::getpid()));
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  return dir;
 }
 
 PointCloud2 toMsg(const hpds::PointBuffer &points, double stamp, const std::string &frame = "lidar") {
@@ -431,8 +450,6 @@ TEST(FrameProcessor, SensorPoseDoesNotDependOnLaterTransforms) {
 
 namespace {
 
-namespace fs = std::filesystem;
-
 using hpds_test::readBytes;
 using hpds_test::writeBytes;
 
@@ -452,16 +469,10 @@ TEST(FrameProcessor, SavedMapLoadsIntoAnotherProcessorAndContinuesIdentically) {
   hpds::SyntheticLidarConfig lidar_config = smallLidar();
   lidar_config.frames = 5;
   const hpds::SyntheticLidar lidar(lidar_config);
-  NodeConfig config;
-  config.hpds.mode = hpds::Mode::Map;
-  config.hpds.output.level = 4;
-  config.hpds.hierarchy.max_depth = 6;
-  config.ros.fixed_frame = "odom";
+  NodeConfig config = persistedMapConfig();
   config.ros.local_map_rate = 1.0;  // frames 0.1 s apart: after frame 0, no local map within these frames
   config.ros.publish_levels = {3};
-  const fs::path dir = fs::temp_directory_path() / ("hpds_fp_persist_" + std::to_string(::getpid()));
-  fs::remove_all(dir);
-  fs::create_directories(dir);
+  const fs::path dir = freshDir("persist");
   const std::string file = (dir / "m.hpdsmap").string();
   auto frame = [&](int i) { return toMsg(lidar.frame(i).frame.points, 10.0 + 0.1 * i); };
 
@@ -539,16 +550,10 @@ TEST(FrameProcessor, SavingAMapContinuedShallowerSaysSo) {
   hpds::SyntheticLidarConfig lidar_config = smallLidar();
   lidar_config.frames = 3;
   const hpds::SyntheticLidar lidar(lidar_config);
-  NodeConfig deep;
-  deep.hpds.mode = hpds::Mode::Map;
-  deep.hpds.output.level = 4;
-  deep.hpds.hierarchy.max_depth = 6;
-  deep.ros.fixed_frame = "odom";
+  const NodeConfig deep = persistedMapConfig();
   NodeConfig shallow = deep;
   shallow.hpds.normals.enabled = false;
-  const fs::path dir = fs::temp_directory_path() / ("hpds_fp_shallow_" + std::to_string(::getpid()));
-  fs::remove_all(dir);
-  fs::create_directories(dir);
+  const fs::path dir = freshDir("shallow");
   const std::string file = (dir / "m.hpdsmap").string();
   auto frame = [&](int i) { return toMsg(lidar.frame(i).frame.points, 10.0 + 0.1 * i); };
 

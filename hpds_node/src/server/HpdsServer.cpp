@@ -275,8 +275,9 @@ void HpdsServer::onCloud(const ros::MessageEvent<const sensor_msgs::PointCloud2>
   if (lost > 0 && logAllowed("lost_upstream"))
     ROS_WARN_STREAM_NAMED("hpds", "hpds: " << lost << " frame(s) from " << publisher << " never arrived (header.seq "
                                            << "jumped to " << msg->header.seq << "): lost before hpds received them ("
-                                           << lost_total << " so far, counted in /diagnostics as 'frames lost upstream'; a throttle, drop or "
-                                           << "filter upstream skips numbers on purpose, and then this is expected)");
+                                           << lost_total << " so far, counted in /diagnostics as 'frames lost "
+                                           << "upstream'; a throttle, drop or filter upstream skips numbers on "
+                                           << "purpose, and then this is expected)");
   if (dropped && logAllowed("overload"))
     ROS_WARN_STREAM_NAMED("hpds", "hpds: dropped the oldest queued frame: frames arrive faster than they are "
                                   "processed ("
