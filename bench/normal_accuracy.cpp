@@ -3,7 +3,7 @@
 //
 // For each synthetic scene (SyntheticLidar knows the true normal of every return) the frames are merged in the world
 // frame and
-//   hpds            map-mode hierarchy, output levels 0..L, normals from the hierarchy (NormalEstimator, as today)
+//   hpds            map-mode hierarchy, output levels 0..L, normals from the hierarchy (NormalEstimator)
 //   hpds_refined    the same with NormalParams::neighborhood_level_offset and max_growth (--level-offset,
 //                   --max-growth); ablation rows give each refinement alone, and the growth rule to the voxel grid
 //   voxel_grid      PCL VoxelGrid (centroids), leaf chosen by bisection so the count equals hpds's
@@ -12,6 +12,9 @@
 //   full_res        PCA at hpds's sample positions with neighbours from the full-resolution input
 //   hpds_scan       the node's scan mode: every frame sampled on its own, normals with hpds_refined's settings
 //                   (its count is the sum over the frames, not the merged count)
+//   hpds_map        the node's map mode with hpds_refined's settings: the normals the map keeps, each estimated from
+//                   the frame that saw its sample from closest (the hierarchy rows above keep the finer levels that
+//                   map mode no longer builds, map.keep_depth)
 // each get PCA normals with two neighbourhoods: the k nearest (k = 10) and a fixed radius (2.5 r_L), neighbours taken
 // from the method's own point set. The error of a normal is the unoriented angle to the true normal of the sample's
 // input point (for a voxel centroid, of the input point nearest to it). A normal that could not be estimated counts
@@ -382,6 +385,8 @@ int main(int argc, char **argv) {
     cfg.hierarchy.max_depth = o.level + 3;
     cfg.output.level = o.level;
     cfg.threads = o.threads;
+    // The estimators below read the hierarchy's finer levels, which map mode only builds when asked to keep them.
+    cfg.map.keep_depth = std::min(cfg.hierarchy.max_depth, o.level + std::max(0, o.level_offset));
     Pipeline pipeline(cfg);
     for (const Frame &f : gt.frames) pipeline.addFrame(f);
     const Hierarchy &h = pipeline.hierarchy();
@@ -457,6 +462,38 @@ int main(int argc, char **argv) {
         for (const Eigen::Vector3d &p : r.positions) ss.points->push_back(pcl::PointXYZ(float(p.x()), float(p.y()), float(p.z())));
         ss.truth = r.truth;
         ErrorSet e = score(gt, ss, r.normals);
+        e.scene = scene.name, e.neighborhood = nb;
+        results.push_back(e);
+      }
+
+      if (!o.scan_only) {
+        // The node's map mode: the normals the map keeps, each from the frame that saw its sample from closest.
+        HpdsConfig mc = cfg;
+        mc.map.keep_depth = -1;
+        mc.normals.k = knn ? o.k : 0;
+        mc.normals.radius = knn ? 0.0 : radius;
+        mc.normals.min_neighbors = 3;
+        mc.normals.neighborhood_level_offset = o.level_offset;
+        mc.normals.max_growth = o.max_growth;
+        Pipeline mp(mc);
+        double frames_normals = 0.0;
+        for (const Frame &f : gt.frames) frames_normals += mp.addFrame(f).seconds_normals;
+        const std::vector<SampleId> mids = mp.outputSamples();
+        const std::vector<SampleNormal> mn = mp.normals(mids);
+        seconds["hpds_map_" + nb] += frames_normals;
+        const Hierarchy &mh = mp.hierarchy();
+        const PointField *mgt = mh.recordLayout().find("gt");
+        SampleSet ms;
+        ms.method = "hpds_map";
+        std::vector<Eigen::Vector3d> map_normals(mids.size());
+        for (std::size_t i = 0; i < mids.size(); ++i) {
+          const double *q = mh.position(mids[i]);
+          ms.points->push_back(pcl::PointXYZ(float(q[0]), float(q[1]), float(q[2])));
+          ms.truth.push_back(static_cast<std::uint32_t>(readAsDouble(mh.record(mids[i]), *mgt)));
+          map_normals[i] = mn[i].valid ? Eigen::Vector3d(mn[i].normal[0], mn[i].normal[1], mn[i].normal[2])
+                                       : Eigen::Vector3d::Constant(NAN);
+        }
+        ErrorSet e = score(gt, ms, map_normals);
         e.scene = scene.name, e.neighborhood = nb;
         results.push_back(e);
       }

@@ -327,6 +327,32 @@ void benchStream(const Options &o) {
   out_note << lc.frames / t_map_out << " frames/s; selection alone " << (t_map_out - t_map) / lc.frames * 1e3
            << " ms/frame, " << selected / lc.frames << " samples/frame";
   report(name, "map mode + ~output selection", t_map_out, out_note.str());
+
+  // Map mode at the shipped defaults (spacing 0.1 m, normals on): the node's frame path, insertion and ~output (the
+  // samples the frame hit, with normals), per frame. Against map.keep_depth 7, which builds levels 6..7 and reads
+  // them for the normals instead of keeping per-frame ones (map mode's only way before). The first 30 frames.
+  const std::size_t n_map = std::min<std::size_t>(frames.size(), 30);
+  std::size_t kept_samples = 0, deep_samples = 0;
+  auto mapFramePath = [&](int keep_depth, std::size_t *samples) {
+    HpdsConfig dc;
+    dc.mode = Mode::Map;
+    dc.map.keep_depth = keep_depth;
+    Pipeline p(dc);
+    const int L = p.outputLevel();
+    for (std::size_t i = 0; i < n_map; ++i) {
+      p.addFrame(frames[i]);
+      (void)p.makeCloud(p.samplesHitByLastFrame(0, L, 2.0 * p.hierarchy().radius(L)), false);
+    }
+    *samples = p.hierarchy().sampleCount();
+  };
+  const Paired t_defaults = pairedMedians(std::min(reps, 3), [&] { mapFramePath(-1, &kept_samples); },
+                                          [&] { mapFramePath(7, &deep_samples); });
+  std::ostringstream defaults_note;
+  defaults_note.precision(3);
+  defaults_note << "per frame, " << n_map << " frames; samples held " << kept_samples << " against " << deep_samples;
+  report(name, "map mode, shipped defaults, frame path",
+         Paired{t_defaults.hpds_s / double(n_map), t_defaults.peer_s / double(n_map), t_defaults.ratio},
+         "map.keep_depth 7 (levels 6..7 read)", defaults_note.str());
 }
 
 }  // namespace

@@ -6,6 +6,7 @@
 
 #include <cstring>
 #include <fstream>
+#include <functional>
 #include <map>
 #include <set>
 #include <tuple>
@@ -135,12 +136,26 @@ TEST_F(MapFile, RoundTripKeepsEverySampleBitForBit) {
   const LoadedHierarchy loaded = loadHierarchy(p.string());
   EXPECT_EQ(loaded.next_frame, 9u);
   expectIdentical(pipeline_->hierarchy(), loaded.hierarchy);
-  // Exact size: nothing but the header, the entries and the checksum.
+  // Exact size: nothing but the header, the entries (with the normals the map keeps) and the checksum.
   const auto &l = pipeline_->hierarchy().recordLayout();
-  EXPECT_EQ(fs::file_size(p), u32At(readBytes(p), 12) + pipeline_->hierarchy().sampleCount() * (41 + l.point_step) + 4);
-  // Saving what was loaded reproduces the file byte for byte.
-  saveHierarchy((dir / "again.hpdsmap").string(), loaded.hierarchy, loaded.next_frame);
-  EXPECT_EQ(readBytes(p), readBytes(dir / "again.hpdsmap"));
+  const std::vector<std::uint8_t> bytes = readBytes(p);
+  const std::uint32_t normal_bytes = u32At(bytes, u32At(bytes, 12) - 8);
+  EXPECT_EQ(normal_bytes, 33u) << "a map-mode pipeline with normals keeps them";
+  EXPECT_EQ(fs::file_size(p),
+            u32At(bytes, 12) + pipeline_->hierarchy().sampleCount() * (41 + l.point_step + normal_bytes) + 4);
+  // Loading into a pipeline and saving again reproduces the file byte for byte, and the same output cloud, normals
+  // included: the loaded samples keep the normals of the frames that saw them.
+  Pipeline again(mapConfig());
+  loadMap(p.string(), again);
+  saveMap((dir / "again.hpdsmap").string(), again);
+  EXPECT_EQ(bytes, readBytes(dir / "again.hpdsmap"));
+  EXPECT_EQ(pipeline_->makeCloud(pipeline_->outputSamples(), true).bytes(),
+            again.makeCloud(again.outputSamples(), true).bytes());
+  // The hierarchy alone round-trips without them.
+  saveHierarchy((dir / "plain.hpdsmap").string(), loaded.hierarchy, loaded.next_frame);
+  const std::vector<std::uint8_t> plain = readBytes(dir / "plain.hpdsmap");
+  EXPECT_EQ(u32At(plain, u32At(plain, 12) - 8), 0u);
+  expectIdentical(pipeline_->hierarchy(), loadHierarchy((dir / "plain.hpdsmap").string()).hierarchy);
   // No temporaries are left beside the file.
   std::size_t entries = 0;
   for (const auto &e : fs::directory_iterator(dir)) entries += e.path().string().find("tmp.") == std::string::npos;
@@ -295,7 +310,8 @@ TEST_F(MapFile, ForgedFilesWithValidChecksumsAreRefusedByMeaning) {
   const fs::path p = dir / "forged.hpdsmap";
   const std::uint32_t header_size = u32At(good, 12);
   const std::uint32_t step = u32At(good, 40);
-  const std::size_t entry = 41 + step;
+  const std::uint32_t normal_bytes = u32At(good, header_size - 8);
+  const std::size_t entry = 41 + step + normal_bytes;
   auto forged = [&](auto &&edit, const std::string &what, const std::string &why) {
     std::vector<std::uint8_t> b = good;
     edit(b);
@@ -303,7 +319,8 @@ TEST_F(MapFile, ForgedFilesWithValidChecksumsAreRefusedByMeaning) {
     writeBytes(p, b);
     expectRefused(p, what, why);
   };
-  forged([](auto &b) { b[8] = 2; }, "unsupported hpds map version 2", "version 2");
+  forged([](auto &b) { b[8] = 3; }, "unsupported hpds map version 3", "version 3");
+  forged([](auto &b) { b[8] = 0; }, "unsupported hpds map version 0", "version 0");
   forged([](auto &b) { b[0] = 'X'; }, "bad magic", "magic");
   forged([](auto &b) { b[24] = 22; }, "invalid hierarchy parameters", "max_depth 22");
   forged([](auto &b) { std::memset(b.data() + 16, 0xFF, 8); }, "invalid hierarchy parameters", "NaN cell size");
@@ -318,6 +335,28 @@ TEST_F(MapFile, ForgedFilesWithValidChecksumsAreRefusedByMeaning) {
   forged([&](auto &b) { b[48 + 4 + u32At(good, 48) + 4] = 9; }, "datatype 9", "bad field datatype");
   forged([&](auto &b) { std::memset(b.data() + 48 + 4 + u32At(good, 48), 0xFF, 4); }, "invalid record layout",
          "field offset beyond the record");
+  forged([&](auto &b) { b[header_size - 8] = 7; }, "kept normals of 7 bytes", "a normal size this build never writes");
+  // Kept normals a map file cannot hold: refused by loadMap, naming the sample, with the pipeline unchanged.
+  for (const auto &[edit, why] : std::vector<std::pair<std::function<void(std::vector<std::uint8_t> &)>, std::string>>{
+           {[&](auto &b) { b[header_size + entry - 1] = 9; }, "state 9"},
+           {[&](auto &b) {
+              b[header_size + entry - 1] = 2;
+              std::memset(b.data() + header_size + entry - normal_bytes, 0, 12);
+            },
+            "a valid normal of length 0"}}) {
+    std::vector<std::uint8_t> b = good;
+    edit(b);
+    refreshCrcs(b);
+    writeBytes(p, b);
+    Pipeline q(mapConfig());
+    try {
+      loadMap(p.string(), q);
+      ADD_FAILURE() << why << ": loaded";
+    } catch (const std::runtime_error &e) {
+      EXPECT_NE(std::string(e.what()).find("sample 0 has an impossible kept normal"), std::string::npos) << e.what();
+    }
+    EXPECT_EQ(q.framesProcessed(), 0u) << why;
+  }
   const std::string foreign = "ply\nformat binary_little_endian 1.0\nend_header\n";
   writeBytes(p, std::vector<std::uint8_t>(foreign.begin(), foreign.end()));
   expectRefused(p, "bad magic", "a PLY file");
@@ -452,13 +491,16 @@ TEST(MapFileCli, SaveThenLoadContinuesTheMap) {
             std::string::npos)
       << log;
   EXPECT_NE(log.find("map.keep_depth 6"), std::string::npos) << log;
-  // Same samples, compared as (x, y, z, level) records.
+  // Same samples with the same normals (the map file keeps them), compared as whole records.
   const PointBuffer whole = readPointCloud((tmp / "whole.ply").string());
   const PointBuffer cont = readPointCloud((tmp / "cont.ply").string());
   ASSERT_GT(whole.size(), 100u);
+  ASSERT_NE(whole.layout().find("normal_x"), nullptr);
+  ASSERT_EQ(whole.layout(), cont.layout());
+  const std::size_t step = whole.layout().point_step;
   std::multiset<std::vector<std::uint8_t>> a, b;
-  for (std::size_t i = 0; i < whole.size(); ++i) a.emplace(whole.record(i), whole.record(i) + 13);
-  for (std::size_t i = 0; i < cont.size(); ++i) b.emplace(cont.record(i), cont.record(i) + 13);
+  for (std::size_t i = 0; i < whole.size(); ++i) a.emplace(whole.record(i), whole.record(i) + step);
+  for (std::size_t i = 0; i < cont.size(); ++i) b.emplace(cont.record(i), cont.record(i) + step);
   EXPECT_EQ(a, b);
 
   struct Case {
@@ -498,13 +540,15 @@ TEST(MapFileCli, SavingAMapContinuedShallowerThanItWasBuiltSaysSo) {
   writeKittiPoses((tmp / "p0.txt").string(), {poses[0]});
   writeKittiPoses((tmp / "p1.txt").string(), {poses[1]});
   const std::string common = " --mode map --max-depth 6";
-  ASSERT_EQ(runHpds("sample " + frame(0) + " --poses " + shellQuote(tmp / "p0.txt") + common + " -o " +
-                        shellQuote(tmp / "deep.ply") + " --save-map " + shellQuote(tmp / "deep.hpdsmap"),
+  { std::ofstream(tmp / "keep.yaml") << "map:\n  keep_depth: 6\n"; }  // levels 6 kept for later reads: a deeper map
+  ASSERT_EQ(runHpds("sample " + frame(0) + " --poses " + shellQuote(tmp / "p0.txt") + common + " --config " +
+                        shellQuote(tmp / "keep.yaml") + " -o " + shellQuote(tmp / "deep.ply") + " --save-map " +
+                        shellQuote(tmp / "deep.hpdsmap"),
                     &log),
             0)
       << log;
   const std::string shallow = "sample " + frame(1) + " --poses " + shellQuote(tmp / "p1.txt") + common +
-                              " --no-normals -o " + shellQuote(tmp / "shallow.ply") + " --load-map " +
+                              " -o " + shellQuote(tmp / "shallow.ply") + " --load-map " +
                               shellQuote(tmp / "deep.hpdsmap");
   // Nothing saved: nothing to say.
   ASSERT_EQ(runHpds(shallow, &log), 0) << log;
@@ -515,8 +559,9 @@ TEST(MapFileCli, SavingAMapContinuedShallowerThanItWasBuiltSaysSo) {
       << log;
   EXPECT_NE(log.find("map.keep_depth 6"), std::string::npos) << log;
   // Saved at its own depth: nothing to say.
-  ASSERT_EQ(runHpds("sample " + frame(1) + " --poses " + shellQuote(tmp / "p1.txt") + common + " -o " +
-                        shellQuote(tmp / "same.ply") + " --load-map " + shellQuote(tmp / "deep.hpdsmap") +
+  ASSERT_EQ(runHpds("sample " + frame(1) + " --poses " + shellQuote(tmp / "p1.txt") + common + " --config " +
+                        shellQuote(tmp / "keep.yaml") + " -o " + shellQuote(tmp / "same.ply") + " --load-map " +
+                        shellQuote(tmp / "deep.hpdsmap") +
                         " --save-map " + shellQuote(tmp / "same.hpdsmap"),
                     &log),
             0)

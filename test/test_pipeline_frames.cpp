@@ -222,11 +222,11 @@ TEST(Pipeline, ScanModeBuildsOnlyTheLevelsItsOutputsReadAndTheyComeOutTheSame) {
   EXPECT_EQ(Pipeline(c).buildDepth(), 4) << "scan mode keeps nothing: map.keep_depth does not apply";
   c.mode = Mode::Map;
   c.map.keep_depth = -1;
-  EXPECT_EQ(Pipeline(c).buildDepth(), 6) << "map mode too builds only the levels its outputs read";
+  EXPECT_EQ(Pipeline(c).buildDepth(), 4) << "map mode too builds only the levels its outputs read";
   c.map.keep_depth = 8;
   EXPECT_EQ(Pipeline(c).buildDepth(), 8) << "map.keep_depth keeps finer levels for later reads";
   c.map.keep_depth = 3;
-  EXPECT_EQ(Pipeline(c).buildDepth(), 6) << "never shallower than what the outputs read";
+  EXPECT_EQ(Pipeline(c).buildDepth(), 4) << "never shallower than what the outputs read";
   c.map.keep_depth = -1;
   c.mode = Mode::Scan;
   {

@@ -110,8 +110,9 @@ TEST(Pipeline, SamplesHitByTheLastFrameMatchBruteForce) {
 TEST(Pipeline, MapModeStoresOnlyTheLevelsItReadsUnlessAskedToKeepMore) {
   HpdsConfig c;
   c.mode = Mode::Map;
-  // The shipped defaults in map mode: output level 5 (r = 0.1 m) and the normals' levels 6..7, nothing finer.
-  EXPECT_EQ(Pipeline(c).buildDepth(), 7);
+  // The shipped defaults in map mode: output level 5 (r = 0.1 m), nothing finer (the normals average each frame's
+  // points per cell of level 7 instead of building levels 6..7).
+  EXPECT_EQ(Pipeline(c).buildDepth(), 5);
   // Spacing 0.4 m without normals: output level 3, built alone unless map.keep_depth asks for levels 4..5 too.
   c.output.spacing = 0.4;
   c.normals.enabled = false;
@@ -218,6 +219,103 @@ TEST(Pipeline, ScratchFromOneHugeFrameIsGivenBackOnceFramesAreSmallAgain) {
     else
       EXPECT_LT(after + 30 * big.size(), peak) << "map mode: " << before << " -> " << peak << " -> " << after;
   }
+}
+
+}  // namespace
+}  // namespace hpds
+
+namespace hpds {
+namespace {
+
+double distance(const double *p, const Eigen::Vector3d &q) {
+  return (Eigen::Vector3d(p[0], p[1], p[2]) - q).norm();
+}
+
+// Map mode keeps per sample the normal of the frame that saw it from closest (Pipeline.hpp): a later frame from
+// farther away must not replace it, one from closer must.
+TEST(MapNormals, EverySampleKeepsTheNormalOfTheFrameThatSawItFromClosest) {
+  SyntheticLidarConfig lc = test::smallLidar(SceneKind::Urban, 2);
+  lc.speed = 15.0;
+  lc.yaw_rate = 0.0;
+  const SyntheticLidar lidar(lc);
+  HpdsConfig c;
+  c.mode = Mode::Map;
+  c.map.evict_distance = 0.0;
+  Pipeline p(c);
+  const Frame f0 = lidar.frame(0).frame, f1 = lidar.frame(1).frame;
+  (void)p.addFrame(f0);
+  const std::vector<SampleId> ids = p.outputSamples();
+  const std::vector<SampleNormal> before = p.normals(ids);
+  const FrameResult r1 = p.addFrame(f1);
+  EXPECT_GT(r1.seconds_normals, 0.0);
+  const std::vector<SampleNormal> after = p.normals(ids);
+  const int L = p.outputLevel();
+  const std::vector<SampleId> hit = p.samplesHitByLastFrame(0, L, 2.0 * p.hierarchy().radius(L));
+  const std::set<SampleId> hit_set(hit.begin(), hit.end());
+  const Eigen::Vector3d s0 = f0.sensor_to_fixed.translation(), s1 = f1.sensor_to_fixed.translation();
+  std::size_t valid = 0, kept = 0, replaced = 0, could_replace = 0;
+  for (std::size_t i = 0; i < ids.size(); ++i) {
+    const double *x = p.hierarchy().position(ids[i]);
+    valid += before[i].valid;
+    if (!before[i].valid) continue;
+    ASSERT_TRUE(after[i].valid) << "a valid normal is never given up";
+    const bool same = std::equal(before[i].normal, before[i].normal + 3, after[i].normal) &&
+                      before[i].curvature == after[i].curvature;
+    // Ranges are compared in float, as kept: a tie keeps the first.
+    const bool closer = hit_set.count(ids[i]) &&
+                        static_cast<float>(distance(x, s1)) < static_cast<float>(distance(x, s0));
+    if (!closer) {
+      kept += same;
+      EXPECT_TRUE(same) << "sample " << ids[i] << " was seen from closer before";
+    } else {
+      ++could_replace;
+      replaced += !same;
+    }
+    // Faces the sensor of the frame that contributed it.
+    const auto v = p.hierarchy().toViewpoint(ids[i]);
+    EXPECT_GE(after[i].normal[0] * v[0] + after[i].normal[1] * v[1] + after[i].normal[2] * v[2], 0.0f);
+  }
+  EXPECT_GT(valid, ids.size() * 95 / 100) << "frame 0's samples get valid normals from frame 0 alone";
+  EXPECT_GT(kept, 1000u);
+  ASSERT_GT(could_replace, 100u);
+  EXPECT_GT(replaced, could_replace / 2) << "samples seen from closer take the closer frame's normal";
+}
+
+}  // namespace
+}  // namespace hpds
+
+namespace hpds {
+namespace {
+
+// A map that keeps the finer levels anyway (map.keep_depth) reads them for its normals, every frame's points, as
+// NormalEstimator does over the hierarchy; without them it keeps per-frame normals (the test above).
+TEST(MapNormals, AMapKeepingTheFinerLevelsReadsThem) {
+  const SyntheticLidar lidar(test::smallLidar(SceneKind::Urban, 2));
+  HpdsConfig c;
+  c.mode = Mode::Map;
+  c.map.keep_depth = 7;  // output level 5 + neighborhood_level_offset 2
+  Pipeline deep(c);
+  c.map.keep_depth = -1;
+  Pipeline lean(c);
+  for (int i = 0; i < 2; ++i) {
+    EXPECT_EQ(deep.addFrame(lidar.frame(i).frame).seconds_normals, 0.0) << "nothing kept per frame";
+    EXPECT_GT(lean.addFrame(lidar.frame(i).frame).seconds_normals, 0.0);
+  }
+  ASSERT_EQ(deep.buildDepth(), 7);
+  ASSERT_EQ(lean.buildDepth(), 5);
+  const std::vector<SampleId> ids = deep.outputSamples();
+  const std::vector<SampleNormal> got = deep.normals(ids);
+  const std::vector<SampleNormal> want =
+      estimateNormals(deep.hierarchy(), ids, normalParamsFor(deep.config(), deep.outputLevel()));
+  ASSERT_EQ(got.size(), want.size());
+  std::size_t valid = 0;
+  for (std::size_t i = 0; i < ids.size(); ++i) {
+    ASSERT_EQ(got[i].valid, want[i].valid) << i;
+    if (!got[i].valid) continue;
+    ++valid;
+    ASSERT_TRUE(std::equal(got[i].normal, got[i].normal + 3, want[i].normal)) << i;
+  }
+  EXPECT_GT(valid, ids.size() * 95 / 100);
 }
 
 }  // namespace

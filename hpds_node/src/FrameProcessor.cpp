@@ -178,6 +178,7 @@ ProcessedFrame FrameProcessor::process(const sensor_msgs::PointCloud2 &msg, cons
   }
   r.processed = true;
   r.counters = inserted.counters;
+  r.seconds_normals += inserted.seconds_normals;  // map mode: the normals the map keeps
 
   // 3. Outputs, in the target frame (or the input frame), stamped with the input stamp.
   std_msgs::Header header;

@@ -18,16 +18,18 @@
 
 #include "hpds/io/AtomicFile.hpp"
 #include "hpds/pipeline/Pipeline.hpp"
+#include "normals/MapNormals.hpp"
 
-// Byte layout of version 1 (little-endian, no padding):
+// Byte layout of version 2 (little-endian, no padding; version 1 is the same without normal_bytes and normals):
 //   0  char[8] magic "HPDSMAP\0"      8  u32 version          12 u32 header_size (bytes, CRC included)
 //   16 f64 cell_size                  24 u32 max_depth        28 u32 next_frame
 //   32 u64 sample_count               40 u32 point_step       44 u32 field_count
 //   48 per field: u32 name_len, name bytes, u32 offset, u8 datatype, u32 count
+//   then u32 normal_bytes: 0, or MapNormals::kFileBytes when the entries carry the normals a map keeps
 //   header_size - 4: u32 CRC-32 of bytes [0, header_size - 4)
-//   body: sample_count entries of kEntryFixedBytes + point_step bytes:
+//   body: sample_count entries of kEntryFixedBytes + point_step + normal_bytes bytes:
 //         f64 x y z, u8 level, u32 frame_index, f32 to_viewpoint[3] (unit direction since the map keeps only
-//         that; older files' full vectors load the same), record bytes
+//         that; older files' full vectors load the same), record bytes, the kept normal (MapNormals::save)
 //   last 4 bytes: u32 CRC-32 of the body entries
 
 namespace hpds {
@@ -168,8 +170,10 @@ std::string describeConfig(double cell_size, int max_depth) {
   return buf;
 }
 
-LoadedHierarchy parse(Source &src, std::uint64_t total_size, const std::string &name,
-                      const HierarchyConfig *expected) {
+/// `normals`: when given, receives the entries' kept normals (MapNormals::kFileBytes each, in file order), or
+/// stays empty when the file holds none.
+LoadedHierarchy parse(Source &src, std::uint64_t total_size, const std::string &name, const HierarchyConfig *expected,
+                      std::vector<std::uint8_t> *normals = nullptr) {
   if (total_size == 0) fail(name, "empty file (0 bytes), not an hpds map");
   std::array<std::uint8_t, 16> start{};
   const std::size_t got = static_cast<std::size_t>(std::min<std::uint64_t>(total_size, start.size()));
@@ -180,8 +184,8 @@ LoadedHierarchy parse(Source &src, std::uint64_t total_size, const std::string &
   std::uint32_t version = 0, header_size = 0;
   std::memcpy(&version, start.data() + 8, 4);
   std::memcpy(&header_size, start.data() + 12, 4);
-  if (version != kHierarchyFileVersion)
-    fail(name, "unsupported hpds map version " + std::to_string(version) + " (this build reads version " +
+  if (version < 1 || version > kHierarchyFileVersion)
+    fail(name, "unsupported hpds map version " + std::to_string(version) + " (this build reads versions 1 to " +
                    std::to_string(kHierarchyFileVersion) + ")");
   if (header_size < kFixedHeaderBytes + 4 || header_size > kMaxHeaderBytes)
     fail(name, "corrupt header: header size " + std::to_string(header_size) + " is impossible");
@@ -228,6 +232,11 @@ LoadedHierarchy parse(Source &src, std::uint64_t total_size, const std::string &
     f.count = count;
     layout.fields.push_back(std::move(f));
   }
+  std::uint32_t normal_bytes = 0;
+  if (version >= 2 && !r.get(normal_bytes)) fail(name, "corrupt header: it ends before the normals' size");
+  if (normal_bytes != 0 && normal_bytes != MapNormals::kFileBytes)
+    fail(name, "corrupt header: kept normals of " + std::to_string(normal_bytes) + " bytes per sample (this build "
+               "writes " + std::to_string(MapNormals::kFileBytes) + ")");
   if (r.pos() != header_size - 4 - 16) fail(name, "corrupt header: unexpected bytes after the field list");
   try {
     layout.validate();
@@ -248,7 +257,7 @@ LoadedHierarchy parse(Source &src, std::uint64_t total_size, const std::string &
                    " (hierarchy.cell_size and hierarchy.max_depth must match the map's; " + keys + ")");
   }
 
-  const std::uint64_t entry_bytes = kEntryFixedBytes + point_step;
+  const std::uint64_t entry_bytes = kEntryFixedBytes + point_step + normal_bytes;
   const std::uint64_t body_bytes = total_size - header_size - 4;
   if (sample_count >= kNoSample || sample_count > body_bytes / entry_bytes ||
       sample_count * entry_bytes != body_bytes) {
@@ -260,6 +269,8 @@ LoadedHierarchy parse(Source &src, std::uint64_t total_size, const std::string &
 
   LoadedHierarchy out{Hierarchy(cell_size, static_cast<int>(max_depth)), next_frame};
   out.hierarchy.setRecordLayout(layout);
+  if (normals) normals->clear();
+  if (normals && normal_bytes) normals->reserve(static_cast<std::size_t>(sample_count) * normal_bytes);
   std::vector<std::uint8_t> chunk;
   std::uint32_t crc = 0;
   // A sample the hierarchy refuses is only reported once the checksum has passed: a damaged body should be called
@@ -284,6 +295,10 @@ LoadedHierarchy parse(Source &src, std::uint64_t total_size, const std::string &
         if (!std::isfinite(xyz[0]) || !std::isfinite(xyz[1]) || !std::isfinite(xyz[2]))
           throw std::invalid_argument("position is not finite");
         out.hierarchy.restoreSample(xyz, level, frame, to_view, e + kEntryFixedBytes);
+        if (normals && normal_bytes) {
+          const std::uint8_t *kept = e + kEntryFixedBytes + point_step;
+          normals->insert(normals->end(), kept, kept + normal_bytes);
+        }
       } catch (const std::exception &ex) {
         refused = "sample " + std::to_string(done + i) + ": " + ex.what();
       }
@@ -312,18 +327,10 @@ void checkSavable(const std::string &path, const Hierarchy &hierarchy) {
   for (const PointField &f : layout.fields)
     if (f.name.size() > kMaxFieldNameBytes) fail(path, "cannot save: a field name longer than 4096 bytes");
 }
-}  // namespace
-
-void saveHierarchy(const std::string &path, const Hierarchy &hierarchy, std::uint32_t next_frame) {
-  checkSavable(path, hierarchy);
-  // Temporary file, fsync and rename (AtomicFile): a failure or a kill leaves any previous map at `path` untouched.
-  AtomicFile file(path);
-  saveHierarchy(file, hierarchy, next_frame);
-  file.commit();
-}
-
-void saveHierarchy(AtomicFile &file, const Hierarchy &hierarchy, std::uint32_t next_frame) {
+/// saveHierarchy's bytes, with the kept normals of a map-mode pipeline when `normals` is given.
+void writeMap(AtomicFile &file, const Hierarchy &hierarchy, std::uint32_t next_frame, const MapNormals *normals) {
   checkSavable(file.target(), hierarchy);
+  const std::uint32_t normal_bytes = normals ? static_cast<std::uint32_t>(MapNormals::kFileBytes) : 0;
   const PointLayout &layout = hierarchy.recordLayout();
 
   ByteWriter h;
@@ -343,13 +350,14 @@ void saveHierarchy(AtomicFile &file, const Hierarchy &hierarchy, std::uint32_t n
     h.put(static_cast<std::uint8_t>(f.type));
     h.put(f.count);
   }
+  h.put(normal_bytes);
   const auto header_size = static_cast<std::uint32_t>(h.bytes.size() + 4);
   std::memcpy(h.bytes.data() + 12, &header_size, 4);
   h.put(crc32(h.bytes.data(), h.bytes.size()));
 
   file.write(h.bytes.data(), h.bytes.size());
   const std::size_t step = layout.point_step;
-  const std::size_t entry_bytes = kEntryFixedBytes + step;
+  const std::size_t entry_bytes = kEntryFixedBytes + step + normal_bytes;
   std::vector<std::uint8_t> chunk;
   const std::size_t chunk_entries = entriesPerChunk(entry_bytes);
   chunk.reserve(chunk_entries * entry_bytes);
@@ -370,6 +378,7 @@ void saveHierarchy(AtomicFile &file, const Hierarchy &hierarchy, std::uint32_t n
     std::memcpy(e + 25, &frame, 4);
     std::memcpy(e + 29, hierarchy.toViewpoint(id).data(), 12);
     if (step) std::memcpy(e + kEntryFixedBytes, hierarchy.record(id), step);
+    if (normals) normals->save(id, e + kEntryFixedBytes + step);
     if (chunk.size() >= chunk_entries * entry_bytes) flush();
   }
   flush();
@@ -377,6 +386,20 @@ void saveHierarchy(AtomicFile &file, const Hierarchy &hierarchy, std::uint32_t n
   std::memcpy(c, &crc, 4);
   file.write(c, 4);
 }
+}  // namespace
+
+void saveHierarchy(const std::string &path, const Hierarchy &hierarchy, std::uint32_t next_frame) {
+  checkSavable(path, hierarchy);
+  // Temporary file, fsync and rename (AtomicFile): a failure or a kill leaves any previous map at `path` untouched.
+  AtomicFile file(path);
+  saveHierarchy(file, hierarchy, next_frame);
+  file.commit();
+}
+
+void saveHierarchy(AtomicFile &file, const Hierarchy &hierarchy, std::uint32_t next_frame) {
+  writeMap(file, hierarchy, next_frame, nullptr);
+}
+
 
 LoadedHierarchy loadHierarchy(const std::string &path, const HierarchyConfig *expected) {
   if (!hostIsLittleEndian()) fail(path, "map files are little-endian; this host is not");
@@ -410,11 +433,14 @@ bool isOtherFormatName(const std::string &path) {
 }
 
 void saveMap(const std::string &path, const Pipeline &pipeline) {
-  saveHierarchy(path, pipeline.hierarchy(), pipeline.framesProcessed());
+  checkSavable(path, pipeline.hierarchy());
+  AtomicFile file(path);
+  saveMap(file, pipeline);
+  file.commit();
 }
 
 void saveMap(AtomicFile &file, const Pipeline &pipeline) {
-  saveHierarchy(file, pipeline.hierarchy(), pipeline.framesProcessed());
+  writeMap(file, pipeline.hierarchy(), pipeline.framesProcessed(), pipeline.map_normals_.get());
 }
 
 int deepestPopulatedLevel(const Hierarchy &hierarchy) {
@@ -453,8 +479,30 @@ std::string shallowSaveWarning(const Pipeline &pipeline, int loaded_deepest, std
 void loadMap(const std::string &path, Pipeline &pipeline) {
   if (pipeline.config().mode != Mode::Map)
     throw std::invalid_argument("loading a map needs mode: map (scan mode starts every frame on an empty hierarchy)");
-  LoadedHierarchy loaded = loadHierarchy(path, &pipeline.config().hierarchy);
+  if (!hostIsLittleEndian()) fail(path, "map files are little-endian; this host is not");
+  Fd fd(::open(path.c_str(), O_RDONLY | O_CLOEXEC));
+  if (fd.get() < 0) {
+    if (errno == ENOENT) fail(path, "file not found");
+    fail(path, std::string("cannot open: ") + std::strerror(errno));
+  }
+  struct stat st {};
+  if (::fstat(fd.get(), &st) != 0) fail(path, std::string("cannot stat: ") + std::strerror(errno));
+  if (!S_ISREG(st.st_mode)) fail(path, "not a regular file");
+  FdSource src(fd.get());
+  std::vector<std::uint8_t> normals;
+  LoadedHierarchy loaded =
+      parse(src, static_cast<std::uint64_t>(st.st_size), path, &pipeline.config().hierarchy, &normals);
+  // Checked before the map is replaced, so that a refused file changes nothing.
+  MapNormals kept;
+  const std::size_t count = loaded.hierarchy.sampleCount();
+  if (!normals.empty())
+    for (std::size_t i = 0; i < count; ++i)
+      if (!kept.restore(static_cast<SampleId>(i), normals.data() + i * MapNormals::kFileBytes))
+        fail(path, "invalid map: sample " + std::to_string(i) + " has an impossible kept normal");
   pipeline.replaceMap(std::move(loaded.hierarchy), loaded.next_frame);
+  // A file without them (version 1, saved with normals off) leaves the samples to the map's own estimate until a
+  // frame hits them; a pipeline without normals has no use for them.
+  if (pipeline.map_normals_ && !normals.empty()) *pipeline.map_normals_ = std::move(kept);
 }
 
 }  // namespace hpds

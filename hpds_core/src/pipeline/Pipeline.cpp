@@ -21,6 +21,7 @@
 #include "hpds/sampling/InsertionOrderer.hpp"
 #include "hpds/util/ParallelFor.hpp"
 #include "normals/CellCentroids.hpp"
+#include "normals/MapNormals.hpp"
 #include "normals/RefinedNormals.hpp"
 
 namespace hpds {
@@ -65,20 +66,20 @@ std::string fieldNames(const PointLayout &l) {
          std::to_string(l.point_step) + " bytes";
 }
 
-/// The deepest level read: the output levels, in map mode the finer levels the normals average over (scan mode's
-/// normals average the frame's own points instead, see fineLevelFor), the levels a map keeps.
+/// The deepest level read: the output levels and the levels a map keeps. No level is built for the normals: they
+/// average the frame's own points per cell of a finer level instead (fineLevelFor).
 int buildDepthFor(const HpdsConfig &config, int output_level) {
-  const bool map_normals = config.mode == Mode::Map && config.normals.enabled;
-  const int normals = map_normals ? output_level + std::max(0, config.normals.neighborhood_level_offset) : 0;
   const int kept = config.mode == Mode::Map ? config.map.keep_depth : -1;
-  return std::min(config.hierarchy.max_depth, std::max({output_level, normals, kept}));
+  return std::min(config.hierarchy.max_depth, std::max(output_level, kept));
 }
 
-/// Scan mode with normals that average finer detail: the level whose cells they average the frame's points in (the
-/// output level + normals.neighborhood_level_offset, clamped to max_depth as the map's normals clamp it), or -1.
+/// Normals that average finer detail: the level whose cells they average the frame's points in (the output level +
+/// normals.neighborhood_level_offset, clamped to max_depth), or -1. A map that keeps that level anyway
+/// (map.keep_depth) is read instead: its finer levels hold every frame's points, not one frame's.
 int fineLevelFor(const HpdsConfig &config, int output_level) {
-  if (config.mode != Mode::Scan || !config.normals.enabled || config.normals.neighborhood_level_offset <= 0) return -1;
+  if (!config.normals.enabled || config.normals.neighborhood_level_offset <= 0) return -1;
   const int fine = std::min(config.hierarchy.max_depth, output_level + config.normals.neighborhood_level_offset);
+  if (config.mode == Mode::Map && config.map.keep_depth >= fine) return -1;
   return fine > output_level ? fine : -1;
 }
 }  // namespace
@@ -89,7 +90,9 @@ Pipeline::Pipeline(const HpdsConfig &config)
       output_level_(resolution_.level),
       build_depth_(buildDepthFor(config_, output_level_)),
       fine_level_(fineLevelFor(config_, output_level_)),
-      hierarchy_(config_.hierarchy.cell_size, config_.hierarchy.max_depth) {}
+      hierarchy_(config_.hierarchy.cell_size, config_.hierarchy.max_depth) {
+  if (config_.mode == Mode::Map && fine_level_ >= 0) map_normals_ = std::make_shared<MapNormals>();
+}
 
 void Pipeline::requireLevel(int level) {
   if (level < 0 || level > config_.hierarchy.max_depth)
@@ -116,6 +119,9 @@ FrameResult Pipeline::addFrame(const Frame &frame) {
   if (map_mode && map_layout_fixed_ && layout != hierarchy_.recordLayout())
     throw std::invalid_argument("frame's point fields (" + fieldNames(layout) + ") differ from the map's (" +
                                 fieldNames(hierarchy_.recordLayout()) + "; the first frame's or the loaded map's)");
+
+  hit_cache_valid_ = false;
+  hit_cache_.clear();
 
   // 1. Scan mode starts every frame on an empty hierarchy.
   if (!map_mode) hierarchy_.clear();
@@ -176,7 +182,8 @@ FrameResult Pipeline::addFrame(const Frame &frame) {
   early_slot_.clear();
   const NormalParams normal_params = normalParamsFor(config_, output_level_);
   const bool ahead = fine_level_ >= 0 && resolveThreads(config_.threads) > 1;
-  const bool early = ahead && normal_params.k == 0 && normal_params.radius > 0.0;
+  // Map mode estimates the normals of every output sample the frame hits, old ones too: none to take early.
+  const bool early = ahead && !map_mode && normal_params.k == 0 && normal_params.radius > 0.0;
   if (early) early_points_.resize(candidates_.size());
   if (fine_level_ >= 0) {
     std::vector<double> radii = refinedSearchRadii(hierarchy_, normal_params);
@@ -296,6 +303,13 @@ FrameResult Pipeline::addFrame(const Frame &frame) {
       if (hierarchy_.level(id) <= output_level_ && k < early_done_) early_slot_[id] = static_cast<std::uint32_t>(k++);
   }
 
+  // 7. Map mode: the normals the map keeps, for the output samples this frame hit.
+  if (map_normals_) {
+    const auto t_normals = std::chrono::steady_clock::now();
+    updateMapNormals(inserted.accepted, viewpoint, normal_params);
+    result.seconds_normals = secondsSince(t_normals);
+  }
+
   c.out_of_range = inserted.out_of_range;
   c.dropped_depth = inserted.dropped_depth;
   c.accepted = inserted.accepted.size();
@@ -306,12 +320,32 @@ FrameResult Pipeline::addFrame(const Frame &frame) {
   return result;
 }
 
+void Pipeline::updateMapNormals(const std::vector<SampleId> &fresh, const double viewpoint[3],
+                                const NormalParams &params) {
+  map_normals_->resetSlots(fresh, hierarchy_.idBound());
+  hit_cache_ = samplesHitByLastFrame(0, output_level_, 2.0 * hierarchy_.radius(output_level_));
+  hit_cache_valid_ = true;
+  const std::vector<SampleId> &hit = hit_cache_;
+  std::vector<float> ranges;
+  const std::vector<SampleId> ids = map_normals_->improvable(hierarchy_, hit, viewpoint, ranges);
+  if (!ids.empty()) {
+    std::vector<LocalPca> neighbourhoods(ids.size());
+    const std::vector<SampleNormal> normals =
+        estimateNormalsRefined(hierarchy_, ids, params, &fine_points_, &neighbourhoods, fine_grids_.get(), nullptr);
+    for (std::size_t i = 0; i < ids.size(); ++i) map_normals_->offer(ids[i], normals[i], neighbourhoods[i], ranges[i]);
+  }
+  // The frame's grids serve this estimate only.
+  if (fine_grids_)
+    for (auto &g : fine_grids_->by_radius) g.reset();
+}
+
 std::size_t Pipeline::memUsage() const {
   return hierarchy_.memUsage() + hierarchy_.scratchBytes() + xyz_.capacity() * sizeof(double) +
          candidates_.capacity() * sizeof(std::uint32_t) + fine_points_.capacity() * sizeof(double) +
          (fine_grids_ ? fine_grids_->memUsage() : 0) + early_points_.capacity() * sizeof(std::uint32_t) +
          early_chosen_.capacity() * sizeof(LocalPca) + early_have_.capacity() +
-         early_slot_.capacity() * sizeof(SampleId);
+         early_slot_.capacity() * sizeof(SampleId) + (map_normals_ ? map_normals_->memUsage() : 0) +
+         hit_cache_.capacity() * sizeof(SampleId);
 }
 
 void Pipeline::replaceMap(Hierarchy &&map, std::uint32_t next_frame) {
@@ -325,6 +359,10 @@ void Pipeline::replaceMap(Hierarchy &&map, std::uint32_t next_frame) {
                                 "): later frames would all be refused");
   hierarchy_ = std::move(map);
   frames_ = next_frame;
+  hit_cache_valid_ = false;
+  hit_cache_.clear();
+  // A file keeps no normals: until a frame hits them, the map's samples get theirs from the map (normalsOfLive).
+  if (map_normals_) map_normals_->clear();
   // A map that has a layout (a saved one always does, even without samples) fixes it; a bare Hierarchy (the tiled
   // build's empty band) leaves it to the first frame.
   map_layout_fixed_ = !hierarchy_.recordLayout().fields.empty();
@@ -348,6 +386,9 @@ std::vector<SampleId> Pipeline::outputSamplesNear(const double center[3], double
 }
 
 std::vector<SampleId> Pipeline::samplesHitByLastFrame(int min_level, int max_level, double radius) const {
+  // The map's normals asked for this set already (the node's ~output asks for it again).
+  if (hit_cache_valid_ && min_level == 0 && max_level == output_level_ && radius == 2.0 * hierarchy_.radius(output_level_))
+    return hit_cache_;
   std::vector<SampleId> hit;
   if (candidates_.empty() || !(radius > 0.0)) return hit;
   const auto inLevels = [&](SampleId id) {
@@ -408,6 +449,7 @@ std::vector<SampleNormal> Pipeline::normalsOfLive(const std::vector<SampleId> &i
                                                   std::vector<LocalPca> *neighbourhoods) const {
   const NormalParams params = normalParamsFor(config_, output_level_);
   if (fine_level_ < 0) return estimateNormals(hierarchy_, ids, params, neighbourhoods);
+  if (map_normals_) return keptNormals(ids, params, neighbourhoods);
   if (neighbourhoods) neighbourhoods->assign(ids.size(), LocalPca{});
   // Neighbourhoods estimated beside the insertion (addFrame) for the samples among ids.
   std::vector<std::uint8_t> state;
@@ -433,6 +475,33 @@ std::vector<SampleNormal> Pipeline::normalsOfLive(const std::vector<SampleId> &i
     for (auto &g : fine_grids_->by_radius) g.reset();
   early_done_ = 0;
   std::vector<std::uint32_t>().swap(early_slot_);
+  return normals;
+}
+
+std::vector<SampleNormal> Pipeline::keptNormals(const std::vector<SampleId> &ids, const NormalParams &params,
+                                                std::vector<LocalPca> *neighbourhoods) const {
+  std::vector<SampleNormal> normals(ids.size(), invalidNormal());
+  if (neighbourhoods) neighbourhoods->assign(ids.size(), LocalPca{});
+  // Samples no frame gave a valid normal since the map was made or loaded (or of levels below the output's) get one
+  // from the map's own levels: fewer points than a frame's cells hold, but every frame's.
+  std::vector<SampleId> rest;
+  std::vector<std::size_t> rest_at;
+  for (std::size_t i = 0; i < ids.size(); ++i) {
+    const bool kept = hierarchy_.level(ids[i]) <= output_level_ &&
+                      map_normals_->lookup(ids[i], normals[i], neighbourhoods ? &(*neighbourhoods)[i] : nullptr);
+    if (!kept) {
+      rest.push_back(ids[i]);
+      rest_at.push_back(i);
+    }
+  }
+  if (rest.empty()) return normals;
+  std::vector<LocalPca> rest_neighbourhoods;
+  const std::vector<SampleNormal> estimated =
+      estimateNormals(hierarchy_, rest, params, neighbourhoods ? &rest_neighbourhoods : nullptr);
+  for (std::size_t j = 0; j < rest.size(); ++j) {
+    normals[rest_at[j]] = estimated[j];
+    if (neighbourhoods) (*neighbourhoods)[rest_at[j]] = rest_neighbourhoods[j];
+  }
   return normals;
 }
 

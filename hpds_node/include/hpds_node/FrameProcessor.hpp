@@ -75,7 +75,7 @@ struct ProcessedFrame {
   sensor_msgs::PointCloud2 output, new_samples, local_map;
   std::vector<std::pair<int, sensor_msgs::PointCloud2>> levels;  ///< (D, cloud) for the requested levels
   double seconds = 0.0;                                          ///< conversion + pipeline + outputs
-  double seconds_normals = 0.0;  ///< of `seconds`: the outputs' normals (and covariances)
+  double seconds_normals = 0.0;  ///< of `seconds`: the outputs' normals (and covariances), and those a map keeps
   /// [m] How far the outputs' float32 x y z may round positions (hpds::positionRounding; 0: float64).
   double position_rounding = 0.0;
 };

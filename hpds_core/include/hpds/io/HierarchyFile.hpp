@@ -1,11 +1,13 @@
 // HierarchyFile: saving a map-mode hierarchy to disk and loading it back (persistence across runs).
 //
 // Contract
-// - Format (version 1, all numbers little-endian), see HierarchyFile.cpp for the byte layout:
+// - Format (version 2, all numbers little-endian; version 1 files, without kept normals, load too), see
+//   HierarchyFile.cpp for the byte layout:
 //   header  = magic "HPDSMAP\0", version, cell_size, max_depth, next frame index, sample count, record layout
 //             (point_step and every field: name, offset, datatype, count), CRC-32 of the header;
 //   body    = one fixed-size entry per live sample: x y z (float64), level (uint8), frame index (uint32),
-//             to_viewpoint (3 x float32), the record (point_step bytes); then CRC-32 of the body.
+//             to_viewpoint (3 x float32), the record (point_step bytes) and, from saveMap of a map-mode pipeline with
+//             kept normals (Pipeline.hpp), that normal; then CRC-32 of the body.
 //   The file size is fully determined by the header, so truncation and trailing bytes are detected before any
 //   sample is read, and nothing is allocated beyond what the file holds.
 // - saveHierarchy writes atomically (AtomicFile.hpp): a temporary file in the same directory, fsync'ed, then renamed
@@ -19,8 +21,9 @@
 //   unsupported version, corrupt header or body (checksum), truncated or oversized file, invalid layout or
 //   parameters, a sample the hierarchy refuses (level out of range, non-finite or out-of-range position, two samples
 //   in one cell), and, when `expected` is given, a cell_size or max_depth that differs from it.
-// - Pipeline integration: saveMap / loadMap below carry the frame counter as well, so that a loaded map continues
-//   with the same frame indices and random-order seeds as an uninterrupted run.
+// - Pipeline integration: saveMap / loadMap below carry the frame counter and the kept normals as well, so that a
+//   loaded map continues with the same frame indices, random-order seeds and normals as an uninterrupted run.
+//   saveHierarchy / loadHierarchy leave the normals out.
 // - Thread-safety: reentrant; concurrent saves to the same path leave one complete file.
 #pragma once
 
@@ -36,7 +39,7 @@ namespace hpds {
 
 class Pipeline;
 
-inline constexpr std::uint32_t kHierarchyFileVersion = 1;
+inline constexpr std::uint32_t kHierarchyFileVersion = 2;
 
 /// A hierarchy read from a file, with the frame index the next inserted frame should get.
 struct LoadedHierarchy {

@@ -3,19 +3,26 @@
 // Contract
 // - The config is resolved first (resolvedConfig: the level-0 cell derived from output.spacing when
 //   hierarchy.cell_size is 0); config() and the hierarchy use the resolved values, outputResolution() says why.
-// - Only levels 0..buildDepth() are built, in both modes: the output level, + normals.neighborhood_level_offset with
-//   normals on in map mode, a level asked for by requireLevel and, in map mode, map.keep_depth; never past max_depth. Points
+// - Only levels 0..buildDepth() are built, in both modes: the output level, a level asked for by requireLevel and,
+//   in map mode, map.keep_depth; never past max_depth. Points
 //   rejected down to buildDepth() count as dropped_depth. In scan mode those levels are exactly what building to
 //   max_depth gives; in map mode finer samples of earlier frames also keep later candidates away, so a map built
 //   deeper (map.keep_depth) differs at its coarse levels too, equally valid.
-// - Scan mode: every frame is sampled on its own (the hierarchy is cleared first). The normals' finer detail
-//   (normals.neighborhood_level_offset) comes from the frame itself: the centroids of its points per cell of level
-//   output + offset (clamped to max_depth) stand in for the samples of those levels, which are not built for it
-//   (with threads > 1, beside the insertion, and with them the normals' first search grids and the neighbourhoods
-//   of the samples accepted so far, which the frame's first normals() then takes). Map mode: one persistent
-//   hierarchy in the fixed frame; earlier samples never move or change level; samples farther than
-//   map.evict_distance from the latest sensor position are evicted before the frame is inserted, and the store is
-//   cut back to map.max_samples (farthest first), so memory is bounded by the cap plus one frame.
+// - The normals' finer detail (normals.neighborhood_level_offset) comes from the frames themselves: the centroids
+//   of a frame's points per cell of level output + offset (clamped to max_depth) stand in for the samples of those
+//   levels, which are not built for it (with threads > 1, beside the insertion, and with them the normals' first
+//   search grids and, in scan mode, the neighbourhoods of the samples accepted so far, which the frame's first
+//   normals() then takes).
+// - Scan mode: every frame is sampled on its own (the hierarchy is cleared first); normals() estimates from the last
+//   frame's centroids. Map mode: one persistent hierarchy in the fixed frame; earlier samples never move or change
+//   level; samples farther than map.evict_distance from the latest sensor position are evicted before the frame is
+//   inserted, and the store is cut back to map.max_samples (farthest first), so memory is bounded by the cap plus one
+//   frame. With normals that average finer detail, each frame estimates the normals of the output samples it hits
+//   (within 2 r_L of its points) from its centroids, and every sample keeps the one of the frame that saw it from
+//   closest (FrameResult::seconds_normals); normals() returns the kept ones, and for samples with none (a loaded map
+//   not hit since, levels below the output) estimates from the map's own levels. A map that keeps the finer levels
+//   anyway (map.keep_depth >= L + offset) keeps no normals: normals() reads those levels, which hold every frame's
+//   points (more accurate than one frame's, at the cost of building them).
 // - Points are transformed by frame.sensor_to_fixed (identity = sensor frame). NaN/Inf coordinates, exact (0,0,0)
 //   no-returns (input.skip_zero_points) and points outside input.min_range/max_range (measured from
 //   frame.viewpoint) are skipped and counted. Normals face, and eviction measures from, sensor_to_fixed * viewpoint.
@@ -32,6 +39,7 @@
 #include <array>
 #include <cstdint>
 #include <memory>
+#include <string>
 #include <vector>
 
 #include "hpds/config/Config.hpp"
@@ -42,7 +50,9 @@
 
 namespace hpds {
 
-struct AveragingGrids;  // internal: the scan-mode normals' search grids
+struct AveragingGrids;  // internal: the normals' search grids over a frame's cell centroids
+class MapNormals;       // internal: the normals a map keeps per sample
+class AtomicFile;
 
 struct FrameCounters {
   std::uint64_t input = 0;            ///< points in the frame
@@ -63,6 +73,8 @@ struct FrameResult {
   std::vector<SampleId> new_samples;  ///< accepted from this frame, all levels, acceptance order
   double seconds_order = 0.0;         ///< insertion order (features included)
   double seconds_insert = 0.0;
+  /// Map mode with normals: estimating the normals the map keeps for the output samples the frame hit.
+  double seconds_normals = 0.0;
   /// Scan mode with 2+ threads: output samples whose normal neighbourhood the second thread estimated while the frame
   /// was inserted (the next normals() only estimates the others; the result is the same either way).
   std::size_t normals_ahead = 0;
@@ -87,9 +99,9 @@ class Pipeline {
   /// every candidate has a hit sample (coverage), so this is the map as that sweep saw it. Increasing id order.
   [[nodiscard]] std::vector<SampleId> samplesHitByLastFrame(int min_level, int max_level, double radius) const;
   /// Normals of `ids` (samples of the hierarchy) with the config's normal settings, as makeCloud estimates them: in
-  /// scan mode from the last frame's cell centroids (see contract), so a caller must not estimate them from
-  /// hierarchy() alone, which holds no level below buildDepth(). `neighbourhoods`: when given, resized to ids.size()
-  /// and set to the PCA each normal came from (for covariances).
+  /// scan mode from the last frame's cell centroids, in map mode those the map keeps (see contract), so a caller
+  /// must not estimate them from hierarchy() alone, which holds no level below buildDepth(). `neighbourhoods`: when
+  /// given, resized to ids.size() and set to the PCA each normal came from (for covariances).
   [[nodiscard]] std::vector<SampleNormal> normals(const std::vector<SampleId> &ids,
                                                   std::vector<LocalPca> *neighbourhoods = nullptr) const;
   /// Output cloud of `ids` (normals estimated when normals.enabled, with covariances when normals.covariances),
@@ -124,7 +136,16 @@ class Pipeline {
   void replaceMap(Hierarchy &&map, std::uint32_t next_frame);
 
  private:
+  // Map files carry the kept normals (io/HierarchyFile.hpp).
+  friend void saveMap(AtomicFile &file, const Pipeline &pipeline);
+  friend void loadMap(const std::string &path, Pipeline &pipeline);
+
   void requireLiveIds(const std::vector<SampleId> &ids, const char *what) const;
+  /// Map mode: offers the map's normals estimates for the output samples the last frame hit (`fresh`: its new ids).
+  void updateMapNormals(const std::vector<SampleId> &fresh, const double viewpoint[3], const NormalParams &params);
+  /// Map mode: the kept normals of ids, estimated from the map where none is kept.
+  [[nodiscard]] std::vector<SampleNormal> keptNormals(const std::vector<SampleId> &ids, const NormalParams &params,
+                                                      std::vector<LocalPca> *neighbourhoods) const;
   /// normals() for ids already checked by requireLiveIds.
   [[nodiscard]] std::vector<SampleNormal> normalsOfLive(const std::vector<SampleId> &ids,
                                                         std::vector<LocalPca> *neighbourhoods) const;
@@ -133,12 +154,17 @@ class Pipeline {
   HpdsConfig config_;
   int output_level_;
   int build_depth_;
-  // Scan mode with normals.neighborhood_level_offset: the level whose cells the normals average the last frame's
+  // Normals with normals.neighborhood_level_offset: the level whose cells the normals average the last frame's
   // points in (-1: the normals read the hierarchy's own levels), and those cell centroids (3 doubles each).
   int fine_level_;
   std::vector<double> fine_points_;
   // Their search grids, the first radii sorted while the frame is inserted when a second thread is allowed.
   std::shared_ptr<AveragingGrids> fine_grids_;
+  // Map mode with those normals: what each sample keeps (normalsOfLive reads it; null otherwise).
+  std::shared_ptr<MapNormals> map_normals_;
+  // samplesHitByLastFrame(0, output level, 2 r_L) of the last frame, as the map's normals took it.
+  std::vector<SampleId> hit_cache_;
+  bool hit_cache_valid_ = false;
   // With a second thread: the neighbourhoods it estimated while the frame was inserted, for the first early_done_
   // samples the insertion published (point indices in early_points_), and each sample's entry (early_slot_, by id;
   // kNoSample: none). The frame's first normals() takes them and lets them go.

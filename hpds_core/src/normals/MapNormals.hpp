@@ -1,0 +1,65 @@
+// MapNormals: the normal a map keeps for each of its samples, estimated from the frames that hit the sample.
+//
+// Why map mode keeps normals instead of estimating them from the map when asked: that estimate averaged the map's
+// levels L+1..L+neighborhood_level_offset, and building those levels was most of a map-mode frame's cost (a
+// 64-beam synthetic drive at the defaults: 270 ms of insertion per frame with them, 45 ms without, and five times
+// the samples held). Each frame instead averages its own points per cell of the fine level, as scan mode does,
+// for the output samples it hits; a sample keeps the estimate from the frame that saw it from closest, where the
+// scan lines around it lie densest.
+//
+// Contract
+// - Indexed by sample id. Ids of evicted samples are reused, so a new sample's slot is emptied (resetSlots) before
+//   anything is offered for it.
+// - An entry is empty, invalid (no frame so far gave a normal: too few neighbours) or valid. offer() replaces an
+//   empty entry, and a valid estimate replaces an invalid one or a valid one from farther away; on a tie the first
+//   stays, so the result depends only on the frames and their order.
+// - Not thread-safe; const members may run concurrently.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <vector>
+
+#include "hpds/normals/LocalPca.hpp"
+#include "hpds/normals/NormalEstimator.hpp"
+#include "hpds/sampling/Hierarchy.hpp"
+
+namespace hpds {
+
+class MapNormals {
+ public:
+  /// Forgets every entry (a replaced map).
+  void clear() { std::vector<Entry>().swap(entries_); }
+  /// Grows to `id_bound` slots and empties those of `fresh` (samples new since the last call).
+  void resetSlots(const std::vector<SampleId> &fresh, std::size_t id_bound);
+  /// Of `hit`, the samples a frame seen from `viewpoint` (fixed frame) could give a better entry: empty, invalid, or
+  /// valid from farther away. `ranges` gets their distances to the viewpoint, same order.
+  [[nodiscard]] std::vector<SampleId> improvable(const Hierarchy &hierarchy, const std::vector<SampleId> &hit,
+                                                 const double viewpoint[3], std::vector<float> &ranges) const;
+  /// Offers an estimate for `id` from a frame `range` metres away (see contract).
+  void offer(SampleId id, const SampleNormal &normal, const LocalPca &neighbourhood, float range);
+  /// The valid normal kept for `id` and the neighbourhood it came from (its normal and eigenvalues; float
+  /// precision); false when there is none.
+  bool lookup(SampleId id, SampleNormal &normal, LocalPca *neighbourhood) const;
+  [[nodiscard]] std::size_t memUsage() const { return entries_.capacity() * sizeof(Entry); }
+
+  /// Bytes of one entry in a map file (HierarchyFile.cpp): f32 normal[3], curvature, l0 l1 l2, range, u8 state.
+  static constexpr std::size_t kFileBytes = 8 * 4 + 1;
+  /// Writes `id`'s entry (an empty one when there is none) as kFileBytes bytes.
+  void save(SampleId id, std::uint8_t *out) const;
+  /// Sets `id`'s entry from kFileBytes bytes; false (nothing set) when they hold no entry this build writes.
+  bool restore(SampleId id, const std::uint8_t *in);
+
+ private:
+  enum : std::uint8_t { kEmpty = 0, kInvalid = 1, kValid = 2 };
+  struct Entry {
+    float normal[3];
+    float curvature;
+    float eigen[3];  ///< l0 l1 l2 of the neighbourhood (covariances tell line-like ones apart by them)
+    float range;     ///< [m] sensor distance of the frame that gave it
+    std::uint8_t state;
+  };
+  std::vector<Entry> entries_;
+};
+
+}  // namespace hpds
