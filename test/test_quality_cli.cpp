@@ -265,8 +265,85 @@ TEST_F(QualityCli, ACompareLevelThatCannotBeComparedIsRefusedBeforeAnythingIsWri
   EXPECT_FALSE(std::filesystem::exists(*dir_ / "cmp_deep")) << log;
   EXPECT_EQ(runHpds(args + shellQuote(*dir_ / "cmp_coarse") + " --compare-level 0", &log), 1) << log;
   EXPECT_NE(log.find("--compare-level 0: too few hpds samples in the patch to compare"), std::string::npos) << log;
-  const bool wrote = std::filesystem::exists(*dir_ / "cmp_coarse") && !std::filesystem::is_empty(*dir_ / "cmp_coarse");
-  EXPECT_FALSE(wrote) << "wrote pictures before refusing:\n" << log;
+  // Not even the folder: a failed run leaves no half output.
+  EXPECT_FALSE(std::filesystem::exists(*dir_ / "cmp_coarse")) << "left a folder behind:\n" << log;
+}
+
+// A sampling with no planar near-horizontal patch (a wall) failed with exit 1 but left its new, empty -o folder
+// behind, which looked like an analysis that had produced nothing.
+TEST_F(QualityCli, AnAnalysisThatFindsNoPatchLeavesNoFolder) {
+  std::ofstream wall(*dir_ / "wall.pcd");
+  wall << "VERSION .7\nFIELDS x y z level\nSIZE 4 4 4 1\nTYPE F F F U\nCOUNT 1 1 1 1\nWIDTH 400\nHEIGHT 1\n"
+          "VIEWPOINT 0 0 0 1 0 0 0\nPOINTS 400\nDATA ascii\n";
+  for (int i = 0; i < 20; ++i)
+    for (int j = 0; j < 20; ++j) wall << "3 " << 0.2 * i << " " << 0.2 * j << " " << (i + j) % 4 << "\n";
+  wall.close();
+  const auto top = *dir_ / "no_patch";
+  std::string log;
+  EXPECT_EQ(runHpds("analyze " + shellQuote(*dir_ / "wall.pcd") + " --cell-size 4 --no-plots -o " +
+                        shellQuote(top / "nested" / "out"),
+                    &log),
+            1)
+      << log;
+  EXPECT_NE(log.find("no planar near-horizontal patch"), std::string::npos) << log;
+  EXPECT_FALSE(std::filesystem::exists(top)) << "left a folder behind:\n" << log;
+  // A folder that was there before stays, with nothing added.
+  std::filesystem::create_directories(top);
+  EXPECT_EQ(runHpds("analyze " + shellQuote(*dir_ / "wall.pcd") + " --cell-size 4 --no-plots -o " + shellQuote(top),
+                    &log),
+            1)
+      << log;
+  EXPECT_TRUE(std::filesystem::is_directory(top));
+  EXPECT_TRUE(std::filesystem::is_empty(top)) << log;
+}
+
+// --compare-level and --poses act on the --input clouds only; without --input they were dropped without a word
+// (exit 0, no comparison), so a user never learnt that the comparison asked for did not happen.
+TEST_F(QualityCli, ComparisonFlagsWithoutInputAreABadCommandLine) {
+  const std::string args = "analyze " + shellQuote(*dir_ / "map.ply") + " --cell-size 4 --no-plots -o " +
+                           shellQuote(*dir_ / "no_input");
+  std::string log;
+  EXPECT_EQ(runHpds(args + " --compare-level 4", &log), 2) << log;
+  EXPECT_NE(log.find("--compare-level requires --input"), std::string::npos) << log;
+  EXPECT_EQ(runHpds(args + " --poses " + shellQuote(*dir_ / "stream/poses.txt"), &log), 2) << log;
+  EXPECT_NE(log.find("--poses requires --input"), std::string::npos) << log;
+  EXPECT_FALSE(std::filesystem::exists(*dir_ / "no_input")) << log;
+}
+
+// An empty -o (an unset shell variable: `-o "$OUT"`) reached the file system: synth failed with the library's
+// "filesystem error: cannot create directories: No such file or directory []"; every command now refuses it as a
+// bad command line.
+TEST_F(QualityCli, AnEmptyOutputPathIsABadCommandLine) {
+  const std::string map = shellQuote(*dir_ / "map.ply");
+  for (const std::string &cmd : {std::string("synth --frames 1"), "render " + map, "analyze " + map + " --cell-size 4",
+                                 "sample " + shellQuote(*dir_ / "stream/frame_000000.pcd")}) {
+    std::string log;
+    EXPECT_EQ(runHpds(cmd + " -o ''", &log), 2) << cmd << "\n" << log;
+    EXPECT_NE(log.find("--output: must be a path, got an empty string"), std::string::npos) << cmd << "\n" << log;
+  }
+}
+
+// `render --prefix ../x -o DIR` wrote its nine pictures beside DIR, outside the folder it was given.
+TEST_F(QualityCli, APrefixIsAFileNameNotAPath) {
+  const auto out = *dir_ / "prefixed";
+  for (const std::string prefix : {"../escaped", "sub/p", "..", "/tmp/abs"}) {
+    std::string log;
+    EXPECT_EQ(runHpds("render " + shellQuote(*dir_ / "map.ply") + " --view top --color level -o " + shellQuote(out) +
+                          " --prefix " + shellQuote(prefix),
+                      &log),
+              2)
+        << prefix << "\n" << log;
+    EXPECT_NE(log.find("--prefix: must be a file-name prefix"), std::string::npos) << log;
+  }
+  EXPECT_FALSE(std::filesystem::exists(*dir_ / "escaped_level_top.png"));
+  EXPECT_FALSE(std::filesystem::exists(out));
+  std::string log;
+  ASSERT_EQ(runHpds("render " + shellQuote(*dir_ / "map.ply") + " --view top --color level -o " + shellQuote(out) +
+                        " --prefix run.1",
+                    &log),
+            0)
+      << log;
+  EXPECT_TRUE(isPng(out / "run.1_level_top.png"));
 }
 
 // A cloud whose every point has a NaN coordinate (a sensor frame with no return) was "rendered" into nine blank

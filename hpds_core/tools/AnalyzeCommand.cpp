@@ -231,9 +231,6 @@ void runAnalyze(const AnalyzeArgs &a) {
   if (!a.inputs.empty() && a.compare_level > max_level)
     throw std::invalid_argument("--compare-level " + std::to_string(a.compare_level) +
                                 ": the sampling's deepest level is " + std::to_string(max_level));
-  fs::create_directories(a.out_dir);
-  const fs::path out(a.out_dir);
-
   // 1. Per level: counts and 3D nearest-neighbour spacing of the union U_D.
   std::vector<std::vector<Eigen::Vector3d>> unions(static_cast<std::size_t>(max_level) + 1);
   std::vector<std::size_t> counts(static_cast<std::size_t>(max_level) + 1, 0);
@@ -241,7 +238,10 @@ void runAnalyze(const AnalyzeArgs &a) {
     ++counts[static_cast<std::size_t>(cloud.level[i])];
     for (int d = cloud.level[i]; d <= max_level; ++d) unions[static_cast<std::size_t>(d)].push_back(cloud.xyz[i]);
   }
+  // Chosen before the folder is made: a sampling without a planar patch is the common failure.
   const Patch patch = choosePatch(a, unions.back());
+  RunFolder folder(a.out_dir);
+  const fs::path out(a.out_dir);
   std::cout << "patch: centre (" << patch.center_xy.x() << ", " << patch.center_xy.y() << "), " << patch.size
             << " m, plane normal (" << patch.plane.normal.transpose() << "), rms " << patch.plane.rms << " m"
             << (patch.automatic ? " (found automatically)" : "") << "\n";
@@ -405,6 +405,7 @@ void runAnalyze(const AnalyzeArgs &a) {
   levels_csv.close();
   rdf_csv.close();
   spec_csv.close();
+  folder.keep();
   std::cout << "wrote " << (out / "analysis.json").string() << ", levels.csv, rdf.csv, spectrum.csv and PNGs\n";
 
   if (a.no_plots) return;
@@ -428,9 +429,11 @@ void addAnalyzeCommand(CLI::App &app) {
       "analyze", "blue-noise analysis of a sampling per level (RDF, power spectrum) and, with --input, versus grids");
   cmd->add_option("sampling", a->sampling, "sampling written by hpds sample (x y z level)")->required();
   addCellSizeOptions(*cmd, a->cell);
-  cmd->add_option("-o,--output", a->out_dir, "output directory")->required();
-  cmd->add_option("--input", a->inputs, "the input clouds of the sampling: adds the grid baselines at equal count");
-  cmd->add_option("--poses", a->poses, "KITTI poses of the inputs (as given to hpds sample)");
+  cmd->add_option("-o,--output", a->out_dir, "output directory")->required()->check(nonEmptyPath());
+  auto *input = cmd->add_option("--input", a->inputs,
+                                "the input clouds of the sampling: adds the grid baselines at equal count");
+  // Both act on the --input clouds only: without them they would be dropped without a word.
+  cmd->add_option("--poses", a->poses, "KITTI poses of the inputs (as given to hpds sample)")->needs(input);
   cmd->add_option("--patch", a->patch, "cx,cy,size [m]: the square xy patch to analyse (default: found automatically)")
       ->delimiter(',')
       ->expected(3)
@@ -445,8 +448,10 @@ void addAnalyzeCommand(CLI::App &app) {
                   "baseline grids start at this fraction of a cell; 0.5 keeps a flat ground at z = 0 mid-cell")
       ->capture_default_str()
       ->check(finiteIn(0.0, 1.0));
-  cmd->add_option("--compare-level", a->compare_level, "level of the baseline comparison (default: the finest)")
-      ->check(integerIn(-1, 21));
+  cmd->add_option("--compare-level", a->compare_level,
+                  "with --input: level of the baseline comparison (default: the finest)")
+      ->check(integerIn(-1, 21))
+      ->needs(input);
   cmd->add_option("--frame", a->frame, "scan-mode files: the frame to analyse (default: the first)")
       ->check(integerIn(0, 4294967295));
   cmd->add_option("--seed", a->seed, "seed of the random baselines")->capture_default_str()->check(unsigned64());

@@ -59,6 +59,24 @@ CLI::Validator unsigned64() {
       "0..2^64-1");
 }
 
+CLI::Validator nonEmptyPath() {
+  return CLI::Validator(
+      [](std::string &value) -> std::string {
+        return value.empty() ? "must be a path, got an empty string (an unset shell variable?)" : "";
+      },
+      "PATH");
+}
+
+CLI::Validator fileNamePrefix() {
+  return CLI::Validator(
+      [](std::string &value) -> std::string {
+        if (value.find_first_of("/\\") == std::string::npos && value != "." && value != "..") return "";
+        return "must be a file-name prefix without '/', '\\' or '..', got '" + value +
+               "' (the files are written into the -o folder; choose another folder with -o)";
+      },
+      "NAME");
+}
+
 void addSamplingOptions(CLI::App &app, SamplingOptions &o) {
   app.add_option("--config", o.config_file, "YAML config (see config/hpds.yaml); flags override it");
   app.add_option("--cell-size", o.cell_size, "[m] level-0 cell edge, fixed (hierarchy.cell_size; default: derived "

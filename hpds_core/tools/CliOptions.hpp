@@ -32,6 +32,11 @@ struct SamplingOptions {
 [[nodiscard]] CLI::Validator finiteIn(double lo, double hi);
 [[nodiscard]] CLI::Validator integerIn(long long lo, long long hi);
 [[nodiscard]] CLI::Validator unsigned64();
+/// Path flags: an empty path (`-o ""`, an unset shell variable) is refused as a bad command line, not taken for a
+/// folder or file named "". A file-name prefix (`render --prefix`) is refused with a path separator in it, so that
+/// the files stay in their folder.
+[[nodiscard]] CLI::Validator nonEmptyPath();
+[[nodiscard]] CLI::Validator fileNamePrefix();
 
 /// Registers --config, --cell-size, --max-depth, --level, --spacing, --normals/--no-normals, --covariances,
 /// --float64-xyz, --order, --seed, --mode, --threads.

@@ -130,4 +130,19 @@ void checkPaths(const std::vector<InputPath> &inputs, const std::vector<OutputPa
   }
 }
 
+RunFolder::RunFolder(const std::string &path) {
+  // Normalised first, so that the folders created are exactly those walked here ("a/../b" creates b alone).
+  const fs::path target = fs::weakly_canonical(fs::absolute(path));
+  fs::path missing;
+  for (fs::path p = target; !p.empty() && !fs::exists(p) && p != p.parent_path(); p = p.parent_path()) missing = p;
+  fs::create_directories(target);
+  created_ = missing;
+}
+
+RunFolder::~RunFolder() {
+  if (created_.empty()) return;
+  std::error_code ignored;  // a destructor during unwinding must not throw; the run's own error is what counts
+  fs::remove_all(created_, ignored);
+}
+
 }  // namespace hpds::cli

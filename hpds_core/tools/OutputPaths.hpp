@@ -16,6 +16,7 @@
 //   plus every file name the command writes into it.
 #pragma once
 
+#include <filesystem>
 #include <string>
 #include <vector>
 
@@ -44,5 +45,22 @@ struct OutputFolder {
 
 void checkPaths(const std::vector<InputPath> &inputs, const std::vector<OutputPath> &outputs,
                 const std::vector<OutputFolder> &folders = {});
+
+/// The output folder of one run (render, analyze, synth -o DIR), created with its missing parents. Destroyed before
+/// keep() (the run threw), it removes the topmost folder it created, with whatever the run put there, so that a
+/// failed run leaves no half output; a folder that existed before is left as it is (its files are replaced
+/// atomically, one by one).
+class RunFolder {
+ public:
+  explicit RunFolder(const std::string &path);
+  RunFolder(const RunFolder &) = delete;
+  RunFolder &operator=(const RunFolder &) = delete;
+  ~RunFolder();
+  /// The run succeeded: the folder stays.
+  void keep() { created_.clear(); }
+
+ private:
+  std::filesystem::path created_;  // topmost folder this run created; empty when it created none
+};
 
 }  // namespace hpds::cli

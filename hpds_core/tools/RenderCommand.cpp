@@ -128,7 +128,7 @@ void runRender(const RenderArgs &a) {
     throw std::invalid_argument(a.cloud + ": no points to render (check --crop / --max-level; points with a NaN or "
                                           "infinite coordinate are not drawn)");
   const double spacing = medianSpacing(kept.xyz);
-  fs::create_directories(a.out_dir);
+  RunFolder folder(a.out_dir);
 
   RenderOptions o;
   o.max_width = a.width;
@@ -182,6 +182,7 @@ void runRender(const RenderArgs &a) {
       std::cout << "wrote " << path << "\n";
     }
   }
+  folder.keep();
 }
 
 }  // namespace
@@ -190,8 +191,10 @@ void addRenderCommand(CLI::App &app) {
   auto a = std::make_shared<RenderArgs>();
   CLI::App *cmd = app.add_subcommand("render", "PNG pictures of a sampling: top/front/side views by level, normal, feature");
   cmd->add_option("cloud", a->cloud, "sampling (or any cloud) to draw")->required();
-  cmd->add_option("-o,--output", a->out_dir, "output directory")->required();
-  cmd->add_option("--prefix", a->prefix, "file name prefix")->capture_default_str();
+  cmd->add_option("-o,--output", a->out_dir, "output directory")->required()->check(nonEmptyPath());
+  cmd->add_option("--prefix", a->prefix, "file name prefix (no '/')")
+      ->capture_default_str()
+      ->check(fileNamePrefix());
   cmd->add_option("--color", a->colors, "level, normal, feature (comma separated)")->delimiter(',')->capture_default_str();
   cmd->add_option("--view", a->views, "top, front, side (comma separated)")->delimiter(',')->capture_default_str();
   cmd->add_option("--crop", a->crop, "x0,y0,z0,x1,y1,z1 [m]: draw only this box")

@@ -276,7 +276,8 @@ void addReplayCommand(CLI::App &app) {
   cmd->add_option("--topic", args->topic, "sensor_msgs/PointCloud2 topic to sample")->required();
   cmd->add_option("-o,--output", args->output,
                   "OUT.bag (the node's output topics + /tf) or OUT.ply (map: final map; scan: all outputs)")
-      ->required();
+      ->required()
+      ->check(nonEmptyPath());
   cmd->add_option("--stats", args->stats, "write run statistics (incl. dropped messages) as JSON");
   cmd->add_option("--fixed-frame", args->fixed_frame, "map mode: frame of the map (ros.fixed_frame)");
   cmd->add_option("--output-frame", args->output_frame, "scan mode: output frame via tf (ros.output_frame)");

@@ -229,7 +229,9 @@ void addSampleCommand(CLI::App &app) {
   CLI::App *cmd = app.add_subcommand("sample", "sample point clouds into an additive Poisson-disk hierarchy");
   cmd->add_option("inputs", args->inputs, "input clouds: .pcd, .ply, KITTI .bin (several = a stream of frames)")
       ->required();
-  cmd->add_option("-o,--output", args->output, "output PLY (binary little-endian)")->required();
+  cmd->add_option("-o,--output", args->output, "output PLY (binary little-endian)")
+      ->required()
+      ->check(nonEmptyPath());
   cmd->add_option("--poses", args->poses, "KITTI pose file: one 3x4 sensor-to-world matrix per line, one per input");
   cmd->add_option("--stats", args->stats, "write run statistics as JSON");
   cmd->add_option("--load-map", args->load_map, "map mode: start from a map saved by --save-map (same cell size and depth)");

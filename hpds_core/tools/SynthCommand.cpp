@@ -42,7 +42,7 @@ void runSynth(SynthArgs a) {
                                 std::to_string(kMaxPointsPerFrame) + " a synthetic frame may have");
   checkPaths({}, {}, {{"-o", a.out_dir, {}}});
   const SyntheticLidar lidar(a.lidar);
-  std::filesystem::create_directories(a.out_dir);
+  RunFolder folder(a.out_dir);
   std::vector<Eigen::Isometry3d> poses;
   std::size_t points = 0;
   for (int i = 0; i < a.lidar.frames; ++i) {
@@ -55,6 +55,7 @@ void runSynth(SynthArgs a) {
   }
   const std::string pose_path = (std::filesystem::path(a.out_dir) / "poses.txt").string();
   writeKittiPoses(pose_path, poses);
+  folder.keep();
   std::cout << "wrote " << a.lidar.frames << " frames (" << points << " points, scene " << toString(a.lidar.scene)
             << ") and " << pose_path << "\n";
 }
@@ -64,7 +65,8 @@ void runSynth(SynthArgs a) {
 void addSynthCommand(CLI::App &app) {
   auto a = std::make_shared<SynthArgs>();
   CLI::App *cmd = app.add_subcommand("synth", "write a synthetic spinning-lidar stream (frames + KITTI poses)");
-  cmd->add_option("-o,--output", a->out_dir, "output directory (frame_NNNNNN.<format> and poses.txt)")->required();
+  cmd->add_option("-o,--output", a->out_dir, "output directory (frame_NNNNNN.<format> and poses.txt)")->required()
+      ->check(nonEmptyPath());
   cmd->add_option("--frames", a->lidar.frames, "number of frames")->capture_default_str()->check(integerIn(1, 100000));
   cmd->add_option("--seed", a->lidar.seed, "scene and noise seed")->capture_default_str()->check(unsigned64());
   cmd->add_option("--scene", a->scene, "urban | planar_urban | curved_objects")->capture_default_str();
