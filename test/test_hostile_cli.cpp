@@ -194,6 +194,30 @@ TEST(HostileCli, GeoreferencedCoordinatesKeepTheirPrecisionOrAreSaidToLoseIt) {
   EXPECT_NE(log.find("--covariances"), std::string::npos) << log;
 }
 
+// A robot's config with covariances on (for GICP) and a quick `--no-normals` run failed with
+// "normals.covariances: needs normals.enabled", naming keys the command line never touched. Flags override the
+// config: no normals means no covariances either, and stderr says so.
+TEST(HostileCli, NoNormalsOverridesTheConfigsCovariancesAndSaysSo) {
+  const auto tmp = test::scratchDir("hostile_cov_config");
+  writePcd((tmp / "f.pcd").string(), typedCloud(FieldType::Float32, gridPoints(20, 0.3)));
+  writeText(tmp / "gicp.yaml", "normals: {covariances: true}\n");
+  const std::string run = "sample " + q(tmp / "f.pcd") + " --config " + q(tmp / "gicp.yaml") + " -o ";
+  std::string log;
+  ASSERT_EQ(hpds(run + q(tmp / "cov.ply"), &log), 0) << log;
+  EXPECT_NE(readPointCloud((tmp / "cov.ply").string()).layout().find("cov_xx"), nullptr);
+  ASSERT_EQ(hpds(run + q(tmp / "none.ply") + " --no-normals", &log), 0) << log;
+  EXPECT_NE(log.find("--no-normals also turns off normals.covariances: true of --config"), std::string::npos) << log;
+  const PointLayout none = readPointCloud((tmp / "none.ply").string()).layout();
+  EXPECT_EQ(none.find("normal_x"), nullptr);
+  EXPECT_EQ(none.find("cov_xx"), nullptr);
+  // Where the config itself contradicts (no flag to override it), the error says what to set.
+  writeText(tmp / "bad.yaml", "normals: {enabled: false, covariances: true}\n");
+  EXPECT_EQ(hpds("sample " + q(tmp / "f.pcd") + " --config " + q(tmp / "bad.yaml") + " -o " + q(tmp / "bad.ply"), &log),
+            1)
+      << log;
+  EXPECT_NE(log.find("set normals.enabled: true, or normals.covariances: false"), std::string::npos) << log;
+}
+
 TEST(HostileCli, MissingXyzAndUnrepresentableFieldsAreRefused) {
   const auto tmp = test::scratchDir("hostile_fields");
   writeText(tmp / "no_z.pcd",

@@ -3,6 +3,7 @@
 #include <charconv>
 #include <cmath>
 #include <cstdlib>
+#include <iostream>
 #include <sstream>
 
 #include "hpds/config/ConfigYaml.hpp"
@@ -121,6 +122,13 @@ HpdsConfig resolveConfig(const SamplingOptions &o) {
   if (normals) c.normals.enabled = *normals;
   if (o.covariances && normals && !*normals)
     throw std::invalid_argument("--covariances needs normals: it cannot go with --no-normals");
+  // Flags override the config: --no-normals asks for no normals, and a covariance is built from one, so the config's
+  // covariances go too rather than the run failing on a key the user did not touch on this command line.
+  if (normals && !*normals && c.normals.covariances && !o.covariances) {
+    c.normals.covariances = false;
+    std::cerr << "hpds: warning: --no-normals also turns off normals.covariances: true of --config '" << o.config_file
+              << "' (a covariance is built from the sample's normal); the output has neither\n";
+  }
   if (o.covariances) c.normals.enabled = c.normals.covariances = true;
   if (o.float64_xyz) c.output.float64_xyz = true;
   if (o.order) c.order.type = parseInsertionOrder(*o.order, "--order");

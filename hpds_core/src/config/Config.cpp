@@ -153,7 +153,8 @@ void validateConfig(const HpdsConfig &c) {
   if (c.normals.max_growth < 1.0 || c.normals.max_growth > 1024.0)
     fail("normals.max_growth", "must be in 1..1024 (1 = off), got " + std::to_string(c.normals.max_growth));
   if (c.normals.covariances && !c.normals.enabled)
-    fail("normals.covariances", "needs normals.enabled (a covariance is built from the sample's normal)");
+    fail("normals.covariances", "needs normals.enabled (a covariance is built from the sample's normal): set "
+                                "normals.enabled: true, or normals.covariances: false");
   requireFinite("normals.covariance_epsilon", c.normals.covariance_epsilon);
   // Below 1e-4 the float32 output would not resolve the normal's variance against the in-plane 1.
   if (c.normals.covariance_epsilon < 1e-4 || c.normals.covariance_epsilon > 1.0)
