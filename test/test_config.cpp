@@ -29,7 +29,7 @@ std::size_t expectSameConfig(const HpdsConfig &a, const HpdsConfig &b) {
   [[maybe_unused]] const auto &[mode, hierarchy, order, output, normals, map, input, threads] = a;
   [[maybe_unused]] const auto &[cell_size, max_depth] = a.hierarchy;
   [[maybe_unused]] const auto &[type, seed, feature_radius] = a.order;
-  [[maybe_unused]] const auto &[level, spacing, float64_xyz] = a.output;
+  [[maybe_unused]] const auto &[level, spacing, float64_xyz, float32_xyz] = a.output;
   [[maybe_unused]] const auto &[enabled, radius, k, min_neighbors, neighborhood_level_offset, max_growth, covariances,
                                  covariance_epsilon, covariance_line_ratio, covariance_k] = a.normals;
   [[maybe_unused]] const auto &[evict_distance, max_samples, keep_depth] = a.map;
@@ -49,6 +49,7 @@ std::size_t expectSameConfig(const HpdsConfig &a, const HpdsConfig &b) {
   same("output.level", a.output.level, b.output.level);
   same("output.spacing", a.output.spacing, b.output.spacing);
   same("output.float64_xyz", a.output.float64_xyz, b.output.float64_xyz);
+  same("output.float32_xyz", a.output.float32_xyz, b.output.float32_xyz);
   same("normals.enabled", a.normals.enabled, b.normals.enabled);
   same("normals.radius", a.normals.radius, b.normals.radius);
   same("normals.k", a.normals.k, b.normals.k);
@@ -99,6 +100,7 @@ HpdsConfig nonDefaultConfig() {
   c.output.level = 5;
   c.output.spacing = 0.3;
   c.output.float64_xyz = true;
+  c.output.float32_xyz = true;
   c.normals.enabled = false;
   c.normals.radius = 1.0 / 3.0;
   c.normals.k = 20;
@@ -119,10 +121,12 @@ HpdsConfig nonDefaultConfig() {
   return c;
 }
 
-// nonDefaultConfig() as a valid config: normals.covariances needs normals on, the default, so this one key keeps it.
+// nonDefaultConfig() as a valid config: normals.covariances needs normals on, the default, so this one key keeps it;
+// and x y z take one type, so output.float32_xyz stays off beside float64_xyz.
 HpdsConfig validNonDefaultConfig() {
   HpdsConfig c = nonDefaultConfig();
   c.normals.enabled = true;
+  c.output.float32_xyz = false;
   return c;
 }
 
@@ -284,6 +288,7 @@ TEST(ConfigYaml, InvalidDocumentsNameTheKey) {
       {"normals: {max_growth: 0.5}", "normals.max_growth", "1..1024"},
       {"normals: {k: 4}", "normals.k", "min_neighbors"},
       {"normals: {enabled: false, covariances: true}", "normals.covariances", "normals.enabled"},
+      {"output: {float64_xyz: true, float32_xyz: true}", "output.float32_xyz", "output.float64_xyz"},
       {"normals: {covariance_epsilon: 0}", "normals.covariance_epsilon", "1e-4..1"},
       {"normals: {covariance_epsilon: 1.5}", "normals.covariance_epsilon", "1e-4..1"},
       {"normals: {covariance_epsilon: .nan}", "normals.covariance_epsilon", "finite"},

@@ -75,15 +75,17 @@ TEST(OutputCloud, LayoutIsAlignedForPackedInputs) {
     for (const bool normals : {false, true})
       for (const bool frame : {false, true})
         for (const bool covariances : {false, true})
-        for (const bool float64_xyz : {false, true}) {
+        for (const XyzType xyz : {XyzType::AsInput, XyzType::Float32, XyzType::Float64}) {
           if (covariances && !normals) continue;  // covariances come with normals
           SCOPED_TRACE("trial " + std::to_string(trial) + (normals ? " normals" : "") + (frame ? " frame" : "") +
-                       (covariances ? " covariances" : "") + (float64_xyz ? " float64_xyz" : ""));
-          const PointLayout out = outputLayout(in, normals, frame, covariances, float64_xyz);
+                       (covariances ? " covariances" : "") + " xyz " + std::to_string(static_cast<int>(xyz)));
+          const PointLayout out = outputLayout(in, normals, frame, covariances, xyz);
           ASSERT_NO_THROW(out.validate());
-          // x y z float64 when asked for or when the input's are: never fewer digits than the input had.
+          // By default x y z keep the input's digits (float64 when its are); a forced type is what was asked for,
+          // at the same aligned offsets.
           const bool input_doubles = in.find("x")->type == FieldType::Float64;
-          expectAligned(out, float64_xyz || input_doubles ? FieldType::Float64 : FieldType::Float32);
+          const bool doubles = xyz == XyzType::Float64 || (xyz == XyzType::AsInput && input_doubles);
+          expectAligned(out, doubles ? FieldType::Float64 : FieldType::Float32);
           // Every field is there with its type and count: ours, and each input field not replaced by one of ours.
           std::set<std::string> expected = {"x", "y", "z", "level"};
           if (normals) expected.insert({"normal_x", "normal_y", "normal_z", "curvature"});

@@ -96,6 +96,8 @@ void addSamplingOptions(CLI::App &app, SamplingOptions &o) {
                "also write GICP covariances cov_xx..cov_zz (normals.covariances; implies --normals)");
   app.add_flag("--float64-xyz", o.float64_xyz,
                "write x y z as float64 (output.float64_xyz): for georeferenced coordinates");
+  app.add_flag("--float32-xyz", o.float32_xyz,
+               "write x y z as float32 even from float64 input (output.float32_xyz): for float32-only readers");
   app.add_option("--order", o.order, "random | input | sphericity | surface_variation (order.type)");
   app.add_option("--seed", o.seed, "seed of the random order (order.seed)")->check(unsigned64());
   app.add_option("--mode", o.mode, "scan | map (mode)");
@@ -130,7 +132,13 @@ HpdsConfig resolveConfig(const SamplingOptions &o) {
               << "' (a covariance is built from the sample's normal); the output has neither\n";
   }
   if (o.covariances) c.normals.enabled = c.normals.covariances = true;
-  if (o.float64_xyz) c.output.float64_xyz = true;
+  if (o.float64_xyz && o.float32_xyz)
+    throw CLI::ValidationError("--float64-xyz and --float32-xyz contradict each other: give one of them");
+  // A flag overrides the config's choice of type, whichever of the two keys the config set.
+  if (o.float64_xyz || o.float32_xyz) {
+    c.output.float64_xyz = o.float64_xyz;
+    c.output.float32_xyz = o.float32_xyz;
+  }
   if (o.order) c.order.type = parseInsertionOrder(*o.order, "--order");
   if (o.seed) c.order.seed = *o.seed;
   if (o.mode) c.mode = parseMode(*o.mode, "--mode");

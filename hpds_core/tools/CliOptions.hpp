@@ -20,6 +20,7 @@ struct SamplingOptions {
   std::vector<std::string> normals_flags;  // each --normals / --no-normals given, as CLI11 records it, in order
   bool covariances = false;
   bool float64_xyz = false;
+  bool float32_xyz = false;
   std::optional<std::string> order;
   std::optional<std::uint64_t> seed;
   std::optional<std::string> mode;
@@ -39,7 +40,7 @@ struct SamplingOptions {
 [[nodiscard]] CLI::Validator fileNamePrefix();
 
 /// Registers --config, --cell-size, --max-depth, --level, --spacing, --normals/--no-normals, --covariances,
-/// --float64-xyz, --order, --seed, --mode, --threads.
+/// --float64-xyz, --float32-xyz, --order, --seed, --mode, --threads.
 void addSamplingOptions(CLI::App &app, SamplingOptions &options);
 
 /// Defaults, then --config FILE, then the flags; throws std::invalid_argument naming the key on a bad value, and

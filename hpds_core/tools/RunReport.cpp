@@ -13,8 +13,14 @@
 
 namespace hpds::cli {
 
-std::string roundingWarning(const PointBuffer &cloud, double output_radius) {
-  const std::string w = positionRoundingWarning(positionRounding(cloud), output_radius, "output.float64_xyz: true (--float64-xyz)");
+std::string roundingWarning(const PointBuffer &cloud, double output_radius, const OutputConfig &output,
+                            double input_rounding) {
+  // The two keys cannot both be set: advising float64 alone would end in a config error.
+  const std::string key = output.float32_xyz
+                              ? "output.float64_xyz: true instead of output.float32_xyz (--float64-xyz instead of "
+                                "--float32-xyz)"
+                              : "output.float64_xyz: true (--float64-xyz)";
+  const std::string w = positionRoundingWarning(positionRounding(cloud), output_radius, key, input_rounding);
   return w.empty() ? w : "hpds: warning: " + w;
 }
 

@@ -45,8 +45,11 @@ struct RunReport {
 [[nodiscard]] std::uint64_t peakMemoryBytes();
 
 /// A warning line (empty when there is nothing to say) when `cloud`'s float32 x y z round its positions by more than
-/// 1 % of the output radius: georeferenced coordinates, which want output.float64_xyz.
-[[nodiscard]] std::string roundingWarning(const PointBuffer &cloud, double output_radius);
+/// 1 % of the output radius: georeferenced coordinates, which want output.float64_xyz (`output` says whether the
+/// run asked for float32), unless the inputs' own float32 x y z (`input_rounding`, positionRounding of the inputs,
+/// 0 when unknown) already lost those digits: see positionRoundingWarning.
+[[nodiscard]] std::string roundingWarning(const PointBuffer &cloud, double output_radius, const OutputConfig &output,
+                                          double input_rounding = 0.0);
 
 /// A warning line (empty when nothing was evicted) for a map-mode run whose map lost samples to map.evict_distance
 /// or map.max_samples: the map it writes is then only what was left around the last frame, which a run that wanted

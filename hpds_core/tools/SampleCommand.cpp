@@ -1,4 +1,5 @@
 // `hpds sample INPUT... -o OUT.ply`: files in, hierarchy, PLY out.
+#include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <cmath>
@@ -102,11 +103,18 @@ int runSample(const SampleArgs &a) {
   std::map<std::string, std::string> not_carried;
   std::mutex not_carried_mutex;
   std::atomic<bool> any_viewpoint{false};  // a PCD's VIEWPOINT placed a sensor where no pose did
+  // The inputs' own float32 rounding: when it is what rounds the output, float64 output would not help.
+  double input_rounding = 0.0;
+  std::mutex input_rounding_mutex;
   auto runFrame = [&](Pipeline &p, std::size_t i, StageSeconds &seconds, PointBuffer *cloud) {
     auto t0 = std::chrono::steady_clock::now();
     Frame frame;
     frame.points = readPointCloud(a.inputs[i], &frame.viewpoint);
     if (!frame.viewpoint.isZero(0.0)) any_viewpoint = true;
+    if (const double rounding = positionRounding(frame.points); rounding > 0.0) {
+      const std::lock_guard<std::mutex> lock(input_rounding_mutex);
+      input_rounding = std::max(input_rounding, rounding);
+    }
     for (const std::string &name : fieldsNotCarried(frame.points.layout(), config.normals.enabled,
                                                     config.normals.enabled && config.normals.covariances)) {
       const std::lock_guard<std::mutex> lock(not_carried_mutex);
@@ -207,7 +215,7 @@ int runSample(const SampleArgs &a) {
   std::cout << "wrote " << output.size() << " samples (levels 0.." << report.output_level << ") to " << a.output;
   if (config.normals.enabled) std::cout << ", " << report.invalid_normals << " without a valid normal";
   std::cout << "\n";
-  if (const std::string w = roundingWarning(output, report.output_radius); !w.empty()) std::cerr << w << "\n";
+  if (const std::string w = roundingWarning(output, report.output_radius, config.output, input_rounding); !w.empty()) std::cerr << w << "\n";
   if (!a.save_map.empty())
     if (const std::string w = shallowSaveWarning(pipeline, loaded_deepest, loaded_frames); !w.empty())
       std::cerr << "hpds: warning: " << w << "\n";

@@ -47,8 +47,11 @@ def parse_args(argv):
                    help="estimate PCA normals and curvature, or not (normals.enabled; default: the config's, on)")
     s.add_argument("--covariances", action="store_true",
                    help="also write GICP covariances cov_xx..cov_zz (normals.covariances; implies --normals)")
-    s.add_argument("--float64-xyz", action="store_true",
-                   help="write x y z as float64 (output.float64_xyz): for georeferenced coordinates")
+    xyz = s.add_mutually_exclusive_group()
+    xyz.add_argument("--float64-xyz", action="store_true",
+                     help="write x y z as float64 (output.float64_xyz): for georeferenced coordinates")
+    xyz.add_argument("--float32-xyz", action="store_true",
+                     help="write x y z as float32 even from float64 input (output.float32_xyz)")
     s.add_argument("--order", help="random | input | sphericity | surface_variation (order.type)")
     s.add_argument("--seed", type=int, help="seed of the random order (order.seed)")
     s.add_argument("--mode", help="map (a tiled build is a map build; scan is refused)")
@@ -84,8 +87,10 @@ def resolve_config(a):
     put("normals", "enabled", True if a.covariances else a.normals)
     if a.covariances:
         put("normals", "covariances", True)
-    if a.float64_xyz:
-        put("output", "float64_xyz", True)
+    # A flag overrides the config's choice of type, whichever of the two keys the config set.
+    if a.float64_xyz or a.float32_xyz:
+        put("output", "float64_xyz", a.float64_xyz)
+        put("output", "float32_xyz", a.float32_xyz)
     put("order", "type", a.order)
     put("order", "seed", a.seed)
     if a.threads is not None:

@@ -203,8 +203,9 @@ void bindTiling(py::module_ &m) {
       py::arg("borders"), py::arg("ply_path"),
       "Output task: writes tile (i, j)'s PLY (normals read across its neighbours' border files).");
   m.def("rounding_warning", &positionRoundingWarning, py::arg("rounding"), py::arg("output_radius"), py::arg("key"),
-        "The warning `hpds sample` prints when float32 x y z round positions by more than 1 % of the output radius "
-        "(empty below that).");
+        py::arg("input_rounding") = 0.0,
+        "The warning `hpds sample` prints when float32 x y z round positions by more than 1 % of the output radius, "
+        "or the inputs' own float32 x y z did (`input_rounding`) (empty below that).");
 }
 
 }  // namespace hpds::python

@@ -139,6 +139,9 @@ void validateConfig(const HpdsConfig &c) {
         !(cellSizeForRadius(c.output.spacing, derivedOutputLevel(c.output.spacing, c.hierarchy.max_depth)) <= kMaxCellSize))
       fail("output.spacing", "is too large: the derived hierarchy.cell_size would exceed 1e6 m");
   }
+  if (c.output.float32_xyz && c.output.float64_xyz)
+    fail("output.float32_xyz", "cannot go with output.float64_xyz: true (x y z are written as one type); set one of "
+                               "them");
   requireNonNegative("normals.radius", c.normals.radius);
   if (c.normals.k < 0) fail("normals.k", "must be >= 0, got " + std::to_string(c.normals.k));
   if (c.normals.min_neighbors < 3)

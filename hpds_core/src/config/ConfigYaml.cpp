@@ -62,6 +62,7 @@ constexpr Key kKeys[] = {
     HPDS_SECTION_KEY(output, level),
     HPDS_SECTION_KEY(output, spacing),
     HPDS_SECTION_KEY(output, float64_xyz),
+    HPDS_SECTION_KEY(output, float32_xyz),
     HPDS_SECTION_KEY(normals, enabled),
     HPDS_SECTION_KEY(normals, radius),
     HPDS_SECTION_KEY(normals, k),
@@ -90,13 +91,13 @@ constexpr Key kKeys[] = {
   [[maybe_unused]] auto &[mode, hierarchy, order, output, normals, map, input, threads] = c;
   [[maybe_unused]] auto &[cell_size, max_depth] = c.hierarchy;
   [[maybe_unused]] auto &[type, seed, feature_radius] = c.order;
-  [[maybe_unused]] auto &[level, spacing, float64_xyz] = c.output;
+  [[maybe_unused]] auto &[level, spacing, float64_xyz, float32_xyz] = c.output;
   [[maybe_unused]] auto &[enabled, radius, k, min_neighbors, neighborhood_level_offset, max_growth, covariances,
                            covariance_epsilon, covariance_line_ratio, covariance_k] = c.normals;
   [[maybe_unused]] auto &[evict_distance, max_samples, keep_depth] = c.map;
   [[maybe_unused]] auto &[skip_zero_points, min_range, max_range] = c.input;
 }
-static_assert(std::size(kKeys) == 2 + 2 + 3 + 3 + 10 + 3 + 3,
+static_assert(std::size(kKeys) == 2 + 2 + 3 + 4 + 10 + 3 + 3,
               "one row per leaf bound in everyMemberHasARow: the top-level scalars plus every section member");
 
 const Key *findKey(std::string_view section, std::string_view name) {

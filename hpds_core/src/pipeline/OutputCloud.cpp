@@ -31,8 +31,13 @@ std::vector<std::string> fieldsNotCarried(const PointLayout &input, bool with_no
   return names;
 }
 
+XyzType outputXyzType(const OutputConfig &output) {
+  if (output.float64_xyz) return XyzType::Float64;
+  return output.float32_xyz ? XyzType::Float32 : XyzType::AsInput;
+}
+
 PointLayout outputLayout(const PointLayout &input, bool with_normals, bool with_frame, bool with_covariances,
-                         bool float64_xyz) {
+                         XyzType xyz) {
   // x y z first, then the other fields by decreasing element size (stable: listed order within a size), each at the
   // next offset that is a multiple of its element size: readers may then load any field as an aligned value, and
   // the size order leaves at most one gap (before the first 8-byte field).
@@ -66,7 +71,8 @@ PointLayout outputLayout(const PointLayout &input, bool with_normals, bool with_
     const PointField *f = input.find(axis);
     input_float64 &= f != nullptr && f->type == FieldType::Float64;
   }
-  const FieldType xyz_type = float64_xyz || input_float64 ? FieldType::Float64 : FieldType::Float32;
+  const bool doubles = xyz == XyzType::Float64 || (xyz == XyzType::AsInput && input_float64);
+  const FieldType xyz_type = doubles ? FieldType::Float64 : FieldType::Float32;
   for (const char *axis : {"x", "y", "z"}) place(PointField{axis, 0, xyz_type, 1});
   for (const PointField &f : rest) place(f);
   out.point_step = (out.point_step + alignment - 1) / alignment * alignment;
@@ -75,12 +81,12 @@ PointLayout outputLayout(const PointLayout &input, bool with_normals, bool with_
 
 PointBuffer buildOutputCloud(const Hierarchy &h, const std::vector<SampleId> &ids,
                              const std::vector<SampleNormal> *normals, bool with_frame,
-                             const std::vector<SampleCovariance> *covariances, bool float64_xyz) {
+                             const std::vector<SampleCovariance> *covariances, XyzType xyz) {
   if (normals && normals->size() != ids.size()) throw std::invalid_argument("buildOutputCloud: one normal per id");
   if (covariances && covariances->size() != ids.size())
     throw std::invalid_argument("buildOutputCloud: one covariance per id");
   const PointLayout &in = h.recordLayout();
-  PointBuffer cloud(outputLayout(in, normals != nullptr, with_frame, covariances != nullptr, float64_xyz),
+  PointBuffer cloud(outputLayout(in, normals != nullptr, with_frame, covariances != nullptr, xyz),
                     ids.size());
   const PointLayout &out = cloud.layout();
   // Field pairs resolved once, so the per-sample loop only copies bytes.
@@ -143,9 +149,20 @@ double positionRounding(const PointBuffer &cloud) {
   return std::ldexp(largest, -24);
 }
 
-std::string positionRoundingWarning(double rounding, double output_radius, const std::string &key) {
-  if (!(rounding > 0.01 * output_radius)) return {};
+std::string positionRoundingWarning(double rounding, double output_radius, const std::string &key,
+                                    double input_rounding) {
   std::ostringstream out;
+  if (input_rounding > 0.01 * output_radius) {
+    // The samples are the input's positions as written, so the sampling itself holds; what is lost is the digits
+    // the input never had, which advising float64 output would send the user after in vain.
+    out << "the input's own float32 x y z round positions by up to " << input_rounding << " m (coordinates up to "
+        << std::ldexp(input_rounding, 24) << " m), more than 1 % of the output radius " << output_radius
+        << " m: the input holds no finer positions, and float64 output cannot restore them; write the input in a "
+           "local frame (coordinates minus an origin near the data, kept aside), or as float64 from a source that "
+           "has the digits";
+    return out.str();
+  }
+  if (!(rounding > 0.01 * output_radius)) return {};
   out << "the output's float32 x y z round positions by up to " << rounding << " m (coordinates up to "
       << std::ldexp(rounding, 24) << " m), more than 1 % of the output radius " << output_radius
       << " m: samples may come out closer than it; set " << key << " (or work in a local frame)";

@@ -507,9 +507,9 @@ std::vector<SampleNormal> Pipeline::keptNormals(const std::vector<SampleId> &ids
 
 PointBuffer Pipeline::makeCloud(const std::vector<SampleId> &ids, bool with_frame_field, double *seconds_normals) const {
   requireLiveIds(ids, "makeCloud");
-  const bool float64_xyz = config_.output.float64_xyz;
+  const XyzType xyz = outputXyzType(config_.output);
   if (!config_.normals.enabled)
-    return buildOutputCloud(hierarchy_, ids, nullptr, with_frame_field, nullptr, float64_xyz);
+    return buildOutputCloud(hierarchy_, ids, nullptr, with_frame_field, nullptr, xyz);
   const auto t0 = std::chrono::steady_clock::now();
   const bool with_covariances = config_.normals.covariances;
   std::vector<LocalPca> neighbourhoods;
@@ -518,8 +518,7 @@ PointBuffer Pipeline::makeCloud(const std::vector<SampleId> &ids, bool with_fram
   if (with_covariances)
     covariances = estimateCovariances(hierarchy_, ids, output_level_, normals, neighbourhoods, config_);
   if (seconds_normals) *seconds_normals = secondsSince(t0);
-  return buildOutputCloud(hierarchy_, ids, &normals, with_frame_field, with_covariances ? &covariances : nullptr,
-                          float64_xyz);
+  return buildOutputCloud(hierarchy_, ids, &normals, with_frame_field, with_covariances ? &covariances : nullptr, xyz);
 }
 
 }  // namespace hpds

@@ -179,7 +179,7 @@ TileFinishStats finishTile(const HpdsConfig &given, const TileGrid &grid, const 
   }
   const PointBuffer cloud = buildOutputCloud(h, ids, config.normals.enabled ? &normals : nullptr, false,
                                              config.normals.covariances ? &covariances : nullptr,
-                                             config.output.float64_xyz);
+                                             outputXyzType(config.output));
 
   const double nan = std::numeric_limits<double>::quiet_NaN();
   stats.bounds = {nan, nan, nan, nan, nan, nan};

@@ -385,8 +385,11 @@ void HpdsServer::handle(const sensor_msgs::PointCloud2::ConstPtr &msg, std::size
                                                                    "the spacing or hierarchy.cell_size");
         for (const std::string &name : frame.fields_not_carried) warnFieldNotCarriedOnce(name);
         const double radius = processor.pipeline().outputResolution().radius;
-        const std::string rounding =
-            hpds::positionRoundingWarning(frame.position_rounding, radius, "the parameter output/float64_xyz true");
+        // The two parameters cannot both be true: advising float64 alone would stop the node at its next start.
+        const std::string rounding = hpds::positionRoundingWarning(
+            frame.position_rounding, radius,
+            config_.hpds.output.float32_xyz ? "the parameter output/float64_xyz true instead of output/float32_xyz true"
+                                            : "the parameter output/float64_xyz true");
         if (!rounding.empty()) ROS_WARN_STREAM_ONCE_NAMED("hpds", "hpds: " << rounding);
         turns.waitToPublish();
         publish(frame);

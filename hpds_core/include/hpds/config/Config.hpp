@@ -43,6 +43,7 @@ struct OutputConfig {
   int level = -1;        ///< output level D (levels 0..D are output); -1 = derive from `spacing`, else max_depth
   double spacing = 0.1;  ///< [m] with level = -1: the output's Poisson radius (see resolveOutput); 0 = unused
   bool float64_xyz = false;  ///< output x y z as float64 (always so when the input's x y z are float64)
+  bool float32_xyz = false;  ///< output x y z as float32 even when the input's are float64; not with float64_xyz
 };
 
 struct NormalConfig {

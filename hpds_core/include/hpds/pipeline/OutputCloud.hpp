@@ -11,6 +11,7 @@
 #include <string>
 #include <vector>
 
+#include "hpds/config/Config.hpp"
 #include "hpds/sampling/Hierarchy.hpp"
 #include "hpds/normals/NormalEstimator.hpp"
 #include "hpds/normals/SampleCovariance.hpp"
@@ -25,17 +26,24 @@ namespace hpds {
 [[nodiscard]] std::vector<std::string> fieldsNotCarried(const PointLayout &input, bool with_normals,
                                                         bool with_covariances);
 
-/// x y z are float32, or float64 when `float64_xyz` or when the input's x, y and z are all float64 (a float32 keeps
-/// about 7 digits: 0.5 m at 5e6 m, so georeferenced coordinates need float64).
+/// The type of the output's x y z: AsInput is float64 when the input's x, y and z are all float64, else float32; the
+/// others force one (a float32 keeps about 7 digits: 0.5 m at 5e6 m, so georeferenced coordinates need float64;
+/// PCL's point types need float32).
+enum class XyzType { AsInput, Float32, Float64 };
+
+/// What output.float64_xyz and output.float32_xyz ask for (validateConfig refuses both).
+[[nodiscard]] XyzType outputXyzType(const OutputConfig &output);
+
+/// x y z as `xyz` says, at offsets 0, 4, 8 (float32) or 0, 8, 16 (float64).
 [[nodiscard]] PointLayout outputLayout(const PointLayout &input, bool with_normals, bool with_frame,
-                                       bool with_covariances = false, bool float64_xyz = false);
+                                       bool with_covariances = false, XyzType xyz = XyzType::AsInput);
 
 /// `normals`, `covariances`: null, or one entry per id (std::invalid_argument otherwise). Samples are written in the
 /// order of `ids`; x y z as outputLayout says.
 [[nodiscard]] PointBuffer buildOutputCloud(const Hierarchy &hierarchy, const std::vector<SampleId> &ids,
                                            const std::vector<SampleNormal> *normals, bool with_frame,
                                            const std::vector<SampleCovariance> *covariances = nullptr,
-                                           bool float64_xyz = false);
+                                           XyzType xyz = XyzType::AsInput);
 
 /// [m] How far `cloud`'s x y z may lie from the positions they were written from: half a float32 unit in the last
 /// place at its largest |coordinate| (2^-24 of it), 0 when they are float64 (or the cloud is empty). Programs
@@ -44,7 +52,11 @@ namespace hpds {
 
 /// The sentence the CLI, the node and the tiled build print when float32 x y z round positions (`rounding`,
 /// positionRounding) by more than 1 % of the output radius: samples may then come out closer than it. Empty below
-/// that. `key` is how the reader sets output.float64_xyz there ("output.float64_xyz: true", a flag, a parameter).
-[[nodiscard]] std::string positionRoundingWarning(double rounding, double output_radius, const std::string &key);
+/// that. `key` is what the reader sets there to get float64 x y z ("output.float64_xyz: true", a flag, a
+/// parameter). `input_rounding` is the inputs' own positionRounding (0 when unknown or float64): when it is over
+/// 1 % of the radius (whatever the output's type), the input itself holds no finer positions, so the sentence says
+/// that float64 output cannot restore them and suggests a local frame instead of `key`.
+[[nodiscard]] std::string positionRoundingWarning(double rounding, double output_radius, const std::string &key,
+                                                  double input_rounding = 0.0);
 
 }  // namespace hpds
