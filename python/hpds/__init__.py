@@ -32,14 +32,16 @@ def _config_source(config):
     return to_yaml(config), ""
 
 
-def downsample(points, config=None):
+def downsample(points, config=None, viewpoint=None):
     """Downsamples one point cloud to an additive Poisson-disk hierarchy.
 
     points: (N, 3) NumPy array of float32 or float64 (float64 is rounded to float32, as the C++ API stores points),
-        in the sensor frame (metres; normals face the origin). NaN/Inf points, exact (0,0,0) no-returns and points
-        outside input.min_range/max_range are skipped.
+        in the sensor frame (metres; normals face the origin, or `viewpoint`). NaN/Inf points, exact (0,0,0)
+        no-returns and points outside input.min_range/max_range are skipped.
     config: None (the defaults), a dict in config/hpds.yaml's layout (missing keys keep their defaults), or the path
         of a YAML file in that layout.
+    viewpoint: None (the origin) or the sensor position (x, y, z) in the points' frame, which normals face: a PCD's
+        VIEWPOINT, from read_points(path, return_viewpoint=True). Must be finite (ValueError otherwise).
     Returns a dict of NumPy arrays, one entry per sample: "index" (uint32, position in `points`), "level" (uint8,
         0..D of the output level D) and, with normals.enabled, "normal" ((n, 3) float32, facing the sensor; NaN where
         no normal could be estimated) and "curvature" (float32); with normals.covariances also "covariance"
@@ -47,7 +49,13 @@ def downsample(points, config=None):
     Raises ValueError naming the key for an invalid config, TypeError for a points array of another type.
     """
     text, path = _config_source(config)
-    return _hpds.downsample(points, text, path)
+    if viewpoint is None:
+        viewpoint = (0.0, 0.0, 0.0)
+    try:
+        viewpoint = [float(v) for v in viewpoint]
+    except (TypeError, ValueError):
+        raise ValueError("viewpoint: expected 3 numbers (x, y, z), got %r" % (viewpoint,)) from None
+    return _hpds.downsample(points, text, path, viewpoint)
 
 
 def load_config(config=None):
@@ -56,12 +64,13 @@ def load_config(config=None):
     return _hpds.config_dict(text, path)
 
 
-def read_points(path):
+def read_points(path, return_viewpoint=False):
     """x, y, z of a .pcd, .ply (built with PCL) or KITTI .bin file as an (N, 3) float64 array.
 
-    A PCD's VIEWPOINT is not returned: downsample() orients normals toward the origin of the points it is given, so
-    for a cloud saved in another frame subtract the sensor position first (`hpds sample` reads VIEWPOINT itself)."""
-    return _hpds.read_points(os.fspath(path))
+    With return_viewpoint, a tuple (points, viewpoint): the sensor position a PCD's VIEWPOINT gives ((3,) float64;
+    zeros for other formats or without one), which downsample(points, config, viewpoint) turns the normals toward,
+    as `hpds sample` does."""
+    return _hpds.read_points(os.fspath(path), bool(return_viewpoint))
 
 
 def read_poses(path):

@@ -1,5 +1,6 @@
 // hpds.downsample: the one-call API (hpds/hpds.hpp) on a NumPy array.
 #include <pybind11/numpy.h>
+#include <pybind11/stl.h>
 
 #include <cstring>
 #include <string>
@@ -53,13 +54,16 @@ void bindDownsample(py::module_ &m) {
   static_assert(sizeof(Eigen::Vector3f) == 3 * sizeof(float), "Vector3f is three packed floats");
   m.def(
       "downsample",
-      [](const py::handle &points_object, const std::string &yaml_text, const std::string &path) {
+      [](const py::handle &points_object, const std::string &yaml_text, const std::string &path,
+         const std::vector<double> &viewpoint) {
         const HpdsConfig config = configFrom(yaml_text, path);
         const std::vector<Eigen::Vector3f> points = pointsFrom(points_object);
+        if (viewpoint.size() != 3)
+          throw py::value_error("viewpoint: expected 3 coordinates (x, y, z), got " + std::to_string(viewpoint.size()));
         Samples s;
         {
           py::gil_scoped_release unlocked;
-          s = downsample(points, config);
+          s = downsample(points, config, Eigen::Vector3d(viewpoint[0], viewpoint[1], viewpoint[2]));
         }
         py::dict out;
         out["index"] = arrayOf(s.index);
@@ -79,9 +83,10 @@ void bindDownsample(py::module_ &m) {
         }
         return out;
       },
-      py::arg("points"), py::arg("config_yaml"), py::arg("config_path"),
+      py::arg("points"), py::arg("config_yaml"), py::arg("config_path"), py::arg("viewpoint"),
       "Samples of `points` ((N, 3) float32/float64) with the config (file `config_path` if not empty, else "
-      "`config_yaml`): dict of index, level and, with normals, normal and curvature, with covariances covariance.");
+      "`config_yaml`) and normals facing `viewpoint` (x, y, z in the points' frame): dict of index, level and, with "
+      "normals, normal and curvature, with covariances covariance.");
 }
 
 }  // namespace hpds::python

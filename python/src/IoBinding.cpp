@@ -32,11 +32,12 @@ PointBuffer readCloudFile(const std::string &path, Eigen::Vector3d *viewpoint) {
 void bindIo(py::module_ &m) {
   m.def(
       "read_points",
-      [](const std::string &path) {
+      [](const std::string &path, bool return_viewpoint) -> py::object {
         PointBuffer cloud;
+        Eigen::Vector3d viewpoint = Eigen::Vector3d::Zero();
         {
           py::gil_scoped_release unlocked;
-          cloud = readCloudFile(path);
+          cloud = readCloudFile(path, &viewpoint);
         }
         const PointLayout &l = cloud.layout();
         const PointField *f[3] = {l.find("x"), l.find("y"), l.find("z")};
@@ -45,9 +46,14 @@ void bindIo(py::module_ &m) {
         double *out = xyz.mutable_data();
         for (std::size_t i = 0; i < cloud.size(); ++i)
           for (int a = 0; a < 3; ++a) out[3 * i + a] = readAsDouble(cloud.record(i), *f[a]);
-        return xyz;
+        if (!return_viewpoint) return std::move(xyz);
+        py::array_t<double> vp(3);
+        for (int a = 0; a < 3; ++a) vp.mutable_data()[a] = viewpoint[a];
+        return py::make_tuple(xyz, vp);
       },
-      py::arg("path"), "x, y, z of every point of a .pcd/.ply/.bin file as an (N, 3) float64 array (exact).");
+      py::arg("path"), py::arg("return_viewpoint") = false,
+      "x, y, z of every point of a .pcd/.ply/.bin file as an (N, 3) float64 array (exact); with return_viewpoint "
+      "also the sensor position (PCD VIEWPOINT; zeros without one) as a (3,) float64 array.");
   m.def(
       "read_poses",
       [](const std::string &path) {

@@ -232,5 +232,57 @@ class Arguments(support.ScratchCase):
         self.assertEqual(hpds.load_config(c), c)
 
 
+class Viewpoint(support.ScratchCase):
+    """A PCD's VIEWPOINT is where its sensor was: normals face it in hpds sample, and in Python when passed on."""
+
+    def write_ground_pcd(self, viewpoint):
+        rng = np.random.default_rng(11)
+        n = 6000
+        xyz = np.stack([rng.uniform(-6, 6, n), rng.uniform(-6, 6, n), 0.01 * rng.standard_normal(n) - 1.5], axis=1)
+        xyz = xyz.astype(np.float32)
+        path = self.path("ground.pcd")
+        with open(path, "w") as f:
+            f.write("VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH %d\nHEIGHT 1\n" % n)
+            f.write("VIEWPOINT %r %r %r 1 0 0 0\nPOINTS %d\nDATA ascii\n" % (*viewpoint, n))
+            for p in xyz:
+                f.write("%r %r %r\n" % tuple(float(v) for v in p))
+        return path, xyz
+
+    def test_read_points_returns_the_viewpoint(self):
+        path, xyz = self.write_ground_pcd((1.0, -2.0, -10.0))
+        points, viewpoint = hpds.read_points(path, return_viewpoint=True)
+        np.testing.assert_array_equal(viewpoint, [1.0, -2.0, -10.0])
+        np.testing.assert_array_equal(points, xyz.astype(np.float64))
+        # The plain call is unchanged: the points alone.
+        np.testing.assert_array_equal(hpds.read_points(path), points)
+        support.write_kitti_bin(self.path("ground.bin"), xyz)
+        np.testing.assert_array_equal(hpds.read_points(self.path("ground.bin"), return_viewpoint=True)[1], [0, 0, 0])
+
+    def test_normals_face_the_viewpoint_as_in_hpds_sample(self):
+        support.require_tools(self)
+        config = {"output": {"spacing": 0.2}, "normals": {"enabled": True}}
+        path, _ = self.write_ground_pcd((0.0, 0.0, -10.0))  # the ground seen from below: normals point down
+        points, viewpoint = hpds.read_points(path, return_viewpoint=True)
+        ours = hpds.downsample(points, config, viewpoint)
+        valid = np.isfinite(ours["normal"]).all(axis=1)
+        self.assertGreater(valid.sum(), 100)
+        self.assertTrue((ours["normal"][valid, 2] < -0.9).all())
+        # Without it they face the origin, above the ground.
+        up = hpds.downsample(points, config)
+        self.assertTrue((up["normal"][np.isfinite(up["normal"]).all(axis=1), 2] > 0.9).all())
+        # The CLI reads VIEWPOINT itself: the same samples and normals, bit for bit.
+        support.run([support.CLI, "sample", path, "-o", self.path("cli.ply"), "--spacing", "0.2"])
+        cli = hpds.ply.read(self.path("cli.ply"))
+        np.testing.assert_array_equal(cli["level"], ours["level"])
+        cli_normal = np.stack([cli["normal_x"], cli["normal_y"], cli["normal_z"]], axis=1).astype(np.float32)
+        np.testing.assert_array_equal(cli_normal.view(np.uint32), ours["normal"].view(np.uint32))
+
+    def test_a_viewpoint_that_is_not_three_finite_numbers_is_refused(self):
+        points = np.random.default_rng(2).uniform(-4, 4, (500, 3))
+        for bad in ((0.0, 0.0), (0.0, float("nan"), 0.0), "abc"):
+            with self.subTest(viewpoint=bad), self.assertRaises(ValueError):
+                hpds.downsample(points, None, bad)
+
+
 if __name__ == "__main__":
     unittest.main()
