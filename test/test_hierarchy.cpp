@@ -45,6 +45,28 @@ TEST(CellKey, FloorIsExactAtCellBoundaries) {
   }
 }
 
+// A power-of-two multiple of the edge is a boundary exactly representable in a double, and for about one edge in
+// eight (none of the round ones above) v * (1 / e) rounds to just below the integer: only the exact residual test
+// puts v in the cell it starts. Cell sizes come from arbitrary spacings, so edges are drawn at random.
+TEST(CellKey, FloorIsExactAtPowerOfTwoMultiplesOfAnyEdge) {
+  std::mt19937_64 rng(17);
+  std::uniform_real_distribution<double> edge(0.01, 10.0);
+  std::uniform_int_distribution<int> power(0, 29);
+  std::size_t rounded_below = 0;
+  for (int i = 0; i < 20000; ++i) {
+    const double e = edge(rng), ie = 1.0 / e;
+    const int j = power(rng);
+    for (const double sign : {1.0, -1.0}) {
+      const double v = sign * std::ldexp(e, j);  // exactly +-2^j cells
+      if (!inCellRange(v, ie)) continue;
+      rounded_below += v * ie < sign * std::ldexp(1.0, j) ? 1 : 0;
+      EXPECT_EQ(exactCellCoord(v, e, ie), static_cast<std::int32_t>(sign * std::ldexp(1.0, j)))
+          << "v=" << v << " e=" << e;
+    }
+  }
+  EXPECT_GT(rounded_below, 100u) << "the estimate never rounded below the boundary: the case is not tested";
+}
+
 TEST(CellKey, MillimetreCellsAtAMillionMetres) {
   const double e = std::ldexp(1.0, -10), ie = 1.0 / e;  // ~0.98 mm
   const double x = 1e6 + 0.123456789;
