@@ -370,7 +370,10 @@ INSTANTIATE_TEST_SUITE_P(
     ::testing::Values(Case{"uniform3d", 1.0, 5, 400, 0, 1}, Case{"planar", 1.0, 6, 500, 1, 1},
                       Case{"scanlines", 0.8, 6, 500, 2, 1}, Case{"coarse_cells", 3.0, 3, 300, 0, 1},
                       Case{"deep_drops", 1.0, 2, 600, 0, 1}, Case{"stream3d", 1.0, 5, 250, 0, 3},
-                      Case{"stream_planar", 0.7, 6, 300, 1, 3}, Case{"stream_scanlines", 1.3, 6, 300, 2, 3}),
+                      Case{"stream_planar", 0.7, 6, 300, 1, 3}, Case{"stream_scanlines", 1.3, 6, 300, 2, 3},
+                      // A map whose finest populated level is 0 (map mode at output level 0) is not empty: later
+                      // batches must still be checked against the earlier ones, not only against themselves.
+                      Case{"stream_level0_only", 1.0, 0, 300, 0, 3}),
     [](const ::testing::TestParamInfo<Case> &param_info) { return std::string(param_info.param.name); });
 
 // A batch offered down to max_level < max_depth gives exactly the levels 0..max_level of a hierarchy that stops there
