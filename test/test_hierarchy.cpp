@@ -526,6 +526,39 @@ TEST(Hierarchy, EvictionToTheCapRemovesTheFarthestByBruteForce) {
   }
 }
 
+// Eviction by distance keeps a sample exactly at the distance ("farther than" is strict): lattice points around a
+// lattice centre lie exactly on a 3-4-5 distance by the dozen, as quantised or gridded input has them.
+// Against a scan of every live sample.
+TEST(Hierarchy, EvictionByDistanceKeepsExactlyTheSamplesWithinByBruteForce) {
+  std::mt19937_64 rng(13);
+  for (int trial = 0; trial < 8; ++trial) {
+    Hierarchy h(1.0, 4);  // r_4 < the lattice spacing: every lattice point becomes a sample
+    std::vector<double> xyz;
+    for (int x = -16; x <= 16; ++x)
+      for (int y = -16; y <= 16; ++y)
+        for (int z = -1; z <= 1; ++z) xyz.insert(xyz.end(), {0.125 * x, 0.125 * y, 0.125 * z});
+    insertAll(h, xyz, shuffledOrder(xyz.size() / 3, rng));
+    std::uniform_int_distribution<int> cell(-8, 8);
+    const double center[3] = {0.125 * cell(rng), 0.125 * cell(rng), 0.0};
+    const double distance = 0.625 * (1 + trial % 3);  // 5/8 m multiples: (3/8, 4/8) m offsets lie exactly on it
+    std::set<SampleId> want;
+    std::size_t on_sphere = 0;
+    for (SampleId id = 0; id < h.idBound(); ++id)
+      if (h.isLive(id)) {
+        const double d2 = dist2(h.position(id), center);
+        if (d2 <= distance * distance) want.insert(id);
+        on_sphere += d2 == distance * distance ? 1 : 0;
+      }
+    ASSERT_GT(on_sphere, 0u) << "trial " << trial << ": no sample exactly at the distance, the case is not tested";
+    const std::size_t live = h.sampleCount();
+    ASSERT_EQ(h.evictOutside(center, distance), live - want.size());
+    std::set<SampleId> got;
+    for (SampleId id = 0; id < h.idBound(); ++id)
+      if (h.isLive(id)) got.insert(id);
+    ASSERT_EQ(got, want) << "trial " << trial << ", distance " << distance;
+  }
+}
+
 TEST(Hierarchy, BallQueryMatchesBruteForce) {
   std::mt19937_64 rng(9);
   Hierarchy h(1.0, 6);
