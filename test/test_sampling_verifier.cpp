@@ -284,6 +284,24 @@ TEST(SamplingVerifier, CloseMixedLevelPairViolatesOnlyWhereBothArePresent) {
   expectSameReport(rep, bruteForce(sampling, 1.0, nullptr));
 }
 
+// The coarser end of a close pair is counted as well as the finer one, wherever it sits among the coarser samples:
+// here it is the very last of them (the boundary of the older points the new level's close pairs are applied to).
+TEST(SamplingVerifier, CloseToTheLastCoarserSampleCountsBothEnds) {
+  const double r1 = radius(1.0, 1);
+  for (int coarser : {1, 3}) {
+    std::vector<Sample> samples;
+    for (int i = 0; i < coarser; ++i) samples.push_back({10.0 * i + 0.1, 0.1, 0.1, 0});
+    const Sample last = samples.back();
+    samples.push_back({last.x + 0.9 * r1, last.y, last.z, 1});
+    const PointBuffer sampling = makeSampling(samples);
+    const VerifyReport rep = verifySampling(sampling, 1.0, nullptr);
+    ASSERT_EQ(rep.levels.size(), 2u);
+    EXPECT_EQ(rep.levels[0].spacing_violations, 0u) << coarser << " level-0 samples";
+    EXPECT_EQ(rep.levels[1].spacing_violations, 2u) << coarser << " level-0 samples";
+    expectSameReport(rep, bruteForce(sampling, 1.0, nullptr));
+  }
+}
+
 TEST(SamplingVerifier, CellDuplicateCountedAtItsLevelOnly) {
   std::vector<Sample> samples = validScene().samples;
   // Opposite corners of the level-3 cell [50, 50.125) x [0, 0.125)^2: 0.18 apart, more than r_3 = 0.108, so only
