@@ -9,12 +9,16 @@
 #include <cstdint>
 #include <cstring>
 #include <map>
+#include <numeric>
+#include <random>
 #include <set>
+#include <tuple>
 #include <vector>
 
 #include "PipelineTestSupport.hpp"
 #include "hpds/eval/SyntheticLidar.hpp"
 #include "hpds/pipeline/Pipeline.hpp"
+#include "hpds/sampling/InsertionOrderer.hpp"
 
 namespace hpds {
 namespace {
@@ -79,6 +83,46 @@ TEST(Pipeline, NormalsEstimatedBesideTheInsertionAreTheSameBits) {
     most_ahead = std::max(most_ahead, r.normals_ahead);
   }
   EXPECT_GT(most_ahead, 0u) << "the second thread never estimated a neighbourhood during an insertion";
+}
+
+// Frame k of a run is ordered by the shuffle of seed + k: node workers (setNextFrameIndex) and a continued map (its
+// saved frame counter) reproduce a run by numbering the frames, which only works if the number reaches the seed. A
+// frame of the same points numbered 0, 1 and 5 against a hierarchy fed that shuffle directly.
+TEST(Pipeline, FrameIndexOffsetsTheRandomOrderSeed) {
+  std::mt19937_64 rng(3);
+  std::uniform_real_distribution<float> u(1.0f, 4.0f);
+  std::vector<std::array<double, 3>> pts(2000);
+  for (auto &p : pts) p = {u(rng), u(rng), u(rng)};  // floats, so the frame's float32 x y z hold them exactly
+  const Frame f = makeFrame(pts);
+  std::vector<double> xyz;
+  for (const auto &p : pts) xyz.insert(xyz.end(), p.begin(), p.end());
+  HpdsConfig c;
+  c.order.type = InsertionOrder::Random;
+  c.order.seed = 40;
+  for (std::uint32_t k : {0u, 1u, 5u}) {
+    Pipeline p(c);
+    p.setNextFrameIndex(k);
+    p.addFrame(f);
+    std::vector<std::uint32_t> order(pts.size());
+    std::iota(order.begin(), order.end(), 0u);
+    seededShuffle(order, c.order.seed + k);
+    Hierarchy want(p.hierarchy().cellSize(), p.hierarchy().maxDepth());
+    InsertBatch b;
+    b.xyz = xyz.data();
+    b.size = pts.size();
+    b.order = order.data();
+    b.order_size = order.size();
+    b.max_level = p.buildDepth();
+    (void)want.insert(b);
+    const auto samples = [](const Hierarchy &h) {
+      std::set<std::tuple<double, double, double, int>> s;
+      for (SampleId id : h.samplesUpTo(h.maxDepth()))
+        s.emplace(h.position(id)[0], h.position(id)[1], h.position(id)[2], h.level(id));
+      return s;
+    };
+    ASSERT_GT(want.sampleCount(), 100u);
+    EXPECT_EQ(samples(p.hierarchy()), samples(want)) << "frame index " << k;
+  }
 }
 
 TEST(Pipeline, DifferentSeedDifferentSampling) {
