@@ -320,3 +320,55 @@ TEST(MapNormals, AMapKeepingTheFinerLevelsReadsThem) {
 
 }  // namespace
 }  // namespace hpds
+
+namespace hpds {
+namespace {
+
+// Map mode estimates every output sample a frame hits (within 2 r_L of its points), earlier frames' samples beyond
+// the frame's points too: the search grids over its centroids must serve those queries, not only the ones inside
+// the box of its points. Frame B (close) ends at x = 1.40, where the grids' first cell frame left at most 0.06 m of
+// margin above its box; frame A (far) reaches x = 2.0.
+TEST(MapNormals, SamplesHitBeyondTheFramesPointsTakeTheCloserFramesNormal) {
+  HpdsConfig c;
+  c.mode = Mode::Map;
+  c.hierarchy.cell_size = 1.0;
+  c.hierarchy.max_depth = 6;
+  c.output.level = 2;  // r_L = 0.217 m; the centroids' cells are of level 4 (6.25 cm)
+  c.map.evict_distance = 0.0;
+  std::mt19937 rng(5);
+  std::normal_distribution<double> noise(0.0, 0.003);
+  auto plane = [&](double x1) {
+    std::vector<std::array<double, 3>> pts;
+    for (int i = 0; i * 0.01 <= x1 + 1e-9; ++i)
+      for (int j = 0; j <= 100; ++j) pts.push_back({i * 0.01, j * 0.01, noise(rng)});
+    return pts;
+  };
+  Frame a = makeFrame(plane(2.0));
+  a.viewpoint = Eigen::Vector3d(-10.0, 0.5, 1.0);
+  Frame b = makeFrame(plane(1.40));
+  b.viewpoint = Eigen::Vector3d(1.4, 0.5, 0.5);
+  Pipeline p(c);
+  (void)p.addFrame(a);
+  const int L = p.outputLevel();
+  const std::vector<SampleId> ids = p.outputSamples();
+  const std::vector<SampleNormal> before = p.normals(ids);
+  (void)p.addFrame(b);
+  const std::vector<SampleId> hit = p.samplesHitByLastFrame(0, L, 2.0 * p.hierarchy().radius(L));
+  const std::set<SampleId> hit_set(hit.begin(), hit.end());
+  const std::vector<SampleNormal> after = p.normals(ids);
+  std::size_t beyond = 0;
+  for (std::size_t i = 0; i < ids.size(); ++i) {
+    if (!hit_set.count(ids[i]) || !before[i].valid) continue;
+    const double *x = p.hierarchy().position(ids[i]);
+    ASSERT_LT(distance(x, b.viewpoint), distance(x, a.viewpoint));
+    ASSERT_TRUE(after[i].valid);
+    beyond += x[0] > 1.42;
+    // Frame B saw it from closer, with its points within the footprint: its estimate replaces frame A's.
+    EXPECT_FALSE(std::equal(before[i].normal, before[i].normal + 3, after[i].normal))
+        << "sample at x = " << x[0] << " kept the farther frame's normal";
+  }
+  EXPECT_GE(beyond, 4u) << "samples hit beyond frame B's points";
+}
+
+}  // namespace
+}  // namespace hpds

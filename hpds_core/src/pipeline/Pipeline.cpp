@@ -187,7 +187,10 @@ FrameResult Pipeline::addFrame(const Frame &frame) {
   if (early) early_points_.resize(candidates_.size());
   if (fine_level_ >= 0) {
     std::vector<double> radii = refinedSearchRadii(hierarchy_, normal_params);
-    auto centroids = [this, &fine_error, &inserted_all, &published, ahead, early, &normal_params,
+    // The grids only serve queries inside their box. Scan mode queries the frame's own points; map mode also the
+    // earlier samples the frame hits, up to 2 r_L beyond its points (step 7): the box is that much wider there.
+    const double box_margin = map_mode ? 2.0 * hierarchy_.radius(output_level_) : 0.0;
+    auto centroids = [this, &fine_error, &inserted_all, &published, ahead, early, &normal_params, box_margin,
                       radii = std::move(radii)]() mutable {
       try {
         double box[6];
@@ -196,8 +199,10 @@ FrameResult Pipeline::addFrame(const Frame &frame) {
         if (!std::isfinite(box[0])) return;
         auto grids = std::make_shared<AveragingGrids>();
         grids->radii = std::move(radii);
-        std::copy(box, box + 3, grids->lo);
-        std::copy(box + 3, box + 6, grids->hi);
+        for (int a = 0; a < 3; ++a) {
+          grids->lo[a] = box[a] - box_margin;
+          grids->hi[a] = box[3 + a] + box_margin;
+        }
         grids->by_radius.resize(grids->radii.size());
         fine_grids_ = grids;
         if (!ahead) return;
