@@ -119,6 +119,27 @@ TEST(TiledOutput, TilePlysHoldTheOutputLevelsWithTheNormalsOfTheWholeMap) {
   EXPECT_EQ(near_border, written);
 }
 
+// The tile maps hold the finer levels the normals average (normals.neighborhood_level_offset): map mode alone
+// builds none for them (it keeps per-frame normals, which tile map files do not carry).
+TEST(TiledOutput, TileMapsHoldTheFinerLevelsTheNormalsAverage) {
+  const HpdsConfig config = normalsConfig();
+  ASSERT_GT(config.normals.neighborhood_level_offset, 0);
+  const int fine = std::min(config.hierarchy.max_depth, config.output.level + config.normals.neighborhood_level_offset);
+  ASSERT_GT(fine, config.output.level);
+  EXPECT_EQ(Pipeline(tilePipelineConfig(config)).buildDepth(), fine);
+  HpdsConfig plain = config;
+  plain.normals.enabled = false;
+  EXPECT_EQ(Pipeline(tilePipelineConfig(plain)).buildDepth(), config.output.level) << "no normals: nothing finer";
+
+  const TileGrid grid(config.hierarchy, 1.0);
+  const std::vector<Frame> input = test::denseFrames(3, 6000, 31);
+  const test::TiledRun run = test::runTiled(config, grid, input, test::scratchDir("tiled_fine"));
+  const MergedTiles m = mergeTiles(config, run);
+  std::size_t finer = 0;
+  for (SampleId id = 0; id < m.h.idBound(); ++id) finer += m.h.level(id) > config.output.level;
+  EXPECT_GT(finer, m.h.sampleCount() / 2) << "tile maps without the levels below the output";
+}
+
 TEST(TiledOutput, NormalsWithoutTheNeighboursSamplesDiffer) {
   const HpdsConfig config = normalsConfig();
   const TileGrid grid(config.hierarchy, 1.0);

@@ -65,7 +65,7 @@ void bindTiling(py::module_ &m) {
         d["border_ring"] = borderRing(config);
         d["output_level"] = resolveOutputLevel(config);
         d["output_radius"] = resolveOutput(config).radius;
-        d["build_depth"] = Pipeline(config).buildDepth();
+        d["build_depth"] = Pipeline(tilePipelineConfig(config)).buildDepth();
         return d;
       },
       py::arg("config_yaml"), py::arg("tile_size"),

@@ -1,5 +1,6 @@
 #include "hpds/tiling/TileBuild.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <stdexcept>
@@ -65,11 +66,22 @@ void validateTiledConfig(const HpdsConfig &config) {
     throw std::invalid_argument("map.max_samples: must be 0 in a tiled map build (it keeps every sample)");
 }
 
+HpdsConfig tilePipelineConfig(const HpdsConfig &given) {
+  HpdsConfig config = resolvedConfig(given);
+  if (config.normals.enabled && config.normals.neighborhood_level_offset > 0) {
+    const int fine = std::min(config.hierarchy.max_depth,
+                              resolveOutputLevel(config) + config.normals.neighborhood_level_offset);
+    config.map.keep_depth = std::max(config.map.keep_depth, fine);
+  }
+  return config;
+}
+
 TileBuildStats buildTile(const HpdsConfig &given, const TileGrid &grid, const TileKey &key,
                          const std::vector<std::string> &bucket_paths, const std::vector<std::string> &border_paths,
                          const std::string &map_path, const std::string &border_path) {
   validateTiledConfig(given);
-  const HpdsConfig config = resolvedConfig(given);  // the cell a pipeline runs with (derived from the spacing)
+  // The cell a pipeline runs with (derived from the spacing), and the finer levels finishTile's normals read.
+  const HpdsConfig config = tilePipelineConfig(given);
   TileBuildStats stats;
   Hierarchy own(config.hierarchy.cell_size, config.hierarchy.max_depth);
   {

@@ -38,6 +38,13 @@ namespace hpds {
 /// (map.evict_distance and map.max_samples 0: an evicted sample would leave its neighbours' decisions unexplained).
 void validateTiledConfig(const HpdsConfig &config);
 
+/// The config buildTile's map-mode pipeline runs with: resolvedConfig(config), with normals on map.keep_depth
+/// down to the level finishTile's normals average (output level + normals.neighborhood_level_offset, clamped to
+/// max_depth). Map mode alone builds no level for its normals (it keeps a per-frame normal per sample, which a
+/// tile's map file does not carry): without this the tiles would hold the output levels only and finishTile's
+/// normals would average no finer level.
+[[nodiscard]] HpdsConfig tilePipelineConfig(const HpdsConfig &config);
+
 struct TileBuildStats {
   FrameCounters counters;            ///< the tile's frames through its pipeline (accepted, dropped, per level)
   std::uint64_t frames = 0;          ///< frames with points in the tile
