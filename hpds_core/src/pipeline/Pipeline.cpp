@@ -366,7 +366,8 @@ void Pipeline::replaceMap(Hierarchy &&map, std::uint32_t next_frame) {
   frames_ = next_frame;
   hit_cache_valid_ = false;
   hit_cache_.clear();
-  // A file keeps no normals: until a frame hits them, the map's samples get theirs from the map (normalsOfLive).
+  // Kept normals belong to the old map (loadMap restores a file's own after this); until a frame hits them, samples
+  // without one get theirs from the map (keptNormals).
   if (map_normals_) map_normals_->clear();
   // A map that has a layout (a saved one always does, even without samples) fixes it; a bare Hierarchy (the tiled
   // build's empty band) leaves it to the first frame.
