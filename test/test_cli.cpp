@@ -375,5 +375,41 @@ TEST(Cli, NormalsAndNoNormalsTogetherAreRefused) {
   EXPECT_EQ(runHpds(run + " --normals --normals", &log), 0) << log;
 }
 
+TEST(Cli, MapModeStatsCountEachFramesNormalsNotOnlyTheFinalCloud) {
+  // Map mode estimates the normals the map keeps inside every frame; the final cloud only looks them up. The
+  // stats' "normals" seconds must hold the frames' estimates: it held only the final lookup (overwritten), so a
+  // run that spent most of its time on normals reported microseconds. A last frame far away evicts the whole map,
+  // leaving a final cloud of nothing to look up: what remains is the frames' share.
+  const auto tmp = test::scratchDir("cli_map_normals_seconds");
+  std::string log;
+  ASSERT_EQ(runHpds("synth -o " + shellQuote(tmp / "s") + " --frames 3 --beams 16 --azimuth-steps 900", &log), 0) << log;
+  {
+    std::ofstream f(tmp / "nothing.pcd");  // the synthetic frames' fields (with their 2 padding bytes), no return
+    f << "# .PCD v0.7\nVERSION 0.7\nFIELDS x y z intensity ring _ time\nSIZE 4 4 4 4 2 1 4\nTYPE F F F F U U F\n"
+         "COUNT 1 1 1 1 1 2 1\nWIDTH 2\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS 2\nDATA ascii\n"
+         "0 0 0 1 1 0 0 0\nnan nan nan 1 1 0 0 0\n";
+  }
+  std::string poses = readText(tmp / "s" / "poses.txt");
+  {
+    std::ofstream f(tmp / "poses.txt");
+    f << poses << "1 0 0 1000 0 1 0 0 0 0 1 0\n";
+  }
+  std::string inputs;
+  for (int i = 0; i < 3; ++i) inputs += shellQuote(tmp / "s" / ("frame_00000" + std::to_string(i) + ".pcd")) + " ";
+  ASSERT_EQ(runHpds("sample " + inputs + shellQuote(tmp / "nothing.pcd") + " --mode map --poses " +
+                        shellQuote(tmp / "poses.txt") + " -o " + shellQuote(tmp / "m.ply") + " --stats " +
+                        shellQuote(tmp / "stats.json"),
+                    &log),
+            0)
+      << log;
+  const std::string stats = readText(tmp / "stats.json");
+  ASSERT_NE(stats.find("\"output_points\": 0"), std::string::npos) << stats;
+  const std::size_t at = stats.find("\"normals\": ");
+  ASSERT_NE(at, std::string::npos) << stats;
+  const double normals = std::stod(stats.substr(at + 11));
+  // Three frames' normals of ~5000 samples each: tens of milliseconds; the final empty lookup: microseconds.
+  EXPECT_GT(normals, 2e-3) << stats;
+}
+
 }  // namespace
 }  // namespace hpds

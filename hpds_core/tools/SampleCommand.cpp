@@ -184,7 +184,10 @@ int runSample(const SampleArgs &a) {
   } else {
     for (std::size_t d = 0; d < report.samples_per_level.size(); ++d)
       report.samples_per_level[d] = pipeline.hierarchy().countAtLevel(static_cast<int>(d));
-    output = pipeline.makeCloud(pipeline.outputSamples(), false, &report.seconds.normals);
+    // makeCloud sets its argument: add to the per-frame normals map mode counted above, not overwrite them.
+    double final_normals = 0.0;
+    output = pipeline.makeCloud(pipeline.outputSamples(), false, &final_normals);
+    report.seconds.normals += final_normals;
   }
   report.frames = a.inputs.size();
   report.totals = totals;
