@@ -400,8 +400,9 @@ void saveHierarchy(AtomicFile &file, const Hierarchy &hierarchy, std::uint32_t n
   writeMap(file, hierarchy, next_frame, nullptr);
 }
 
-
-LoadedHierarchy loadHierarchy(const std::string &path, const HierarchyConfig *expected) {
+namespace {
+/// parse() over the file at `path`; `normals` as there.
+LoadedHierarchy parseFile(const std::string &path, const HierarchyConfig *expected, std::vector<std::uint8_t> *normals) {
   if (!hostIsLittleEndian()) fail(path, "map files are little-endian; this host is not");
   Fd fd(::open(path.c_str(), O_RDONLY | O_CLOEXEC));
   if (fd.get() < 0) {
@@ -412,7 +413,12 @@ LoadedHierarchy loadHierarchy(const std::string &path, const HierarchyConfig *ex
   if (::fstat(fd.get(), &st) != 0) fail(path, std::string("cannot stat: ") + std::strerror(errno));
   if (!S_ISREG(st.st_mode)) fail(path, "not a regular file");
   FdSource src(fd.get());
-  return parse(src, static_cast<std::uint64_t>(st.st_size), path, expected);
+  return parse(src, static_cast<std::uint64_t>(st.st_size), path, expected, normals);
+}
+}  // namespace
+
+LoadedHierarchy loadHierarchy(const std::string &path, const HierarchyConfig *expected) {
+  return parseFile(path, expected, nullptr);
 }
 
 LoadedHierarchy loadHierarchyBytes(const std::uint8_t *data, std::size_t size, const std::string &name,
@@ -479,19 +485,8 @@ std::string shallowSaveWarning(const Pipeline &pipeline, int loaded_deepest, std
 void loadMap(const std::string &path, Pipeline &pipeline) {
   if (pipeline.config().mode != Mode::Map)
     throw std::invalid_argument("loading a map needs mode: map (scan mode starts every frame on an empty hierarchy)");
-  if (!hostIsLittleEndian()) fail(path, "map files are little-endian; this host is not");
-  Fd fd(::open(path.c_str(), O_RDONLY | O_CLOEXEC));
-  if (fd.get() < 0) {
-    if (errno == ENOENT) fail(path, "file not found");
-    fail(path, std::string("cannot open: ") + std::strerror(errno));
-  }
-  struct stat st {};
-  if (::fstat(fd.get(), &st) != 0) fail(path, std::string("cannot stat: ") + std::strerror(errno));
-  if (!S_ISREG(st.st_mode)) fail(path, "not a regular file");
-  FdSource src(fd.get());
   std::vector<std::uint8_t> normals;
-  LoadedHierarchy loaded =
-      parse(src, static_cast<std::uint64_t>(st.st_size), path, &pipeline.config().hierarchy, &normals);
+  LoadedHierarchy loaded = parseFile(path, &pipeline.config().hierarchy, &normals);
   // Checked before the map is replaced, so that a refused file changes nothing.
   MapNormals kept;
   const std::size_t count = loaded.hierarchy.sampleCount();
