@@ -372,3 +372,50 @@ TEST(MapNormals, SamplesHitBeyondTheFramesPointsTakeTheCloserFramesNormal) {
 
 }  // namespace
 }  // namespace hpds
+
+namespace hpds {
+namespace {
+
+// A frame whose fields differ from the map's only in their offsets (padding) is refused with a message that shows
+// the difference: names and types alone read the same on both sides.
+TEST(Pipeline, AFrameDifferingOnlyInPaddingIsRefusedWithTheOffsets) {
+  auto layout = [](std::uint32_t intensity_offset) {
+    PointLayout l;
+    for (std::uint32_t a = 0; a < 3; ++a) l.fields.push_back(PointField{std::string(1, char('x' + a)), 4 * a});
+    l.fields.push_back(PointField{"intensity", intensity_offset});
+    l.point_step = intensity_offset + 4;
+    return l;
+  };
+  auto frame = [](const PointLayout &l) {
+    Frame f;
+    f.points = PointBuffer(l, 1);
+    writeFromDouble(f.points.record(0), *l.find("x"), 1.0);
+    return f;
+  };
+  HpdsConfig c;
+  c.mode = Mode::Map;
+  Pipeline p(c);
+  (void)p.addFrame(frame(layout(12)));
+  try {
+    (void)p.addFrame(frame(layout(16)));
+    ADD_FAILURE() << "a frame of another layout was taken";
+  } catch (const std::invalid_argument &e) {
+    const std::string m = e.what();
+    EXPECT_NE(m.find("at offsets 0 4 8 16, 20 bytes) differ from the map's (x y z intensity as float32 float32 "
+                     "float32 float32 at offsets 0 4 8 12, 16 bytes"),
+              std::string::npos)
+        << m;
+  }
+  // Other names: the names say it, no offsets needed.
+  PointLayout other = layout(12);
+  other.fields[3].name = "range";
+  try {
+    (void)p.addFrame(frame(other));
+    ADD_FAILURE() << "a frame of another layout was taken";
+  } catch (const std::invalid_argument &e) {
+    EXPECT_EQ(std::string(e.what()).find("offsets"), std::string::npos) << e.what();
+  }
+}
+
+}  // namespace
+}  // namespace hpds

@@ -9,6 +9,7 @@
 #include <stdexcept>
 #include <string>
 #include <thread>
+#include <utility>
 
 #if defined(__GLIBC__)
 #include <malloc.h>
@@ -55,15 +56,26 @@ FrameCounters &FrameCounters::operator+=(const FrameCounters &o) {
 
 namespace {
 /// "x y z intensity as float32 float32 float32 float32, 16 bytes": what tells two layouts apart in an error.
-std::string fieldNames(const PointLayout &l) {
+std::string fieldNames(const PointLayout &l, bool with_offsets = false) {
   std::string names, types;
   for (const PointField &f : l.fields) {
     names += (names.empty() ? "" : " ") + f.name;
     types += std::string(types.empty() ? "" : " ") + fieldTypeName(f.type) +
              (f.count > 1 ? "[" + std::to_string(f.count) + "]" : "");
   }
-  return (names.empty() ? "none" : names) + " as " + (types.empty() ? "-" : types) + ", " +
+  std::string offsets;
+  if (with_offsets)
+    for (const PointField &f : l.fields) offsets += (offsets.empty() ? " at offsets " : " ") + std::to_string(f.offset);
+  return (names.empty() ? "none" : names) + " as " + (types.empty() ? "-" : types) + offsets + ", " +
          std::to_string(l.point_step) + " bytes";
+}
+
+/// fieldNames of two layouts that differ, with the offsets when names and types alone read the same (padding).
+std::pair<std::string, std::string> fieldDifference(const PointLayout &a, const PointLayout &b) {
+  // Names and types without the record size: the size alone does not say where the padding is.
+  const auto withoutSize = [](const std::string &text) { return text.substr(0, text.rfind(", ")); };
+  const bool same_text = withoutSize(fieldNames(a)) == withoutSize(fieldNames(b));
+  return {fieldNames(a, same_text), fieldNames(b, same_text)};
 }
 
 /// The deepest level read: the output levels and the levels a map keeps. No level is built for the normals: they
@@ -116,9 +128,11 @@ FrameResult Pipeline::addFrame(const Frame &frame) {
   const bool map_mode = config_.mode == Mode::Map;
   // The map's layout is the first frame's, even when that frame gave no sample (empty, or NaN only), or the loaded
   // map's.
-  if (map_mode && map_layout_fixed_ && layout != hierarchy_.recordLayout())
-    throw std::invalid_argument("frame's point fields (" + fieldNames(layout) + ") differ from the map's (" +
-                                fieldNames(hierarchy_.recordLayout()) + "; the first frame's or the loaded map's)");
+  if (map_mode && map_layout_fixed_ && layout != hierarchy_.recordLayout()) {
+    const auto [frame_fields, map_fields] = fieldDifference(layout, hierarchy_.recordLayout());
+    throw std::invalid_argument("frame's point fields (" + frame_fields + ") differ from the map's (" + map_fields +
+                                "; the first frame's or the loaded map's)");
+  }
 
   hit_cache_valid_ = false;
   hit_cache_.clear();
@@ -358,10 +372,11 @@ void Pipeline::replaceMap(Hierarchy &&map, std::uint32_t next_frame) {
   if (map.cellSize() != config_.hierarchy.cell_size || map.maxDepth() != config_.hierarchy.max_depth)
     throw std::invalid_argument("hierarchy: the map's cell_size/max_depth differ from the configuration's");
   // Frames already taken fixed the fields: a map of other fields would have every later frame refused.
-  if (map_layout_fixed_ && !map.recordLayout().fields.empty() && map.recordLayout() != hierarchy_.recordLayout())
-    throw std::invalid_argument("the map's point fields (" + fieldNames(map.recordLayout()) +
-                                ") differ from those of the frames so far (" + fieldNames(hierarchy_.recordLayout()) +
-                                "): later frames would all be refused");
+  if (map_layout_fixed_ && !map.recordLayout().fields.empty() && map.recordLayout() != hierarchy_.recordLayout()) {
+    const auto [map_fields, frame_fields] = fieldDifference(map.recordLayout(), hierarchy_.recordLayout());
+    throw std::invalid_argument("the map's point fields (" + map_fields + ") differ from those of the frames so far (" +
+                                frame_fields + "): later frames would all be refused");
+  }
   hierarchy_ = std::move(map);
   frames_ = next_frame;
   hit_cache_valid_ = false;
