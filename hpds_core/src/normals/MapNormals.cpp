@@ -6,7 +6,7 @@
 namespace hpds {
 
 void MapNormals::resetSlots(const std::vector<SampleId> &fresh, std::size_t id_bound) {
-  if (entries_.size() < id_bound) entries_.resize(id_bound, Entry{{0.f, 0.f, 0.f}, 0.f, {0.f, 0.f, 0.f}, 0.f, kEmpty});
+  if (entries_.size() < id_bound) entries_.resize(id_bound);
   for (SampleId id : fresh) entries_[id].state = kEmpty;
 }
 
@@ -28,8 +28,7 @@ std::vector<SampleId> MapNormals::improvable(const Hierarchy &hierarchy, const s
 }
 
 void MapNormals::offer(SampleId id, const SampleNormal &normal, const LocalPca &neighbourhood, float range) {
-  if (id >= entries_.size()) entries_.resize(std::size_t(id) + 1, Entry{{0.f, 0.f, 0.f}, 0.f, {0.f, 0.f, 0.f}, 0.f, kEmpty});
-  Entry &e = entries_[id];
+  Entry &e = slot(id);
   const bool take = e.state == kEmpty || (normal.valid && (e.state == kInvalid || range < e.range));
   if (!take) return;
   for (int a = 0; a < 3; ++a) e.normal[a] = normal.normal[a];
@@ -58,8 +57,7 @@ bool MapNormals::lookup(SampleId id, SampleNormal &normal, LocalPca *neighbourho
 }
 
 void MapNormals::save(SampleId id, std::uint8_t *out) const {
-  Entry e{{0.f, 0.f, 0.f}, 0.f, {0.f, 0.f, 0.f}, 0.f, kEmpty};
-  if (id < entries_.size()) e = entries_[id];
+  const Entry e = id < entries_.size() ? entries_[id] : Entry{};
   std::memcpy(out, e.normal, 12);
   std::memcpy(out + 12, &e.curvature, 4);
   std::memcpy(out + 16, e.eigen, 12);
@@ -75,18 +73,17 @@ bool MapNormals::restore(SampleId id, const std::uint8_t *in) {
   std::memcpy(&e.range, in + 28, 4);
   e.state = in[32];
   if (e.state > kValid) return false;
-  // A valid entry is a unit normal seen from a finite range; anything else would reach the outputs as garbage.
+  // A kept entry was seen from a finite range, and a valid one is a unit normal; anything else would reach the
+  // outputs as garbage.
+  if (e.state != kEmpty && !(e.range >= 0.f && std::isfinite(e.range))) return false;
   if (e.state == kValid) {
     const double n2 = double(e.normal[0]) * e.normal[0] + double(e.normal[1]) * e.normal[1] +
                       double(e.normal[2]) * e.normal[2];
     if (!(std::fabs(n2 - 1.0) < 1e-3) || !std::isfinite(e.curvature) || !std::isfinite(e.eigen[0]) ||
-        !std::isfinite(e.eigen[1]) || !std::isfinite(e.eigen[2]) || !(e.range >= 0.f) || !std::isfinite(e.range))
+        !std::isfinite(e.eigen[1]) || !std::isfinite(e.eigen[2]))
       return false;
-  } else if (e.state == kInvalid && !(e.range >= 0.f && std::isfinite(e.range))) {
-    return false;
   }
-  if (id >= entries_.size()) entries_.resize(std::size_t(id) + 1, Entry{{0.f, 0.f, 0.f}, 0.f, {0.f, 0.f, 0.f}, 0.f, kEmpty});
-  entries_[id] = e;
+  slot(id) = e;
   return true;
 }
 

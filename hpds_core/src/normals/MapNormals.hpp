@@ -53,12 +53,17 @@ class MapNormals {
  private:
   enum : std::uint8_t { kEmpty = 0, kInvalid = 1, kValid = 2 };
   struct Entry {
-    float normal[3];
-    float curvature;
-    float eigen[3];  ///< l0 l1 l2 of the neighbourhood (covariances tell line-like ones apart by them)
-    float range;     ///< [m] sensor distance of the frame that gave it
-    std::uint8_t state;
+    float normal[3] = {0.f, 0.f, 0.f};
+    float curvature = 0.f;
+    float eigen[3] = {0.f, 0.f, 0.f};  ///< l0 l1 l2 of the neighbourhood (covariances tell line-like ones apart)
+    float range = 0.f;                 ///< [m] sensor distance of the frame that gave it
+    std::uint8_t state = kEmpty;
   };
+  /// `id`'s entry, growing the table (empty entries) to hold it.
+  Entry &slot(SampleId id) {
+    if (id >= entries_.size()) entries_.resize(std::size_t(id) + 1);
+    return entries_[id];
+  }
   std::vector<Entry> entries_;
 };
 
