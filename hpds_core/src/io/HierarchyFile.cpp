@@ -386,14 +386,20 @@ void writeMap(AtomicFile &file, const Hierarchy &hierarchy, std::uint32_t next_f
   std::memcpy(c, &crc, 4);
   file.write(c, 4);
 }
-}  // namespace
 
-void saveHierarchy(const std::string &path, const Hierarchy &hierarchy, std::uint32_t next_frame) {
+/// writeMap into `path` itself.
+void writeMapFile(const std::string &path, const Hierarchy &hierarchy, std::uint32_t next_frame,
+                  const MapNormals *normals) {
   checkSavable(path, hierarchy);
   // Temporary file, fsync and rename (AtomicFile): a failure or a kill leaves any previous map at `path` untouched.
   AtomicFile file(path);
-  saveHierarchy(file, hierarchy, next_frame);
+  writeMap(file, hierarchy, next_frame, normals);
   file.commit();
+}
+}  // namespace
+
+void saveHierarchy(const std::string &path, const Hierarchy &hierarchy, std::uint32_t next_frame) {
+  writeMapFile(path, hierarchy, next_frame, nullptr);
 }
 
 void saveHierarchy(AtomicFile &file, const Hierarchy &hierarchy, std::uint32_t next_frame) {
@@ -402,7 +408,8 @@ void saveHierarchy(AtomicFile &file, const Hierarchy &hierarchy, std::uint32_t n
 
 namespace {
 /// parse() over the file at `path`; `normals` as there.
-LoadedHierarchy parseFile(const std::string &path, const HierarchyConfig *expected, std::vector<std::uint8_t> *normals) {
+LoadedHierarchy parseFile(const std::string &path, const HierarchyConfig *expected,
+                          std::vector<std::uint8_t> *normals) {
   if (!hostIsLittleEndian()) fail(path, "map files are little-endian; this host is not");
   Fd fd(::open(path.c_str(), O_RDONLY | O_CLOEXEC));
   if (fd.get() < 0) {
@@ -439,10 +446,7 @@ bool isOtherFormatName(const std::string &path) {
 }
 
 void saveMap(const std::string &path, const Pipeline &pipeline) {
-  checkSavable(path, pipeline.hierarchy());
-  AtomicFile file(path);
-  saveMap(file, pipeline);
-  file.commit();
+  writeMapFile(path, pipeline.hierarchy(), pipeline.framesProcessed(), pipeline.map_normals_.get());
 }
 
 void saveMap(AtomicFile &file, const Pipeline &pipeline) {

@@ -137,6 +137,7 @@ class Pipeline {
 
  private:
   // Map files carry the kept normals (io/HierarchyFile.hpp).
+  friend void saveMap(const std::string &path, const Pipeline &pipeline);
   friend void saveMap(AtomicFile &file, const Pipeline &pipeline);
   friend void loadMap(const std::string &path, Pipeline &pipeline);
 
