@@ -240,6 +240,12 @@ OutputResolution resolveOutput(const HpdsConfig &c) {
 
 int resolveOutputLevel(const HpdsConfig &c) { return resolveOutput(c).level; }
 
+int normalsAveragingLevel(const HpdsConfig &c, int output_level) {
+  if (!c.normals.enabled || c.normals.neighborhood_level_offset <= 0) return -1;
+  const int fine = std::min(c.hierarchy.max_depth, output_level + c.normals.neighborhood_level_offset);
+  return fine > output_level ? fine : -1;
+}
+
 HpdsConfig resolvedConfig(const HpdsConfig &c) {
   const OutputResolution r = resolveOutput(c);
   HpdsConfig out = c;

@@ -109,10 +109,10 @@ PointBuffer buildOutputCloud(const Hierarchy &h, const std::vector<SampleId> &id
       std::memcpy(rec + fy->offset, &p[1], 8);
       std::memcpy(rec + fz->offset, &p[2], 8);
     } else {
-      const float xyz[3] = {static_cast<float>(p[0]), static_cast<float>(p[1]), static_cast<float>(p[2])};
-      std::memcpy(rec + fx->offset, &xyz[0], 4);
-      std::memcpy(rec + fy->offset, &xyz[1], 4);
-      std::memcpy(rec + fz->offset, &xyz[2], 4);
+      const float single[3] = {static_cast<float>(p[0]), static_cast<float>(p[1]), static_cast<float>(p[2])};
+      std::memcpy(rec + fx->offset, &single[0], 4);
+      std::memcpy(rec + fy->offset, &single[1], 4);
+      std::memcpy(rec + fz->offset, &single[2], 4);
     }
     rec[fl->offset] = static_cast<std::uint8_t>(h.level(id));
     if (normals) {

@@ -85,14 +85,12 @@ int buildDepthFor(const HpdsConfig &config, int output_level) {
   return std::min(config.hierarchy.max_depth, std::max(output_level, kept));
 }
 
-/// Normals that average finer detail: the level whose cells they average the frame's points in (the output level +
-/// normals.neighborhood_level_offset, clamped to max_depth), or -1. A map that keeps that level anyway
-/// (map.keep_depth) is read instead: its finer levels hold every frame's points, not one frame's.
+/// Normals that average finer detail: the level whose cells they average the frame's points in
+/// (normalsAveragingLevel), or -1. A map that keeps that level anyway (map.keep_depth) is read instead: its finer
+/// levels hold every frame's points, not one frame's.
 int fineLevelFor(const HpdsConfig &config, int output_level) {
-  if (!config.normals.enabled || config.normals.neighborhood_level_offset <= 0) return -1;
-  const int fine = std::min(config.hierarchy.max_depth, output_level + config.normals.neighborhood_level_offset);
-  if (config.mode == Mode::Map && config.map.keep_depth >= fine) return -1;
-  return fine > output_level ? fine : -1;
+  const int fine = normalsAveragingLevel(config, output_level);
+  return config.mode == Mode::Map && config.map.keep_depth >= fine ? -1 : fine;
 }
 }  // namespace
 

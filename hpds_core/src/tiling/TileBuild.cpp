@@ -68,11 +68,7 @@ void validateTiledConfig(const HpdsConfig &config) {
 
 HpdsConfig tilePipelineConfig(const HpdsConfig &given) {
   HpdsConfig config = resolvedConfig(given);
-  if (config.normals.enabled && config.normals.neighborhood_level_offset > 0) {
-    const int fine = std::min(config.hierarchy.max_depth,
-                              resolveOutputLevel(config) + config.normals.neighborhood_level_offset);
-    config.map.keep_depth = std::max(config.map.keep_depth, fine);
-  }
+  config.map.keep_depth = std::max(config.map.keep_depth, normalsAveragingLevel(config, config.output.level));
   return config;
 }
 

@@ -108,6 +108,11 @@ struct OutputResolution {
 /// resolveOutput(config).level.
 [[nodiscard]] int resolveOutputLevel(const HpdsConfig &config);
 
+/// The finer level the normals of output level `output_level` average (output_level +
+/// normals.neighborhood_level_offset, clamped to hierarchy.max_depth), or -1 when they average none (normals off, an
+/// offset of 0, or the output at max_depth).
+[[nodiscard]] int normalsAveragingLevel(const HpdsConfig &config, int output_level);
+
 /// `config` with hierarchy.cell_size and output.level set to resolveOutput's values (what a Pipeline runs with and a
 /// map file records); every other key unchanged. Resolving a resolved config changes nothing.
 [[nodiscard]] HpdsConfig resolvedConfig(const HpdsConfig &config);
