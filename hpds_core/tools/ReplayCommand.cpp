@@ -253,7 +253,8 @@ int runReplay(const ReplayArgs &a) {
   std::cout << "messages: " << messageSummary(clouds.size(), a.topic, s, wrong_type, target) << "\n";
   std::cout << "wrote " << a.output << "\n";
   if (!to_bag) {
-    if (const std::string w = roundingWarning(ply, report.output_radius, config.hpds.output); !w.empty()) std::cerr << w << "\n";
+    if (const std::string w = roundingWarning(ply, report.output_radius, config.hpds.output); !w.empty())
+      std::cerr << w << "\n";
     // A bag holds what the node publishes; the PLY is meant as the final map, which eviction may have cut short.
     if (const std::string w = evictionWarning(config.hpds, report.totals.evicted, pipeline.hierarchy().sampleCount(),
                                               false);

@@ -218,7 +218,8 @@ int runSample(const SampleArgs &a) {
   std::cout << "wrote " << output.size() << " samples (levels 0.." << report.output_level << ") to " << a.output;
   if (config.normals.enabled) std::cout << ", " << report.invalid_normals << " without a valid normal";
   std::cout << "\n";
-  if (const std::string w = roundingWarning(output, report.output_radius, config.output, input_rounding); !w.empty()) std::cerr << w << "\n";
+  if (const std::string w = roundingWarning(output, report.output_radius, config.output, input_rounding); !w.empty())
+    std::cerr << w << "\n";
   if (!a.save_map.empty())
     if (const std::string w = shallowSaveWarning(pipeline, loaded_deepest, loaded_frames); !w.empty())
       std::cerr << "hpds: warning: " << w << "\n";

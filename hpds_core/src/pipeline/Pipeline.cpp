@@ -406,7 +406,8 @@ std::vector<SampleId> Pipeline::outputSamplesNear(const double center[3], double
 
 std::vector<SampleId> Pipeline::samplesHitByLastFrame(int min_level, int max_level, double radius) const {
   // The map's normals asked for this set already (the node's ~output asks for it again).
-  if (hit_cache_valid_ && min_level == 0 && max_level == output_level_ && radius == 2.0 * hierarchy_.radius(output_level_))
+  if (hit_cache_valid_ && min_level == 0 && max_level == output_level_ &&
+      radius == 2.0 * hierarchy_.radius(output_level_))
     return hit_cache_;
   std::vector<SampleId> hit;
   if (candidates_.empty() || !(radius > 0.0)) return hit;
