@@ -382,7 +382,8 @@ TEST(Cli, MapModeStatsCountEachFramesNormalsNotOnlyTheFinalCloud) {
   // leaving a final cloud of nothing to look up: what remains is the frames' share.
   const auto tmp = test::scratchDir("cli_map_normals_seconds");
   std::string log;
-  ASSERT_EQ(runHpds("synth -o " + shellQuote(tmp / "s") + " --frames 3 --beams 16 --azimuth-steps 900", &log), 0) << log;
+  ASSERT_EQ(runHpds("synth -o " + shellQuote(tmp / "s") + " --frames 3 --beams 16 --azimuth-steps 900", &log), 0)
+      << log;
   {
     std::ofstream f(tmp / "nothing.pcd");  // the synthetic frames' fields (with their 2 padding bytes), no return
     f << "# .PCD v0.7\nVERSION 0.7\nFIELDS x y z intensity ring _ time\nSIZE 4 4 4 4 2 1 4\nTYPE F F F F U U F\n"

@@ -298,11 +298,13 @@ TEST(HostileCli, AnInputFrameFieldIsNotTakenForHpdssOwn) {
   const auto tmp = test::scratchDir("hostile_frame_field");
   std::string body;
   for (int i = 0; i < 30; ++i)
-    for (int j = 0; j < 30; ++j) body += std::to_string(0.1 * i) + " " + std::to_string(0.1 * j) + " 2 " + std::to_string((i + j) % 3) + "\n";
+    for (int j = 0; j < 30; ++j)
+      body += std::to_string(0.1 * i) + " " + std::to_string(0.1 * j) + " 2 " + std::to_string((i + j) % 3) + "\n";
   writeText(tmp / "f.pcd", "VERSION 0.7\nFIELDS x y z frame\nSIZE 4 4 4 4\nTYPE F F F U\nCOUNT 1 1 1 1\nWIDTH 900\n"
                            "HEIGHT 1\nPOINTS 900\nDATA ascii\n" + body);
   std::string log;
-  ASSERT_EQ(hpds("sample " + q(tmp / "f.pcd") + " --mode map --no-normals --spacing 0.2 -o " + q(tmp / "m.ply"), &log), 0)
+  ASSERT_EQ(
+      hpds("sample " + q(tmp / "f.pcd") + " --mode map --no-normals --spacing 0.2 -o " + q(tmp / "m.ply"), &log), 0)
       << log;
   EXPECT_NE(log.find("input field 'frame'"), std::string::npos) << log;
   EXPECT_EQ(readPointCloud((tmp / "m.ply").string()).layout().find("frame"), nullptr);
