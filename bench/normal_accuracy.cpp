@@ -343,6 +343,28 @@ std::vector<SampleSet> gridBaselines(const GroundTruth &gt, const pcl::search::K
   return sets;
 }
 
+/// Samples `ids` of `h` as a SampleSet, each with the ground-truth index its record carries ("gt").
+SampleSet hierarchySamples(const Hierarchy &h, const std::vector<SampleId> &ids, const std::string &method) {
+  const PointField *gtf = h.recordLayout().find("gt");
+  SampleSet set;
+  set.method = method;
+  for (SampleId id : ids) {
+    const double *q = h.position(id);
+    set.points->push_back(pcl::PointXYZ(float(q[0]), float(q[1]), float(q[2])));
+    set.truth.push_back(static_cast<std::uint32_t>(readAsDouble(h.record(id), *gtf)));
+  }
+  return set;
+}
+
+/// hpds normals as score() takes them: NaN where a normal could not be estimated.
+std::vector<Eigen::Vector3d> scoredNormals(const std::vector<SampleNormal> &normals) {
+  std::vector<Eigen::Vector3d> out(normals.size());
+  for (std::size_t i = 0; i < normals.size(); ++i)
+    out[i] = normals[i].valid ? Eigen::Vector3d(normals[i].normal[0], normals[i].normal[1], normals[i].normal[2])
+                              : Eigen::Vector3d::Constant(NAN);
+  return out;
+}
+
 }  // namespace
 
 int main(int argc, char **argv) {
@@ -391,14 +413,7 @@ int main(int argc, char **argv) {
     for (const Frame &f : gt.frames) pipeline.addFrame(f);
     const Hierarchy &h = pipeline.hierarchy();
     const std::vector<SampleId> ids = pipeline.outputSamples();
-    const PointField *gtf = h.recordLayout().find("gt");
-    SampleSet hp;
-    hp.method = "hpds";
-    for (SampleId id : ids) {
-      const double *q = h.position(id);
-      hp.points->push_back(pcl::PointXYZ(float(q[0]), float(q[1]), float(q[2])));
-      hp.truth.push_back(static_cast<std::uint32_t>(readAsDouble(h.record(id), *gtf)));
-    }
+    const SampleSet hp = hierarchySamples(h, ids, "hpds");
     const std::size_t target = ids.size();
 
     pcl::search::KdTree<pcl::PointXYZ> input_tree;
@@ -433,10 +448,7 @@ int main(int argc, char **argv) {
         const auto tn = std::chrono::steady_clock::now();
         const std::vector<SampleNormal> hn = estimateNormals(h, ids, np);
         seconds[std::string(v.name) + "_" + nb] += std::chrono::duration<double>(std::chrono::steady_clock::now() - tn).count();
-        std::vector<Eigen::Vector3d> hpds_normals(hn.size());
-        for (std::size_t i = 0; i < hn.size(); ++i)
-          hpds_normals[i] = hn[i].valid ? Eigen::Vector3d(hn[i].normal[0], hn[i].normal[1], hn[i].normal[2])
-                                        : Eigen::Vector3d::Constant(NAN);
+        const std::vector<Eigen::Vector3d> hpds_normals = scoredNormals(hn);
         SampleSet hv = hp;
         hv.method = v.name;
         ErrorSet e = score(gt, hv, hpds_normals);
@@ -446,14 +458,16 @@ int main(int argc, char **argv) {
         if (knn && v.name == std::string("hpds_refined")) writePictures(o, scene, gt, hp, hpds_normals, "hpds_refined_knn");
       }
 
+      // The node's pipelines with the refined estimator's settings above.
+      HpdsConfig refined = cfg;
+      refined.normals.k = knn ? o.k : 0;
+      refined.normals.radius = knn ? 0.0 : radius;
+      refined.normals.min_neighbors = 3;
+      refined.normals.neighborhood_level_offset = o.level_offset;
+      refined.normals.max_growth = o.max_growth;
       {
-        // The node's scan mode: each frame on its own, with the refined estimator's settings above.
-        HpdsConfig sc = cfg;
-        sc.normals.k = knn ? o.k : 0;
-        sc.normals.radius = knn ? 0.0 : radius;
-        sc.normals.min_neighbors = 3;
-        sc.normals.neighborhood_level_offset = o.level_offset;
-        sc.normals.max_growth = o.max_growth;
+        // Scan mode: each frame on its own.
+        const HpdsConfig &sc = refined;
         const auto tn = std::chrono::steady_clock::now();
         const bench::ScanModeNormals r = bench::scanModeNormals(gt.frames, sc);
         seconds["hpds_scan_" + nb] += std::chrono::duration<double>(std::chrono::steady_clock::now() - tn).count();
@@ -467,33 +481,16 @@ int main(int argc, char **argv) {
       }
 
       if (!o.scan_only) {
-        // The node's map mode: the normals the map keeps, each from the frame that saw its sample from closest.
-        HpdsConfig mc = cfg;
+        // Map mode at its defaults: the normals the map keeps, each from the frame that saw its sample from closest.
+        HpdsConfig mc = refined;
         mc.map.keep_depth = -1;
-        mc.normals.k = knn ? o.k : 0;
-        mc.normals.radius = knn ? 0.0 : radius;
-        mc.normals.min_neighbors = 3;
-        mc.normals.neighborhood_level_offset = o.level_offset;
-        mc.normals.max_growth = o.max_growth;
         Pipeline mp(mc);
         double frames_normals = 0.0;
         for (const Frame &f : gt.frames) frames_normals += mp.addFrame(f).seconds_normals;
         const std::vector<SampleId> mids = mp.outputSamples();
         const std::vector<SampleNormal> mn = mp.normals(mids);
         seconds["hpds_map_" + nb] += frames_normals;
-        const Hierarchy &mh = mp.hierarchy();
-        const PointField *mgt = mh.recordLayout().find("gt");
-        SampleSet ms;
-        ms.method = "hpds_map";
-        std::vector<Eigen::Vector3d> map_normals(mids.size());
-        for (std::size_t i = 0; i < mids.size(); ++i) {
-          const double *q = mh.position(mids[i]);
-          ms.points->push_back(pcl::PointXYZ(float(q[0]), float(q[1]), float(q[2])));
-          ms.truth.push_back(static_cast<std::uint32_t>(readAsDouble(mh.record(mids[i]), *mgt)));
-          map_normals[i] = mn[i].valid ? Eigen::Vector3d(mn[i].normal[0], mn[i].normal[1], mn[i].normal[2])
-                                       : Eigen::Vector3d::Constant(NAN);
-        }
-        ErrorSet e = score(gt, ms, map_normals);
+        ErrorSet e = score(gt, hierarchySamples(mp.hierarchy(), mids, "hpds_map"), scoredNormals(mn));
         e.scene = scene.name, e.neighborhood = nb;
         results.push_back(e);
       }
