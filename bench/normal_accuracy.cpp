@@ -172,6 +172,14 @@ struct ErrorSet {
   std::vector<double> errors;  // degrees, 90 for invalid
   std::vector<ObjectKind> kinds;  // of each sample's true surface
   std::size_t invalid = 0;
+  // Oriented methods (hpds's: toward the sensor) only; PCL's normals here are unoriented (NaN).
+  std::size_t wrong_side = 0;  // valid normals facing away from the true, sensor-facing normal
+  std::vector<std::uint8_t> away;  // per sample: 1 where it does
+  bool oriented = false;
+  double wrongSidePct() const {
+    return oriented ? 100.0 * static_cast<double>(wrong_side) / static_cast<double>(std::max<std::size_t>(1, count - invalid))
+                    : NAN;
+  }
   double quantile(double q) const {
     if (errors.empty()) return NAN;
     std::vector<double> e = errors;
@@ -257,7 +265,9 @@ ErrorSet score(const GroundTruth &gt, const SampleSet &s, const std::vector<Eige
   e.method = s.method;
   e.count = s.points->size();
   e.cell = s.cell;
+  e.oriented = s.method.rfind("hpds", 0) == 0 || s.method.rfind("ablation_hpds", 0) == 0;
   e.errors.resize(normals.size());
+  e.away.assign(normals.size(), 0);
   for (std::uint32_t t : s.truth) e.kinds.push_back(gt.kind[t]);
   for (std::size_t i = 0; i < normals.size(); ++i) {
     const Eigen::Vector3d &n = normals[i];
@@ -266,8 +276,10 @@ ErrorSet score(const GroundTruth &gt, const SampleSet &s, const std::vector<Eige
       ++e.invalid;
       continue;
     }
-    const double c = std::min(1.0, std::abs(n.normalized().dot(gt.normal[s.truth[i]])));
-    e.errors[i] = std::acos(c) * kRadToDeg;
+    const double dot = n.normalized().dot(gt.normal[s.truth[i]]);
+    e.errors[i] = std::acos(std::min(1.0, std::abs(dot))) * kRadToDeg;
+    e.away[i] = dot < 0.0 ? 1 : 0;
+    e.wrong_side += e.away[i];
   }
   return e;
 }
@@ -533,7 +545,7 @@ int main(int argc, char **argv) {
   const fs::path out(o.out_dir);
   {
     std::ofstream csv(out / "normal_accuracy.csv");
-    csv << "scene,method,neighborhood,count,cell,invalid_pct,median_deg,p90_deg,over10_pct,mean_deg\n";
+    csv << "scene,method,neighborhood,count,cell,invalid_pct,median_deg,p90_deg,over10_pct,mean_deg,wrong_side_pct\n";
     std::ofstream q(out / "normal_errors.csv");
     q << "scene,method,neighborhood,quantile,error_deg\n";
     std::ofstream json(out / "normal_accuracy.json");
@@ -545,11 +557,13 @@ int main(int argc, char **argv) {
       for (double v : e.errors) mean += v / static_cast<double>(e.errors.size());
       const double inv = 100.0 * static_cast<double>(e.invalid) / static_cast<double>(std::max<std::size_t>(1, e.count));
       csv << e.scene << "," << e.method << "," << e.neighborhood << "," << e.count << "," << e.cell << "," << inv << ","
-          << e.quantile(0.5) << "," << e.quantile(0.9) << "," << 100.0 * e.fractionOver(10.0) << "," << mean << "\n";
+          << e.quantile(0.5) << "," << e.quantile(0.9) << "," << 100.0 * e.fractionOver(10.0) << "," << mean << ","
+          << (e.oriented ? std::to_string(e.wrongSidePct()) : std::string()) << "\n";
       json << "    {\"scene\": \"" << e.scene << "\", \"method\": \"" << e.method << "\", \"neighborhood\": \""
            << e.neighborhood << "\", \"count\": " << e.count << ", \"cell\": " << e.cell << ", \"invalid_pct\": " << inv
            << ", \"median_deg\": " << e.quantile(0.5) << ", \"p90_deg\": " << e.quantile(0.9)
-           << ", \"over10_pct\": " << 100.0 * e.fractionOver(10.0) << ", \"mean_deg\": " << mean << "}"
+           << ", \"over10_pct\": " << 100.0 * e.fractionOver(10.0) << ", \"mean_deg\": " << mean
+           << ", \"wrong_side_pct\": " << (e.oriented ? std::to_string(e.wrongSidePct()) : std::string("null")) << "}"
            << (i + 1 < results.size() ? ",\n" : "\n");
       std::vector<double> sorted = e.errors;
       std::sort(sorted.begin(), sorted.end());
@@ -565,14 +579,16 @@ int main(int argc, char **argv) {
   std::ostringstream md;
   md << "Angular error of unoriented normals against the exact surface normal, in degrees, at equal sample count "
         "(hpds levels 0.." << o.level << ", r_L = " << fmt(r_level, 3) << " m). k-NN: k = " << o.k
-     << "; radius: " << fmt(radius, 3) << " m. Failed estimates count as 90 degrees. hpds_refined: "
+     << "; radius: " << fmt(radius, 3) << " m. Failed estimates count as 90 degrees. Facing away: the share of valid "
+        "normals on the other side of the true, sensor-facing normal (hpds orients toward the sensor; the PCL rows are "
+        "unoriented). hpds_refined: "
      << "neighborhood_level_offset = " << o.level_offset << ", max_growth = " << fmt(o.max_growth, 0) << ".\n\nScenes:";
   for (const Scene &sc : scenes(o.quick)) md << " " << sc.name << " (" << sc.description << ");";
   md << "\n\n";
   auto table = [&](bool ablation) {
     for (const std::string nb : {"knn", "radius"}) {
-      md << "| scene (" << nb << ") | method | samples | leaf/radius [m] | median | p90 | > 10 deg | failed |\n"
-         << "|---|---|---:|---:|---:|---:|---:|---:|\n";
+      md << "| scene (" << nb << ") | method | samples | leaf/radius [m] | median | p90 | > 10 deg | failed | facing away |\n"
+         << "|---|---|---:|---:|---:|---:|---:|---:|---:|\n";
       for (const ErrorSet &e : results) {
         const bool is_ablation = e.method.rfind("ablation_", 0) == 0;
         if (e.neighborhood != nb || is_ablation != ablation) continue;
@@ -580,7 +596,7 @@ int main(int argc, char **argv) {
            << " | " << fmt(e.quantile(0.5)) << " | " << fmt(e.quantile(0.9)) << " | "
            << fmt(100.0 * e.fractionOver(10.0), 1) << " % | "
            << fmt(100.0 * static_cast<double>(e.invalid) / static_cast<double>(std::max<std::size_t>(1, e.count)), 1)
-           << " % |\n";
+           << " % | " << (e.oriented ? fmt(e.wrongSidePct(), 1) + " %" : std::string("-")) << " |\n";
       }
       md << "\n";
     }
@@ -607,18 +623,27 @@ int main(int argc, char **argv) {
   md << "\nAblation: each refinement alone, and the growth rule given to the voxel grid too:\n\n";
   table(true);
   // Where the errors are: p90 per surface kind (k-NN), for the main methods.
-  md << "p90 error [deg] by surface kind (k-NN; share of samples in brackets):\n\n";
+  md << "p90 error [deg] by surface kind (k-NN; share of samples in brackets, and of its valid normals facing away):\n\n";
   for (const ErrorSet &e : results) {
     if (e.neighborhood != "knn" || (e.method.rfind("hpds", 0) != 0 && e.method.rfind("ablation", 0) != 0 && e.method != "voxel_grid")) continue;
     md << "- " << e.scene << " / " << e.method << ":";
     for (int k = 1; k < kObjectKindCount; ++k) {
       std::vector<double> sub;
+      std::size_t away = 0, valid = 0;
       for (std::size_t i = 0; i < e.errors.size(); ++i)
-        if (static_cast<int>(e.kinds[i]) == k) sub.push_back(e.errors[i]);
+        if (static_cast<int>(e.kinds[i]) == k) {
+          sub.push_back(e.errors[i]);
+          away += e.away[i];
+          valid += e.errors[i] < 90.0 ? 1 : 0;
+        }
       if (sub.empty()) continue;
       std::sort(sub.begin(), sub.end());
       md << " " << toString(static_cast<ObjectKind>(k)) << " " << fmt(sub[std::min(sub.size() - 1, sub.size() * 9 / 10)], 1)
-         << " (" << fmt(100.0 * static_cast<double>(sub.size()) / static_cast<double>(e.errors.size()), 0) << " %)";
+         << " (" << fmt(100.0 * static_cast<double>(sub.size()) / static_cast<double>(e.errors.size()), 0) << " %"
+         << (e.oriented ? ", " + fmt(100.0 * static_cast<double>(away) / static_cast<double>(std::max<std::size_t>(1, valid)), 1) +
+                              " % away"
+                        : std::string())
+         << ")";
     }
     md << "\n";
   }
