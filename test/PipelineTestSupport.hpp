@@ -1,10 +1,13 @@
 // Helpers of the pipeline tests (test_pipeline_*.cpp, test_insertion_order.cpp): a frame made from a list of points,
-// and the small synthetic lidar most of them drive the pipeline with.
+// the small synthetic lidar most of them drive the pipeline with, and the promised orientation of normals.
 #pragma once
 
 #include <array>
+#include <cmath>
 #include <cstddef>
 #include <vector>
+
+#include <Eigen/Core>
 
 #include "hpds/eval/SyntheticLidar.hpp"
 #include "hpds/points/Frame.hpp"
@@ -44,6 +47,17 @@ inline SyntheticLidarConfig smallLidar(SceneKind scene = SceneKind::Urban, int f
   c.frames = frames;
   c.scene = scene;
   return c;
+}
+
+/// The orientation NormalEstimator.hpp promises, written from its contract: a normal n of a sample whose unit
+/// direction to its viewpoint is v faces the viewpoint (n.v >= 0), except that one within 11.5 degrees of
+/// perpendicular to v (|n.v| < 0.2) and within 60 degrees of `up` (|n.up| >= 0.5) faces it along `up`
+/// ((n.up)(v.up) >= 0), unless the sample is level with the sensor (|v.up| < 1e-3).
+inline bool orientedAsPromised(const Eigen::Vector3d &n, const Eigen::Vector3d &v,
+                               const Eigen::Vector3d &up = Eigen::Vector3d::UnitZ()) {
+  if (std::abs(n.dot(v)) < 0.2 && std::abs(n.dot(up)) >= 0.5 && std::abs(v.dot(up)) >= 1e-3)
+    return n.dot(up) * v.dot(up) >= 0.0;
+  return n.dot(v) >= 0.0;
 }
 
 }  // namespace hpds::test

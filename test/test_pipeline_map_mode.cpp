@@ -273,7 +273,8 @@ TEST(MapNormals, EverySampleKeepsTheNormalOfTheFrameThatSawItFromClosest) {
     }
     // Faces the sensor of the frame that contributed it.
     const auto v = p.hierarchy().toViewpoint(ids[i]);
-    EXPECT_GE(after[i].normal[0] * v[0] + after[i].normal[1] * v[1] + after[i].normal[2] * v[2], 0.0f);
+    EXPECT_TRUE(test::orientedAsPromised(Eigen::Vector3d(after[i].normal[0], after[i].normal[1], after[i].normal[2]),
+                                         Eigen::Vector3d(v[0], v[1], v[2])));
   }
   EXPECT_GT(valid, ids.size() * 95 / 100) << "frame 0's samples get valid normals from frame 0 alone";
   EXPECT_GT(kept, 1000u);

@@ -279,7 +279,7 @@ std::vector<SampleNormal> estimateNormalsRefined(const Hierarchy &h, const std::
   if (neighbourhoods)
     for (std::size_t i = 0; i < ids.size(); ++i)
       if (have[i]) (*neighbourhoods)[i] = chosen[i];
-  orientTowardViewpoints(h, ids, result, params.threads);
+  orientTowardViewpoints(h, ids, result, params.up, params.threads);
   return result;
 }
 
