@@ -592,7 +592,8 @@ int main(int argc, char **argv) {
   md << "\n\n";
   auto table = [&](bool ablation) {
     for (const std::string nb : {"knn", "radius"}) {
-      md << "| scene (" << nb << ") | method | samples | leaf/radius [m] | median | p90 | > 10 deg | failed | facing away |\n"
+      md << "| scene (" << nb << ") | method | samples | leaf/radius [m] | median | p90 | > 10 deg | failed "
+         << "| facing away |\n"
          << "|---|---|---:|---:|---:|---:|---:|---:|---:|\n";
       for (const ErrorSet &e : results) {
         const bool is_ablation = e.method.rfind("ablation_", 0) == 0;
