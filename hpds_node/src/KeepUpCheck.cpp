@@ -10,11 +10,17 @@ namespace hpds_node {
 namespace {
 constexpr std::size_t kKept = 64;
 
-double median(const std::deque<double> &values) {
-  std::vector<double> v(values.begin(), values.end());
+// Gaps this much shorter or longer than the usual one, all in a row, are a new rate.
+constexpr double kRateChange = 1.5;
+
+template <class It>
+double median(It begin, It end) {
+  std::vector<double> v(begin, end);
   std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2), v.end());
   return v[v.size() / 2];
 }
+
+double median(const std::deque<double> &values) { return median(values.begin(), values.end()); }
 
 void keep(std::deque<double> &values, double v) {
   values.push_back(v);
@@ -29,16 +35,27 @@ std::string format(const char *pattern, double a, double b = 0.0, double c = 0.0
 }  // namespace
 
 KeepUpCheck::KeepUpCheck(const hpds::HpdsConfig &config, std::size_t workers, std::size_t judge_after,
-                         double tf_timeout)
+                         double tf_timeout, std::size_t queue_size)
     : config_(config),
       workers_(std::max<std::size_t>(1, workers)),
       judge_after_(std::max<std::size_t>(1, judge_after)),
+      // A back-to-back delivery makes the queue overflow by its (workers + queue_size + 1)-th frame at the latest,
+      // one gap short of this: its drop is never taken for a new rate.
+      rate_change_gaps_(std::max<std::size_t>(1, workers) + std::max<std::size_t>(1, queue_size) + 1),
       tf_timeout_(tf_timeout) {}
 
 void KeepUpCheck::arrived(double wall_seconds) {
   // A burst (several messages at one instant) gives no period: only positive gaps count.
   if (last_arrival_ >= 0.0 && wall_seconds > last_arrival_) keep(gaps_, wall_seconds - last_arrival_);
   last_arrival_ = wall_seconds;
+  // Kept across a change of rate, the older gaps would go on setting the median (for up to half the window), and a
+  // drop soon after the input sped up would quote the old period and be called a moment behind.
+  if (gaps_.size() <= rate_change_gaps_) return;
+  const auto recent = gaps_.end() - static_cast<std::ptrdiff_t>(rate_change_gaps_);
+  const double usual = median(gaps_.begin(), recent);
+  const bool faster = std::all_of(recent, gaps_.end(), [&](double g) { return g < usual / kRateChange; });
+  const bool slower = std::all_of(recent, gaps_.end(), [&](double g) { return g > usual * kRateChange; });
+  if (faster || slower) gaps_.erase(gaps_.begin(), recent);
 }
 
 std::string KeepUpCheck::processed(double seconds, double waited) {

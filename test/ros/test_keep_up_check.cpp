@@ -149,6 +149,69 @@ TEST(KeepUpCheck, TheFirstOverloadDropIsReportedOnceWithWhatWasMeasured) {
   EXPECT_EQ(slow.dropped(), "");
 }
 
+// 10 Hz frames of 60 ms (the workers keep up, the verdict says nothing), then `after` more arrivals `period` apart,
+// the first `pause` seconds after the last 10 Hz one.
+void keptUpThen(KeepUpCheck &check, double pause, double period, int after) {
+  for (int i = 0; i < 64; ++i) {
+    check.arrived(0.1 * i);
+    EXPECT_EQ(check.processed(i == 0 ? 3.0 : 0.06), "") << i;
+  }
+  ASSERT_TRUE(check.judged());
+  for (int k = 0; k < after; ++k) {
+    check.arrived(6.3 + pause + period * k);
+    EXPECT_EQ(check.processed(0.06), "");
+  }
+}
+
+// The gaps of the last 64 arrivals were the period: a drop soon after the input sped up quoted the old rate and
+// called an input the worker can no longer follow a moment's lag.
+TEST(KeepUpCheck, ADropAfterTheRateRoseQuotesTheNewRate) {
+  KeepUpCheck check(hpds::HpdsConfig{}, 1, 8);
+  keptUpThen(check, 0.05, 0.05, 4);  // 20 Hz from the 65th frame on
+  const std::string w = check.dropped();
+  EXPECT_TRUE(contains(w, "cannot keep up")) << w;
+  EXPECT_TRUE(contains(w, "every 50 ms (20.0 Hz) and take 60 ms each")) << w;
+  EXPECT_TRUE(contains(w, "about 17% of the frames will be dropped")) << w;  // 1 - 50/60
+}
+
+// The same after a pause (a bag paused, a sensor restarted) that ends at another rate; a pause that ends at the old
+// rate is one long gap, which leaves the period as it was.
+TEST(KeepUpCheck, ADropAfterAPauseQuotesTheRateTheInputResumedAt) {
+  KeepUpCheck faster(hpds::HpdsConfig{}, 1, 8);
+  keptUpThen(faster, 30.0, 0.04, 4);  // 25 Hz after 30 s without input
+  const std::string w = faster.dropped();
+  EXPECT_TRUE(contains(w, "cannot keep up")) << w;
+  EXPECT_TRUE(contains(w, "every 40 ms (25.0 Hz)")) << w;
+
+  KeepUpCheck same(hpds::HpdsConfig{}, 1, 8);
+  keptUpThen(same, 30.0, 0.1, 5);
+  const std::string s = same.dropped();
+  EXPECT_TRUE(contains(s, "fell behind the input for a moment")) << s;
+  EXPECT_TRUE(contains(s, "every 100 ms (10.0 Hz)")) << s;
+}
+
+// A stalled connection delivers the frames it held back to back: too few to fill the queue and the workers are no
+// new rate, so the drop they cause is a moment behind the usual rate, as before.
+TEST(KeepUpCheck, FramesDeliveredBackToBackAfterAStallKeepThePeriod) {
+  KeepUpCheck check(hpds::HpdsConfig{}, 1, 8);
+  keptUpThen(check, 0.3, 0.001, 3);  // two frames held back come with the third: it finds the queue full
+  const std::string w = check.dropped();
+  EXPECT_TRUE(contains(w, "fell behind the input for a moment")) << w;
+  EXPECT_TRUE(contains(w, "every 100 ms (10.0 Hz)")) << w;
+
+  // Two workers and two queued frames take four of them; the fifth is dropped.
+  KeepUpCheck larger(hpds::HpdsConfig{}, 2, 8, 0.0, 2);
+  keptUpThen(larger, 0.5, 0.001, 5);
+  const std::string l = larger.dropped();
+  EXPECT_TRUE(contains(l, "every 100 ms (10.0 Hz)")) << l;
+  // The same queue after a rise to 40 Hz: five gaps in a row are the new rate.
+  KeepUpCheck rose(hpds::HpdsConfig{}, 2, 8, 0.0, 2);
+  keptUpThen(rose, 0.025, 0.025, 5);
+  const std::string r = rose.dropped();
+  EXPECT_TRUE(contains(r, "every 25 ms (40.0 Hz)")) << r;
+  EXPECT_TRUE(contains(r, "cannot keep up")) << r;  // 60 ms a frame on two workers: 30 ms per frame
+}
+
 TEST(KeepUpCheck, AdviceFollowsTheConfig) {
   hpds::HpdsConfig config;
   config.mode = hpds::Mode::Map;

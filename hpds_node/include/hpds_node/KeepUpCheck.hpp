@@ -6,11 +6,16 @@
 //   transform, and for a frame dropped for want of a transform only the wait (seconds 0); dropped() every frame
 //   dropped because the queue was full. Only the last 64 gaps and times are kept. The verdict weighs processing
 //   only: a wait for a lagging transform shrinks as the worker falls behind, so it is no cost of its own.
+// - Period: the median gap between arrivals since the input last changed rate. A change is `workers + queue_size +
+//   1` gaps in a row all shorter than 2/3 of the median of the gaps before them, or all longer than 3/2 of it (the
+//   input sped up or slowed down, also after a pause); only those gaps are then kept. Frames that a stalled
+//   connection delivers back to back overflow the queue by then, so the drop they cause is judged against the usual
+//   rate. A pause that ends at the old rate is one long gap, which the median ignores.
 // - Verdict: with the `judge_after`-th processed frame after the first (the first pays for allocations and is left
-//   out), the input period is the median gap between arrivals and the cost the median processing time. When
-//   cost > workers * period the queue must drop frames: processed() returns the warning. The verdict is taken once.
+//   out), the cost is the median processing time. When cost > workers * period the queue must drop frames:
+//   processed() returns the warning. The verdict is taken once.
 // - dropped() returns the warning at the first overload drop, whatever the verdict (a load spike, a frame larger
-//   than the first ones), with the numbers measured so far.
+//   than the first ones), with the current period and the costs measured so far.
 // - Each returns a non-empty text at most once over both: the warning names the measured period and cost, the share
 //   of frames lost and the settings that lower the cost, with their current values; when frames wait for their
 //   transforms for more than half the input period, it says that too (a missing or late transform, ros/tf_timeout).
@@ -29,9 +34,10 @@ namespace hpds_node {
 class KeepUpCheck {
  public:
   /// `config`: what the frames run with (for the advice); `workers`: frames processed at once; `tf_timeout`: the
-  /// longest wait for a transform [s] (ros/tf_timeout, for the advice).
+  /// longest wait for a transform [s] (ros/tf_timeout, for the advice); `queue_size`: frames waiting for a worker
+  /// (ros/queue_size).
   KeepUpCheck(const hpds::HpdsConfig &config, std::size_t workers, std::size_t judge_after = 8,
-              double tf_timeout = 0.0);
+              double tf_timeout = 0.0, std::size_t queue_size = 1);
 
   void arrived(double wall_seconds);
   /// The warning when this frame completes a failed verdict (see contract), else "".
@@ -48,6 +54,7 @@ class KeepUpCheck {
   hpds::HpdsConfig config_;
   std::size_t workers_;
   std::size_t judge_after_;
+  std::size_t rate_change_gaps_;
   double tf_timeout_;
   bool judged_ = false, warned_ = false, first_skipped_ = false;
   std::size_t costs_seen_ = 0;

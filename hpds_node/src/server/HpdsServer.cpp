@@ -48,7 +48,8 @@ HpdsServer::HpdsServer(ros::NodeHandle nh, ros::NodeHandle private_nh, const std
   NodeConfig per_worker = config_;
   if (workers > 1) per_worker.hpds.threads = 1;
   for (std::size_t w = 0; w < workers; ++w) processors_.push_back(std::make_unique<FrameProcessor>(per_worker));
-  keep_up_ = std::make_unique<KeepUpCheck>(config_.hpds, workers, 8, config_.ros.tf_timeout);
+  keep_up_ = std::make_unique<KeepUpCheck>(config_.hpds, workers, 8, config_.ros.tf_timeout,
+                                           static_cast<std::size_t>(config_.ros.queue_size));
   target_frame_ = processors_.front()->targetFrame();
   const bool map_mode = config_.hpds.mode == hpds::Mode::Map;
   // Before anything is advertised: a node that cannot load its map, or could not save it at the end of a run,
