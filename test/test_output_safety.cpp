@@ -17,6 +17,7 @@
 #include <unistd.h>
 
 #include <chrono>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <random>
@@ -390,6 +391,42 @@ TEST_F(OutputSafety, UnwritableOrMisnamedOutputsAreRefusedBeforeAnyWork) {
   }
   // A device is no file to lose: any name.
   EXPECT_EQ(test::runHpds(sample + " -o /dev/null", &log), 0) << log;
+}
+
+// An output is written whole under a temporary name and renamed into place, which a pipe cannot take. Written into
+// directly, `-o FIFO` sampled everything and then waited for a reader that may never come, and a reader got a
+// cloud even when a later output failed. Each run here has a deadline: a run that waits fails the test, not hangs.
+TEST_F(OutputSafety, PipesAndOtherSpecialFilesAreRefusedAsOutputsBeforeAnyWork) {
+  writeRandomCloud(dir_ / "a.ply", 2000);
+  const fs::path fifo = dir_ / "fifo.ply";
+  ASSERT_EQ(::mkfifo(fifo.c_str(), 0644), 0) << std::strerror(errno);
+  fs::create_symlink(fifo, dir_ / "to_fifo.ply");
+  fs::create_directory(dir_ / "pictures");
+  ASSERT_EQ(::mkfifo((dir_ / "pictures" / "render_feature_top.png").c_str(), 0644), 0) << std::strerror(errno);
+  const auto q = [&](const std::string &name) { return " " + shellQuote(dir_ / name); };
+  const std::string deadline = "timeout -s KILL 30 " + test::cliPath() + " ";
+  const std::string sample = deadline + "sample" + q("a.ply");
+  const std::vector<Refusal> cases = {
+      {sample + " -o" + q("fifo.ply"), "-o: '" + fifo.string() + "' is a pipe (FIFO)"},
+      {sample + " -o" + q("to_fifo.ply"), "is a pipe (FIFO)"},
+      {sample + " -o" + q("out.ply") + " --stats" + q("fifo.ply"), "--stats: '" + fifo.string() + "' is a pipe"},
+      // The shell's pipe behind /dev/stdout (test::runCommand reads the output through one).
+      {sample + " -o /dev/stdout", "-o: '/dev/stdout' is a pipe (FIFO)"},
+      {deadline + "render" + q("a.ply") + " -o" + q("pictures"), "is a pipe (FIFO)"},
+  };
+  for (const Refusal &c : cases) {
+    std::string log;
+    EXPECT_EQ(test::runCommand(c.args, &log), 1) << c.args << "\n" << log;
+    EXPECT_NE(log.find("hpds: error: "), std::string::npos) << log;
+    EXPECT_NE(log.find(c.message), std::string::npos) << c.args << "\n" << log;
+    EXPECT_NE(log.find("write to a file"), std::string::npos) << log;
+    EXPECT_EQ(log.find("samples"), std::string::npos) << c.args << ": sampled before the refusal\n" << log;
+    EXPECT_FALSE(fs::exists(dir_ / "out.ply")) << c.args;
+  }
+  EXPECT_TRUE(fs::is_fifo(fifo));
+  // The null device discards an output under any name, as before.
+  std::string log;
+  EXPECT_EQ(test::runCommand(sample + " -o /dev/null", &log), 0) << log;
 }
 
 }  // namespace

@@ -66,6 +66,25 @@ void checkExtension(const OutputPath &o) {
                                " needs another name, e.g. map.hpdsmap");
 }
 
+// Why an existing output that is not a regular file cannot be written, or "" when it can. Every output goes whole
+// to a temporary beside it, renamed into place once every output of the run is complete; a pipe or a device can
+// only be written into. A pipe would then hold the run, after all its work, until something reads it, and a
+// reader would get a cloud whose run failed on a later output. The null device takes anything and keeps nothing.
+std::string specialFileProblem(const struct stat &st) {
+  if (S_ISREG(st.st_mode)) return {};
+  const std::string advice = ": hpds writes each output whole under a temporary name and renames it into place; "
+                             "write to a file and read that (or to /dev/null to discard the output)";
+  if (S_ISFIFO(st.st_mode)) return "is a pipe (FIFO), not a regular file" + advice;
+  if (S_ISCHR(st.st_mode)) {
+    struct stat null {};
+    if (::stat("/dev/null", &null) == 0 && S_ISCHR(null.st_mode) && null.st_rdev == st.st_rdev) return {};
+    return "is a character device (a terminal?), not a regular file" + advice;
+  }
+  if (S_ISDIR(st.st_mode)) return "is a directory";
+  return std::string(S_ISBLK(st.st_mode) ? "is a block device" : "is a socket or other special file") +
+         ", not a regular file" + advice;
+}
+
 struct Planned {
   std::string flag, path, updates;
   std::optional<Identity> id;
@@ -80,8 +99,9 @@ void checkPaths(const std::vector<InputPath> &inputs, const std::vector<OutputPa
     if (o.path.empty()) continue;
     struct stat st {};
     const bool exists = ::stat(o.path.c_str(), &st) == 0;
-    if (exists && S_ISDIR(st.st_mode)) refuse(o.flag, o.path, "is a directory");
-    // Devices and FIFOs are written in place and hold nothing to lose: any name, no folder to write into.
+    if (exists)
+      if (const std::string why = specialFileProblem(st); !why.empty()) refuse(o.flag, o.path, why);
+    // The null device is written in place and holds nothing to lose: any name, no folder to write into.
     if (!exists || S_ISREG(st.st_mode)) {
       checkExtension(o);
       // The folder the file lands in: a symbolic link's target's (AtomicFile follows links, even a dangling one).
@@ -108,6 +128,8 @@ void checkPaths(const std::vector<InputPath> &inputs, const std::vector<OutputPa
     }
     for (const std::string &name : f.files) {
       const std::string path = (fs::path(f.path) / name).string();
+      if (struct stat file {}; ::stat(path.c_str(), &file) == 0)
+        if (const std::string why = specialFileProblem(file); !why.empty()) refuse(f.flag, path, why);
       planned.push_back({f.flag, path, "", identify(path)});
     }
   }

@@ -11,7 +11,10 @@
 //     an output that does not exist yet is identified by its folder's identity and its name.
 // - An output may be declared as an update of one input (`--save-map` of the `--load-map` file): that input is read
 //   completely before the output is written, and the write is atomic (AtomicFile), so nothing is lost.
-// - Existing devices and FIFOs (/dev/null) are accepted as outputs of any extension: they hold nothing to destroy.
+// - An existing output that is not a regular file is refused: a pipe (a FIFO, /dev/stdout into a pipe), a terminal
+//   or other device, a socket. Outputs are written whole under a temporary name and renamed into place (AtomicFile),
+//   which such a file cannot take; written into directly, a pipe would hold the run after its work until read. The
+//   null device (/dev/null) is accepted under any name: it discards the output.
 // - Outputs that are folders (render, analyze, synth -o DIR) are checked as the folder they will create or fill,
 //   plus every file name the command writes into it.
 #pragma once
