@@ -357,6 +357,46 @@ TEST(Cli, NanOnlyAndHugeCoordinateFramesAreCountedNotFatal) {
   EXPECT_EQ(readPointCloud((tmp / "huge8.ply").string()).size(), 3u);
 }
 
+// Points beyond the exact key range of the finest level are never inserted (counted as out_of_range), so no sample
+// covers them: `verify --input` counted them as uncovered and failed a sampling that did all it could.
+TEST(Cli, VerifyLeavesInputPointsBeyondTheKeyRangeOutOfCoverage) {
+  const auto tmp = test::scratchDir("cli_verify_key_range");
+  PointLayout l;
+  for (const char *n : {"x", "y", "z"}) l.append(n, FieldType::Float32);
+  // 1.6e7 m: beyond 2^30 cells of the finest level at the default spacing and depth (1.55e7 m), within them at 4 m
+  // cells (1.68e7 m).
+  const double pts[5][3] = {{1.6e7, 0, 0}, {0, -1.6e7, 5}, {1, 2, 3}, {1.05, 2, 3}, {3, 2, 1}};
+  PointBuffer frame(l, 5);
+  for (int i = 0; i < 5; ++i)
+    for (int k = 0; k < 3; ++k) writeFromDouble(frame.record(i), l.fields[k], pts[i][k]);
+  writeKittiBin((tmp / "far.bin").string(), frame);
+  const std::string in = shellQuote(tmp / "far.bin");
+  std::string log;
+  ASSERT_EQ(runHpds("sample " + in + " --no-normals -o " + shellQuote(tmp / "s.ply"), &log), 0) << log;
+  ASSERT_NE(log.find("2 points lie beyond the exact key range"), std::string::npos) << log;
+  EXPECT_EQ(runHpds("verify " + shellQuote(tmp / "s.ply") + " --spacing 0.1 --input " + in, &log), 0) << log;
+  EXPECT_NE(log.find("2 of the 5 input points lie beyond the exact key range of level 8"), std::string::npos) << log;
+  EXPECT_NE(log.find("OK: no violations"), std::string::npos) << log;
+
+  // With a fixed cell the key range is that of the --max-depth the sampling was made with (hpds sample's 8 when not
+  // given): at 4 m cells and depth 8 the same points are all inserted, and all must be covered.
+  ASSERT_EQ(runHpds("sample " + in + " --no-normals --float64-xyz --cell-size 4 -o " + shellQuote(tmp / "c.ply"), &log),
+            0)
+      << log;
+  EXPECT_EQ(runHpds("verify " + shellQuote(tmp / "c.ply") + " --cell-size 4 --input " + in, &log), 0) << log;
+  EXPECT_EQ(log.find("key range"), std::string::npos) << log;
+  const std::string deep = " --no-normals --cell-size 4 --max-depth 21 -o ";
+  ASSERT_EQ(runHpds("sample " + in + deep + shellQuote(tmp / "d.ply"), &log), 0) << log;
+  EXPECT_EQ(runHpds("verify " + shellQuote(tmp / "d.ply") + " --cell-size 4 --input " + in, &log), 1) << log;
+  EXPECT_EQ(runHpds("verify " + shellQuote(tmp / "d.ply") + " --cell-size 4 --max-depth 21 --input " + in, &log), 0)
+      << log;
+  EXPECT_NE(log.find("2 of the 5 input points lie beyond the exact key range of level 21"), std::string::npos) << log;
+  // Its samples are at levels 0 and 1: a depth of 0 is not the sampler's.
+  EXPECT_EQ(runHpds("verify " + shellQuote(tmp / "d.ply") + " --cell-size 4 --max-depth 0 --input " + in, &log), 1)
+      << log;
+  EXPECT_NE(log.find("holds level 1, deeper than --max-depth 0"), std::string::npos) << log;
+}
+
 // `--normals --no-normals` (or the other way round, as a flag appended to a command that had one) added up to
 // nothing and ran without normals, exit 0, whichever came last. Contradictory flags are a bad command line.
 TEST(Cli, NormalsAndNoNormalsTogetherAreRefused) {

@@ -16,6 +16,7 @@
 
 #include "hpds/points/PointBuffer.hpp"
 #include "hpds/eval/SamplingVerifier.hpp"
+#include "hpds/sampling/CellKey.hpp"
 
 namespace hpds {
 namespace {
@@ -48,11 +49,11 @@ PointBuffer makeSampling(const std::vector<Sample> &samples, FieldType coord = F
   return buf;
 }
 
-PointBuffer makeCloud(const std::vector<P3> &pts) {
+PointBuffer makeCloud(const std::vector<P3> &pts, FieldType coord = FieldType::Float32) {
   PointLayout layout;
-  layout.append("x", FieldType::Float32);
-  layout.append("y", FieldType::Float32);
-  layout.append("z", FieldType::Float32);
+  layout.append("x", coord);
+  layout.append("y", coord);
+  layout.append("z", coord);
   PointBuffer buf(layout, pts.size());
   for (std::size_t i = 0; i < pts.size(); ++i)
     for (int a = 0; a < 3; ++a) writeFromDouble(buf.record(i), buf.layout().fields[a], pts[i][a]);
@@ -351,6 +352,42 @@ TEST(SamplingVerifier, FarInputPointIsUncoveredAndItsDistanceMatches) {
     EXPECT_EQ(l.spacing_violations + l.cell_violations, 0u);
   }
   expectSameReport(rep, bruteForce(sampling, 1.0, &input));
+}
+
+// The sampler inserts no point 2^30 - 8 cells of its finest level or more from the origin (CellKey.hpp): no sample
+// can cover one, and counting it as uncovered failed samplings that did all they could.
+TEST(SamplingVerifier, InputBeyondTheKeyRangeIsCountedNotCovered) {
+  const PointBuffer sampling = makeSampling({{0.5, 0.5, 0.5, 0}});
+  // At depth 21 of 1 m cells: the last coordinate the sampler inserts and the first it refuses.
+  const double inside = std::ldexp(1073741824.0 - 9.0, -21), outside = std::ldexp(1073741824.0 - 8.0, -21);
+  ASSERT_TRUE(inCellRange(inside, std::ldexp(1.0, 21)));
+  ASSERT_FALSE(inCellRange(outside, std::ldexp(1.0, 21)));
+  const PointBuffer input =
+      makeCloud({{0.5, 0.5, 0.5}, {outside, 0.5, 0.5}, {0.5, 0.5, -outside}, {inside, 0.5, 0.5}}, FieldType::Float64);
+
+  const VerifyReport rep = verifySampling(sampling, 1.0, &input, 1, 21);
+  EXPECT_EQ(rep.key_range_depth, 21);
+  EXPECT_EQ(rep.input_points, 4u);
+  EXPECT_EQ(rep.input_beyond_key_range, 2u);
+  ASSERT_EQ(rep.levels.size(), 1u);
+  EXPECT_EQ(rep.levels[0].coverage_violations, 1u) << "the point the sampler inserts must still be covered";
+  const std::string text = formatReport(rep);
+  EXPECT_NE(text.find("2 of the 4 input points lie beyond the exact key range of level 21"), std::string::npos)
+      << text;
+
+  // Without the sampler's depth, only the deepest level present bounds it (here 0: 1e9 m), so all three count.
+  const VerifyReport unknown = verifySampling(sampling, 1.0, &input);
+  EXPECT_EQ(unknown.key_range_depth, 0);
+  EXPECT_EQ(unknown.input_beyond_key_range, 0u);
+  EXPECT_EQ(unknown.levels[0].coverage_violations, 3u);
+  EXPECT_EQ(formatReport(unknown).find("key range"), std::string::npos);
+
+  // A depth shallower than a level present, or beyond 21, is no sampler's.
+  const PointBuffer two_levels = makeSampling({{0.5, 0.5, 0.5, 0}, {0.1, 0.1, 0.1, 1}});
+  EXPECT_THROW((void)verifySampling(two_levels, 1.0, &input, 1, 0), std::invalid_argument);
+  EXPECT_NO_THROW((void)verifySampling(two_levels, 1.0, &input, 1, 1));
+  EXPECT_THROW((void)verifySampling(sampling, 1.0, &input, 1, 22), std::invalid_argument);
+  EXPECT_THROW((void)verifySampling(sampling, 1.0, &input, 1, -2), std::invalid_argument);
 }
 
 TEST(SamplingVerifier, MatchesBruteForceOnRandomSets) {

@@ -22,6 +22,11 @@ namespace {
 
 constexpr int kMaxLevel = 21;
 constexpr double kInf = std::numeric_limits<double>::infinity();
+/// Cells of the finest level a coordinate stays below to be inserted (the sampler's exact-key limit, 2^30 - 8).
+constexpr long double kKeyRangeCells = 1073741824.0L - 8.0L;
+/// Far more than the sampler's rounding of |v| / edge there (below 1e-6 cells): points this close to the bound
+/// may have gone either way, and are left out rather than guessed.
+constexpr long double kKeyRangeMargin = 1e-3L;
 
 using Vec3 = std::array<double, 3>;
 
@@ -177,7 +182,8 @@ std::size_t VerifyReport::total_violations() const {
   return total;
 }
 
-VerifyReport verifySampling(const PointBuffer &sampling, double cell_size, const PointBuffer *input, int threads) {
+VerifyReport verifySampling(const PointBuffer &sampling, double cell_size, const PointBuffer *input, int threads,
+                            int max_depth) {
   if (!(std::isfinite(cell_size) && cell_size > 0.0))
     throw std::invalid_argument("verifySampling: cell_size must be finite and > 0");
   const Xyz sxyz = requireXyz(sampling, "sampling");
@@ -213,6 +219,12 @@ VerifyReport verifySampling(const PointBuffer &sampling, double cell_size, const
       ++nonfinite[l];
     }
   }
+  if (max_depth != -1 && !(max_depth >= std::max(max_level, 0) && max_depth <= kMaxLevel))
+    throw std::invalid_argument("verifySampling: max_depth " + std::to_string(max_depth) +
+                                (max_depth >= 0 && max_depth < max_level
+                                     ? " is shallower than level " + std::to_string(max_level) +
+                                           ", which the sampling holds"
+                                     : ": expected -1 or a level in 0..21"));
   for (int l = 0; l <= kMaxLevel; ++l) per_level[l + 1] += per_level[l];
   const std::array<std::size_t, kMaxLevel + 2> level_begin = per_level;  // level l occupies [begin[l], begin[l+1])
   std::vector<Vec3> pts(level_begin[kMaxLevel + 1]);
@@ -232,13 +244,27 @@ VerifyReport verifySampling(const PointBuffer &sampling, double cell_size, const
   report.tolerance = 4.0 * std::ldexp(1.0, doubles ? -53 : -24) * max_abs;
   const double tol = report.tolerance;
 
-  // Coverage candidates: sensor no-returns (non-finite or exactly the origin) are not points of the scene.
+  // Coverage candidates: sensor no-returns (non-finite or exactly the origin) are not points of the scene, and no
+  // sample can cover a point the sampler never inserted.
+  report.key_range_depth = max_depth >= 0 ? max_depth : std::max(max_level, 0);
+  const long double key_bound =
+      (kKeyRangeCells - kKeyRangeMargin) * std::ldexp(static_cast<long double>(cell_size), -report.key_range_depth);
+  const auto beyondKeyRange = [&](const Vec3 &p) {
+    return std::fabs(static_cast<long double>(p[0])) >= key_bound ||
+           std::fabs(static_cast<long double>(p[1])) >= key_bound ||
+           std::fabs(static_cast<long double>(p[2])) >= key_bound;
+  };
   std::vector<Vec3> probes;
   if (input) {
+    report.input_points = input->size();
     probes.reserve(input->size());
     for (std::size_t i = 0; i < input->size(); ++i) {
       const Vec3 p = readXyz(*input, ixyz, i);
       if (!isFinite(p) || (p[0] == 0.0 && p[1] == 0.0 && p[2] == 0.0)) continue;
+      if (beyondKeyRange(p)) {
+        ++report.input_beyond_key_range;
+        continue;
+      }
       probes.push_back(p);
     }
   }
@@ -346,10 +372,19 @@ VerifyReport verifySampling(const PointBuffer &sampling, double cell_size, const
 
 std::string formatReport(const VerifyReport &report) {
   std::string out;
-  char line[256];
+  char line[320];
   std::snprintf(line, sizeof line, "cell size %.6g m, tolerance %.3g m, violations %zu\n", report.cell_size,
                 report.tolerance, report.total_violations());
   out += line;
+  if (report.input_beyond_key_range > 0) {
+    const double edge = std::ldexp(report.cell_size, -report.key_range_depth);
+    std::snprintf(line, sizeof line,
+                  "%zu of the %zu input points lie beyond the exact key range of level %d (a coordinate of %.4g m "
+                  "or more: 2^30 - 8 cells of %.4g m), where the sampler inserts none: not checked for coverage\n",
+                  report.input_beyond_key_range, report.input_points, report.key_range_depth,
+                  static_cast<double>(kKeyRangeCells) * edge, edge);
+    out += line;
+  }
   for (const auto &l : report.levels)
     if (l.unresolved) {
       std::snprintf(line, sizeof line,

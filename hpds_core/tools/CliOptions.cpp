@@ -147,18 +147,24 @@ HpdsConfig resolveConfig(const SamplingOptions &o) {
   return c;
 }
 
-void addCellSizeOptions(CLI::App &app, CellSizeOptions &o) {
+void addCellSizeOptions(CLI::App &app, CellSizeOptions &o, bool depth_bounds_keys) {
   auto *cell = app.add_option("--cell-size", o.cell_size, "[m] level-0 cell edge the sampling was made with")
                    ->check(finiteIn(0.0, 1e6));
   auto *spacing = app.add_option("--spacing", o.spacing,
                                  "[m] or: the --spacing (output.spacing) the sampling was made with, the cell derived "
                                  "from it as hpds sample does when no cell size is fixed")
                       ->check(finiteIn(0.0, 1e6));
-  auto *depth = app.add_option("--max-depth", o.max_depth, "with --spacing: the hierarchy.max_depth of the sampling")
+  auto *depth = app.add_option("--max-depth", o.max_depth,
+                               depth_bounds_keys
+                                   ? "the hierarchy.max_depth the sampling was made with: with --spacing it "
+                                     "derives the cell; --input points 2^30 - 8 cells of that level or more from "
+                                     "the origin were never inserted and are not checked for coverage (with "
+                                     "--cell-size and no --max-depth: the deeper of 8 and the sampling's deepest level)"
+                                   : "with --spacing: the hierarchy.max_depth of the sampling")
                     ->capture_default_str()
                     ->check(integerIn(0, 21));
   cell->excludes(spacing);
-  depth->needs(spacing);
+  if (!depth_bounds_keys) depth->needs(spacing);
 }
 
 namespace {

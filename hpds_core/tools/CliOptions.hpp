@@ -54,7 +54,9 @@ struct CellSizeOptions {
   std::optional<double> spacing;
   int max_depth = HierarchyConfig{}.max_depth;
 };
-void addCellSizeOptions(CLI::App &app, CellSizeOptions &options);
+/// `depth_bounds_keys`: --max-depth also goes with --cell-size, where it only bounds the coordinates the sampler
+/// inserted (verify); else it needs --spacing.
+void addCellSizeOptions(CLI::App &app, CellSizeOptions &options, bool depth_bounds_keys = false);
 [[nodiscard]] double resolveCellSize(const CellSizeOptions &options);
 /// With --spacing: the output level its derived cell is made for (the deepest level such a sampling holds); with
 /// --cell-size: -1 (any level).

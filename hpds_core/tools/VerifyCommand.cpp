@@ -1,6 +1,7 @@
-// `hpds verify SAMPLING.ply --cell-size C | --spacing S [--input INPUT] [--frame K]`: an independent check of a
-// written sampling (k-d trees, not the sampler's grids). Prints a per-level table; exit code 1 on any violation. A
-// scan-mode output of several frames is checked frame by frame.
+// `hpds verify SAMPLING.ply (--cell-size C | --spacing S) [--max-depth M] [--input INPUT] [--frame K]`: an
+// independent check of a written sampling (k-d trees, not the sampler's grids). Prints a per-level table; exit code 1
+// on any violation. A scan-mode output of several frames is checked frame by frame.
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <iostream>
@@ -49,7 +50,7 @@ void addVerifyCommand(CLI::App &app) {
   auto a = std::make_shared<VerifyArgs>();
   CLI::App *cmd = app.add_subcommand("verify", "check a sampling: one sample per cell, additive spacing, coverage");
   cmd->add_option("sampling", a->sampling, "sampling written by hpds sample (needs x y z level)")->required();
-  addCellSizeOptions(*cmd, a->cell);
+  addCellSizeOptions(*cmd, a->cell, true);
   cmd->add_option("--input", a->input, "input cloud, same frame as the sampling: also check coverage <= 2 r_D");
   cmd->add_option("--frame", a->frame,
                   "a scan-mode output of several frames (field 'frame'): check only this frame (-1 = each frame "
@@ -57,7 +58,7 @@ void addVerifyCommand(CLI::App &app) {
       ->capture_default_str()
       ->check(integerIn(-1, 4294967295));
   cmd->add_option("--threads", a->threads, "worker threads, 0 = all cores")->capture_default_str()->check(integerIn(0, 1024));
-  cmd->callback([a] {
+  cmd->callback([a, cmd] {
     const double cell_size = resolveCellSize(a->cell);
     // A scan-mode output of several frames holds one sampling per frame (each frame sampled on its own): each is
     // checked on its own, as the sampler made it.
@@ -67,18 +68,31 @@ void addVerifyCommand(CLI::App &app) {
       throw std::invalid_argument(a->sampling +
                                   ": no 'level' field, so not a sampling written by hpds sample (verify checks "
                                   "hpds sample's output; give it that, and the scan as --input)");
+    const PointField &lf = *all.layout().find("level");
+    double max_level = -1.0;
+    for (std::size_t i = 0; i < all.size(); ++i) max_level = std::max(max_level, readAsDouble(all.record(i), lf));
     // A --spacing with another --max-depth than the sampling's derives another cell, against which a sampling can
     // pass unchecked (its radii all shrunk): a level deeper than that cell's output level gives it away.
-    if (const int deepest = deepestLevelFor(a->cell); deepest >= 0) {
-      const PointField &lf = *all.layout().find("level");
-      double max_level = -1.0;
-      for (std::size_t i = 0; i < all.size(); ++i) max_level = std::max(max_level, readAsDouble(all.record(i), lf));
-      if (max_level > deepest)
-        throw std::invalid_argument(
-            a->sampling + ": holds level " + std::to_string(static_cast<long long>(max_level)) + ", but --spacing " +
-            std::to_string(*a->cell.spacing) + " with --max-depth " + std::to_string(a->cell.max_depth) +
-            " makes samplings of levels 0.." + std::to_string(deepest) +
-            ": give the --spacing and --max-depth it was sampled with (or its --cell-size)");
+    if (const int deepest = deepestLevelFor(a->cell); deepest >= 0 && max_level > deepest)
+      throw std::invalid_argument(
+          a->sampling + ": holds level " + std::to_string(static_cast<long long>(max_level)) + ", but --spacing " +
+          std::to_string(*a->cell.spacing) + " with --max-depth " + std::to_string(a->cell.max_depth) +
+          " makes samplings of levels 0.." + std::to_string(deepest) +
+          ": give the --spacing and --max-depth it was sampled with (or its --cell-size)");
+    // The depth whose cells bound the coordinates the sampler inserted: --input points beyond were never inserted,
+    // and counted as uncovered they failed a sampling that did all it could. hpds sample's default depth unless
+    // given; a sampling holding deeper levels was built at least that deep.
+    // Levels beyond 21 are no sampler's: the verifier names the sample.
+    int key_depth = a->cell.max_depth;
+    if (a->cell.cell_size && max_level <= 21.0) {
+      const int present = static_cast<int>(max_level);
+      if (cmd->count("--max-depth") == 0) {
+        key_depth = std::max(key_depth, present);
+      } else if (present > key_depth) {
+        throw std::invalid_argument(a->sampling + ": holds level " + std::to_string(present) +
+                                    ", deeper than --max-depth " + std::to_string(key_depth) +
+                                    ": give the --max-depth it was sampled with");
+      }
     }
     const bool several = all.layout().find("frame") != nullptr;
     std::map<std::uint64_t, PointBuffer> frames = byFrame(std::move(all));
@@ -102,7 +116,7 @@ void addVerifyCommand(CLI::App &app) {
     for (const auto &[frame, sampling] : frames) {
       VerifyReport report;
       try {
-        report = verifySampling(sampling, cell_size, a->input.empty() ? nullptr : &input, a->threads);
+        report = verifySampling(sampling, cell_size, a->input.empty() ? nullptr : &input, a->threads, key_depth);
       } catch (const std::invalid_argument &e) {
         // The verifier knows no file names; its complaints are about the sampling's content.
         std::string why = e.what();

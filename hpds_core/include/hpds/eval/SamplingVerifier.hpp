@@ -21,8 +21,14 @@
 //   one violation, rather than passing a check that could not fail.
 // - Samples with a NaN/Inf coordinate cannot be valid: each counts as one spacing violation in every U_D holding it.
 //   Input points with a NaN/Inf coordinate or exactly at (0,0,0) (sensor no-returns) are ignored for coverage.
+// - Key range: the sampler inserts no point with a coordinate of (2^30 - 8) or more cells of its finest level
+//   M (edge C * 2^-M, M = hierarchy.max_depth), so no sample covers one. Such input points are not checked for
+//   coverage; they are counted in `input_beyond_key_range`. `max_depth` -1 takes M as the deepest level present
+//   (the sampler's is at least that, so the points left out were surely never inserted). The bound is taken a
+//   thousandth of a cell short: a point on it may have been refused by the sampler's rounding.
 // - Throws std::invalid_argument when the sampling lacks x/y/z or `level` (or the input lacks x/y/z), when C is not
-//   finite and positive, or when a level value is not an integer in 0..21.
+//   finite and positive, when a level value is not an integer in 0..21, or when `max_depth` is not -1 or a level
+//   from the deepest one present to 21.
 // - `threads` (<= 0: hardware concurrency) splits the per-point loops into fixed chunks; every reduction is a min,
 //   max or count, so the report does not depend on the thread count.
 // - Cost: one k-d tree build per level over U_D plus one nearest-neighbour query per sample, one per input point and
@@ -52,16 +58,20 @@ struct LevelReport {
 struct VerifyReport {
   double cell_size = 0.0;  ///< C [m]
   double tolerance = 0.0;  ///< tol [m], see the contract
+  int key_range_depth = 0;               ///< M, the level whose cells bound the key range (see the contract)
+  std::size_t input_points = 0;          ///< points of the input cloud, 0 without one
+  std::size_t input_beyond_key_range = 0;  ///< input points beyond the key range: not checked for coverage
   std::vector<LevelReport> levels;  ///< index D = level D, 0..max level present
   [[nodiscard]] std::size_t total_violations() const;
 };
 
-/// Checks `sampling` (see the contract); `input` may be null (no coverage check).
+/// Checks `sampling` (see the contract); `input` may be null (no coverage check). `max_depth`: the
+/// hierarchy.max_depth the sampling was made with, for the key range, or -1 (see the contract).
 [[nodiscard]] VerifyReport verifySampling(const PointBuffer &sampling, double cell_size, const PointBuffer *input,
-                                          int threads = 1);
+                                          int threads = 1, int max_depth = -1);
 
 /// A fixed-width table, one row per level: level, r_D, count, union, min_nn/r, viol, cells, cover/r ('-' without
-/// input), uncov; then the total.
+/// input), uncov; then the total. A line before it says how many input points lay beyond the key range, if any.
 [[nodiscard]] std::string formatReport(const VerifyReport &report);
 
 }  // namespace hpds
