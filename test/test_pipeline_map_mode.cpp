@@ -231,8 +231,10 @@ double distance(const double *p, const Eigen::Vector3d &q) {
   return (Eigen::Vector3d(p[0], p[1], p[2]) - q).norm();
 }
 
-// Map mode keeps per sample the normal of the frame that saw it from closest (Pipeline.hpp): a later frame from
-// farther away must not replace it, one from closer must.
+// Map mode keeps per sample the normal of the frame that saw it from closest (MapNormals.hpp), unless that frame left
+// it on one scan line (a line-like neighbourhood) and the other did not: a later frame from farther away must not
+// replace a planar normal, one from closer must (but not with a line-like one), and a line-like one gives way to a
+// planar one from any distance.
 TEST(MapNormals, EverySampleKeepsTheNormalOfTheFrameThatSawItFromClosest) {
   SyntheticLidarConfig lc = test::smallLidar(SceneKind::Urban, 2);
   lc.speed = 15.0;
@@ -245,15 +247,19 @@ TEST(MapNormals, EverySampleKeepsTheNormalOfTheFrameThatSawItFromClosest) {
   const Frame f0 = lidar.frame(0).frame, f1 = lidar.frame(1).frame;
   (void)p.addFrame(f0);
   const std::vector<SampleId> ids = p.outputSamples();
-  const std::vector<SampleNormal> before = p.normals(ids);
+  std::vector<LocalPca> nb_before, nb_after;
+  const std::vector<SampleNormal> before = p.normals(ids, &nb_before);
   const FrameResult r1 = p.addFrame(f1);
   EXPECT_GT(r1.seconds_normals, 0.0);
-  const std::vector<SampleNormal> after = p.normals(ids);
+  const std::vector<SampleNormal> after = p.normals(ids, &nb_after);
   const int L = p.outputLevel();
   const std::vector<SampleId> hit = p.samplesHitByLastFrame(0, L, 2.0 * p.hierarchy().radius(L));
   const std::set<SampleId> hit_set(hit.begin(), hit.end());
   const Eigen::Vector3d s0 = f0.sensor_to_fixed.translation(), s1 = f1.sensor_to_fixed.translation();
-  std::size_t valid = 0, kept = 0, replaced = 0, could_replace = 0;
+  // The kept eigenvalues are floats: judged in float, as MapNormals does.
+  const float ratio = static_cast<float>(NormalParams{}.line_ratio);
+  auto lineLike = [&](const LocalPca &n) { return float(n.l1) < ratio * float(n.l2); };
+  std::size_t valid = 0, kept = 0, replaced = 0, could_replace = 0, upgraded = 0;
   for (std::size_t i = 0; i < ids.size(); ++i) {
     const double *x = p.hierarchy().position(ids[i]);
     valid += before[i].valid;
@@ -261,13 +267,21 @@ TEST(MapNormals, EverySampleKeepsTheNormalOfTheFrameThatSawItFromClosest) {
     ASSERT_TRUE(after[i].valid) << "a valid normal is never given up";
     const bool same = std::equal(before[i].normal, before[i].normal + 3, after[i].normal) &&
                       before[i].curvature == after[i].curvature;
+    const bool was_line = lineLike(nb_before[i]), is_line = lineLike(nb_after[i]);
     // Ranges are compared in float, as kept: a tie keeps the first.
     const bool closer = hit_set.count(ids[i]) &&
                         static_cast<float>(distance(x, s1)) < static_cast<float>(distance(x, s0));
-    if (!closer) {
+    if (!same) {
+      EXPECT_TRUE(hit_set.count(ids[i])) << "sample " << ids[i] << " changed without being hit";
+      EXPECT_FALSE(is_line && !was_line) << "sample " << ids[i] << ": a planar normal gave way to a line-like one";
+      EXPECT_TRUE(closer || (was_line && !is_line)) << "sample " << ids[i] << " was seen from closer before";
+      upgraded += was_line && !is_line && !closer;
+    }
+    if (!was_line && !closer) {
       kept += same;
-      EXPECT_TRUE(same) << "sample " << ids[i] << " was seen from closer before";
-    } else {
+      EXPECT_TRUE(same) << "sample " << ids[i] << ": a planar normal seen from closer before";
+    }
+    if (closer && !was_line) {
       ++could_replace;
       replaced += !same;
     }
@@ -280,6 +294,7 @@ TEST(MapNormals, EverySampleKeepsTheNormalOfTheFrameThatSawItFromClosest) {
   EXPECT_GT(kept, 1000u);
   ASSERT_GT(could_replace, 100u);
   EXPECT_GT(replaced, could_replace / 2) << "samples seen from closer take the closer frame's normal";
+  EXPECT_GT(upgraded, 10u) << "line-like normals give way to a farther frame's planar one";
 }
 
 }  // namespace

@@ -19,7 +19,7 @@ std::vector<SampleId> MapNormals::improvable(const Hierarchy &hierarchy, const s
     const double dx = p[0] - viewpoint[0], dy = p[1] - viewpoint[1], dz = p[2] - viewpoint[2];
     const float range = static_cast<float>(std::sqrt(dx * dx + dy * dy + dz * dz));
     const Entry *e = id < entries_.size() ? &entries_[id] : nullptr;
-    if (!e || e->state != kValid || range < e->range) {
+    if (!e || e->state != kValid || range < e->range || lineLike(e->eigen[1], e->eigen[2])) {
       out.push_back(id);
       ranges.push_back(range);
     }
@@ -29,7 +29,12 @@ std::vector<SampleId> MapNormals::improvable(const Hierarchy &hierarchy, const s
 
 void MapNormals::offer(SampleId id, const SampleNormal &normal, const LocalPca &neighbourhood, float range) {
   Entry &e = slot(id);
-  const bool take = e.state == kEmpty || (normal.valid && (e.state == kInvalid || range < e.range));
+  bool take = e.state == kEmpty || (normal.valid && (e.state == kInvalid || range < e.range));
+  if (normal.valid && e.state == kValid) {
+    const bool was_line = lineLike(e.eigen[1], e.eigen[2]);
+    const bool is_line = lineLike(static_cast<float>(neighbourhood.l1), static_cast<float>(neighbourhood.l2));
+    if (was_line != is_line) take = was_line;
+  }
   if (!take) return;
   for (int a = 0; a < 3; ++a) e.normal[a] = normal.normal[a];
   e.curvature = normal.curvature;

@@ -5,14 +5,18 @@
 // 64-beam synthetic drive at the defaults: 270 ms of insertion per frame with them, 45 ms without, and five times
 // the samples held). Each frame instead averages its own points per cell of the fine level, as scan mode does,
 // for the output samples it hits; a sample keeps the estimate from the frame that saw it from closest, where the
-// scan lines around it lie densest.
+// scan lines around it lie densest, unless that frame left it on one scan line and another did not: a line-like
+// neighbourhood pins no plane (a wall grazed by a closer frame's one ring; planar_urban's wall p90 44 degrees with
+// closeness alone, 12 with this rule).
 //
 // Contract
 // - Indexed by sample id. Ids of evicted samples are reused, so a new sample's slot is emptied (resetSlots) before
 //   anything is offered for it.
-// - An entry is empty, invalid (no frame so far gave a normal: too few neighbours) or valid. offer() replaces an
-//   empty entry, and a valid estimate replaces an invalid one or a valid one from farther away; on a tie the first
-//   stays, so the result depends only on the frames and their order.
+// - An entry is empty, invalid (no frame so far gave a normal: too few neighbours) or valid; a valid one is
+//   line-like (its neighbourhood's l1 < line_ratio * l2, NormalParams::line_ratio) or planar. offer() replaces an
+//   empty entry; a valid estimate replaces an invalid one, a line-like one by a planar one from any distance, and
+//   one of its own kind from farther away; on a tie the first stays, so the result depends only on the frames and
+//   their order.
 // - Not thread-safe; const members may run concurrently.
 #pragma once
 
@@ -28,12 +32,14 @@ namespace hpds {
 
 class MapNormals {
  public:
+  /// `line_ratio`: NormalParams::line_ratio of the normals offered.
+  explicit MapNormals(double line_ratio) : line_ratio_(static_cast<float>(line_ratio)) {}
   /// Forgets every entry (a replaced map).
   void clear() { std::vector<Entry>().swap(entries_); }
   /// Grows to `id_bound` slots and empties those of `fresh` (samples new since the last call).
   void resetSlots(const std::vector<SampleId> &fresh, std::size_t id_bound);
-  /// Of `hit`, the samples a frame seen from `viewpoint` (fixed frame) could give a better entry: empty, invalid, or
-  /// valid from farther away. `ranges` gets their distances to the viewpoint, same order.
+  /// Of `hit`, the samples a frame seen from `viewpoint` (fixed frame) could give a better entry: empty, invalid,
+  /// line-like, or valid from farther away. `ranges` gets their distances to the viewpoint, same order.
   [[nodiscard]] std::vector<SampleId> improvable(const Hierarchy &hierarchy, const std::vector<SampleId> &hit,
                                                  const double viewpoint[3], std::vector<float> &ranges) const;
   /// Offers an estimate for `id` from a frame `range` metres away (see contract).
@@ -59,11 +65,14 @@ class MapNormals {
     float range = 0.f;                 ///< [m] sensor distance of the frame that gave it
     std::uint8_t state = kEmpty;
   };
+  /// In float, as kept: an entry and the estimate it is compared with are judged alike.
+  [[nodiscard]] bool lineLike(float l1, float l2) const { return l1 < line_ratio_ * l2; }
   /// `id`'s entry, growing the table (empty entries) to hold it.
   Entry &slot(SampleId id) {
     if (id >= entries_.size()) entries_.resize(std::size_t(id) + 1);
     return entries_[id];
   }
+  float line_ratio_;
   std::vector<Entry> entries_;
 };
 

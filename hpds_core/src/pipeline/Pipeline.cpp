@@ -101,7 +101,8 @@ Pipeline::Pipeline(const HpdsConfig &config)
       build_depth_(buildDepthFor(config_, output_level_)),
       fine_level_(fineLevelFor(config_, output_level_)),
       hierarchy_(config_.hierarchy.cell_size, config_.hierarchy.max_depth) {
-  if (config_.mode == Mode::Map && fine_level_ >= 0) map_normals_ = std::make_shared<MapNormals>();
+  if (config_.mode == Mode::Map && fine_level_ >= 0)
+    map_normals_ = std::make_shared<MapNormals>(normalParamsFor(config_, output_level_).line_ratio);
 }
 
 void Pipeline::requireLevel(int level) {
