@@ -108,6 +108,51 @@ TEST(RefinedNormals, GrowthSpansParallelScanLines) {
 
 }
 
+TEST(RefinedNormals, AScanLineWhoseGrownBallReachesTheGroundKeepsThePlaneThroughIt) {
+  // A wall (the plane y = 0) seen as scan lines along x, 0.6 m apart in height, with 1 cm range noise along a ray
+  // that meets it at about 30 degrees, standing on dense ground (z = 0, y < 0). The line at 0.9 m: its first
+  // non-line ball (1.08 m, the lines above and below) reaches the ground, so it is not flat; the plane through the
+  // line that both neighbouring lines support is the wall's. The lowest line (0.3 m) has the ground on one side and
+  // no line below it: no plane through it is supported on both sides, and it stays a line rather than take a plane
+  // the ground's points happen to favour.
+  std::mt19937_64 rng(12);
+  std::normal_distribution<double> noise(0.0, 0.01);
+  const Eigen::Vector3d ray = Eigen::Vector3d(0.55, -0.8, 0.25).normalized();
+  std::vector<double> xyz;
+  for (const double z : {0.3, 0.9, 1.5, 2.1})
+    for (int i = 0; i < 2000; ++i) {
+      const Eigen::Vector3d p = Eigen::Vector3d(i * 0.003, 0.0, z) + noise(rng) * ray;
+      xyz.insert(xyz.end(), {p.x(), p.y(), p.z()});
+    }
+  for (int i = 0; i < 120; ++i)
+    for (int j = 1; j <= 40; ++j) xyz.insert(xyz.end(), {0.0013 + 0.05 * i, -0.05 * j, 0.002 * noise(rng)});
+  const Hierarchy h = test::buildShuffled(xyz, kCell, 6, 13, {3.0, -6.0, 1.5});
+  const int level = 3;  // r_3 = 0.108 m: one line's samples, the lines 0.6 m apart
+  std::vector<SampleId> wall, lowest;
+  for (SampleId id : h.samplesUpTo(level)) {
+    const double *p = h.position(id);
+    if (p[0] < 1.5 || p[0] > 4.5) continue;  // away from the lines' ends
+    if (std::abs(p[1]) < 0.05 && std::abs(p[2] - 0.9) < 0.05) wall.push_back(id);
+    if (std::abs(p[1]) < 0.05 && std::abs(p[2] - 0.3) < 0.05) lowest.push_back(id);
+  }
+  ASSERT_GT(wall.size(), 20u);
+  ASSERT_GT(lowest.size(), 20u);
+  NormalParams p = params(level, 0, 2.5 * h.radius(level));
+  p.min_neighbors = 5;
+  p.neighborhood_level_offset = 2;
+  p.max_growth = 8.0;
+  std::vector<LocalPca> nb;
+  const std::vector<SampleNormal> wn = estimateNormals(h, wall, p, &nb);
+  for (std::size_t i = 0; i < wall.size(); ++i) {
+    ASSERT_TRUE(wn[i].valid);
+    EXPECT_GT(std::abs(wn[i].normal[1]), std::cos(5.0 / 57.29577951308232)) << "wall sample " << i;
+    EXPECT_GE(nb[i].l1, p.line_ratio * nb[i].l2) << "wall sample " << i << ": a plane, not the line";
+  }
+  (void)estimateNormals(h, lowest, p, &nb);
+  for (std::size_t i = 0; i < lowest.size(); ++i)
+    EXPECT_LT(nb[i].l1, p.line_ratio * nb[i].l2) << "lowest line's sample " << i << " was given a plane";
+}
+
 TEST(RefinedNormals, TooFewNeighboursGrowTheFootprintUntilThereAreEnough) {
   // A plane sampled on a 0.2 m grid, far sparser than the output level: the base footprint (2.5 r_5 = 0.068 m) holds
   // the sample alone, 2x still, 4x (0.27 m) the sample and its four nearest grid neighbours.

@@ -5,6 +5,7 @@
 
 #include <Eigen/Eigenvalues>
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <limits>
 #include <numeric>
@@ -111,6 +112,69 @@ BrutePca brutePca(const Hierarchy &h, SampleId q, int finest, double rho) {
   return out;
 }
 
+/// Where a line's grown ball is not flat: the plane through the line (principal axis of the ball of radius rho / 2)
+/// at the angle about it that most points of the ball off the line fall within 10 degrees of (36 bins of the
+/// diamond angle, the best two adjacent, the first on a tie), refitted to the points within 4 % of rho of it; kept
+/// if 3 or more of those lie off the line on each side and their PCA passes the growth's tests. RefinedNormals.cpp's
+/// planeThroughLine, by brute force over the samples.
+bool brutePlaneThroughLine(const Hierarchy &h, SampleId q, int finest, double rho, const NormalParams &p,
+                           BrutePca &out) {
+  const Eigen::Vector3d c(h.position(q));
+  std::vector<Eigen::Vector3d> ball, inner;
+  for (SampleId id : h.samplesUpTo(finest)) {
+    const Eigen::Vector3d d = Eigen::Vector3d(h.position(id)) - c;
+    if (d.squaredNorm() < rho * rho) ball.push_back(d);
+    if (d.squaredNorm() < rho * rho / 4.0) inner.push_back(d);
+  }
+  if (inner.size() < 2) return false;
+  Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+  for (const auto &d : inner) mean += d / static_cast<double>(inner.size());
+  Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
+  for (const auto &d : inner) cov += (d - mean) * (d - mean).transpose() / static_cast<double>(inner.size());
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(cov);
+  const Eigen::Vector3d line = es.eigenvectors().col(2), u = line.unitOrthogonal(), w = line.cross(u);
+  const double off = std::max(3.0 * std::sqrt(std::max(0.0, es.eigenvalues()(1))), 0.1 * rho);
+  auto diamond = [](double a, double b) {  // the angle of (a, b) modulo pi, as 0..2
+    if (b < 0.0 || (b == 0.0 && a < 0.0)) a = -a, b = -b;
+    return a >= 0.0 ? b / (a + b) : 1.0 - a / (b - a);
+  };
+  std::array<int, 36> bins{};
+  for (const auto &d : ball) {
+    const Eigen::Vector3d e = d - mean;
+    const double a = e.dot(u), b = e.dot(w);
+    if (std::hypot(a, b) >= off) ++bins[std::min(35, static_cast<int>(diamond(a, b) * 18.0))];
+  }
+  auto window = [&](int k) { return bins[k] + bins[(k + 1) % 36]; };
+  int best = 0;
+  for (int k = 1; k < 36; ++k)
+    if (window(k) > window(best)) best = k;
+  if (window(best) < 6) return false;
+  const double pd = (best + 1) / 18.0;  // back from the diamond angle to a direction in u, w
+  const Eigen::Vector3d along = ((1.0 - pd) * u + (pd <= 1.0 ? pd : 2.0 - pd) * w).normalized();
+  const Eigen::Vector3d normal = line.cross(along).normalized();
+  std::vector<Eigen::Vector3d> plane;
+  int above = 0, below = 0;
+  for (const auto &d : ball) {
+    const Eigen::Vector3d e = d - mean;
+    if (std::abs(e.dot(normal)) > 2.0 * p.max_plane_rms * rho) continue;
+    plane.push_back(d);
+    if (std::hypot(e.dot(u), e.dot(w)) >= off) (e.dot(along) > 0.0 ? above : below) += 1;
+  }
+  if (above < 3 || below < 3 || static_cast<int>(plane.size()) < p.min_neighbors) return false;
+  Eigen::Vector3d pm = Eigen::Vector3d::Zero();
+  for (const auto &d : plane) pm += d / static_cast<double>(plane.size());
+  Eigen::Matrix3d pc = Eigen::Matrix3d::Zero();
+  for (const auto &d : plane) pc += (d - pm) * (d - pm).transpose() / static_cast<double>(plane.size());
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> ps(pc);
+  const Eigen::Vector3d l = ps.eigenvalues().cwiseMax(0.0);
+  if (!(l(1) > 1e-9 * l.sum()) || l(0) > p.max_plane_rms * p.max_plane_rms * rho * rho || l(1) < p.line_ratio * l(2))
+    return false;
+  out.values = l;
+  out.vectors = ps.eigenvectors();
+  out.count = plane.size();
+  return true;
+}
+
 /// The neighbourhood NormalEstimator.hpp's contract picks for a fixed radius, brute force: levels 0..level+offset
 /// inside the footprint, doubled while line-like or too small up to max_growth, a grown one kept only if flat and
 /// no longer line-like. Returns false where no neighbourhood qualifies (invalid normal).
@@ -126,12 +190,14 @@ bool bruteNeighbourhood(const Hierarchy &h, SampleId q, const NormalParams &p, B
       const bool valid = l(1) > 1e-9 * l.sum();
       const bool flat = l(0) <= p.max_plane_rms * p.max_plane_rms * rho * rho;
       const bool not_line = l(1) >= p.line_ratio * l(2);
+      const bool had_line = have && chosen.values(1) < p.line_ratio * chosen.values(2);
       if (valid && (!have || (flat && not_line))) {
         chosen = pca;
         have = true;
         if (not_line) return true;
       }
       settled = have && !flat;
+      if (settled && had_line && brutePlaneThroughLine(h, q, finest, rho, p, chosen)) return true;
     }
     if (settled || rho * 2.0 > limit * (1.0 + 1e-12)) return have;
   }
