@@ -305,6 +305,10 @@ TEST_F(OutputSafety, NoOutputIsAnInputOrAnotherOutput) {
   writeText(dir_ / "c.yaml", "threads: 1\n");
   writeText(dir_ / "s.json", "{}\n");  // a config file (JSON is YAML) named like a stats file
   const std::string before = test::readText(dir_ / "a.ply");
+  for (const char *path : {"synth_frames/frame_000001.pcd", "synth_poses/poses.txt"}) {
+    fs::create_directories((dir_ / path).parent_path());
+    ASSERT_EQ(::mkfifo((dir_ / path).c_str(), 0644), 0) << std::strerror(errno);
+  }
   const auto q = [&](const std::string &name) { return " " + shellQuote(dir_ / name); };
   const std::vector<Refusal> cases = {
       {"sample" + q("a.ply") + " -o" + q("a.ply"), "-o: '" + (dir_ / "a.ply").string() + "' is the input"},
@@ -350,6 +354,10 @@ TEST_F(OutputSafety, NoOutputIsAnInputOrAnotherOutput) {
 TEST_F(OutputSafety, UnwritableOrMisnamedOutputsAreRefusedBeforeAnyWork) {
   writeRandomCloud(dir_ / "a.ply", 2000);
   writeText(dir_ / "plain", "a file, not a folder");
+  for (const char *path : {"synth_frames/frame_000001.pcd", "synth_poses/poses.txt"}) {
+    fs::create_directories((dir_ / path).parent_path());
+    ASSERT_EQ(::mkfifo((dir_ / path).c_str(), 0644), 0) << std::strerror(errno);
+  }
   const auto q = [&](const std::string &name) { return " " + shellQuote(dir_ / name); };
   const std::string sample = "sample" + q("a.ply");
   const std::vector<Refusal> cases = {
@@ -403,6 +411,10 @@ TEST_F(OutputSafety, PipesAndOtherSpecialFilesAreRefusedAsOutputsBeforeAnyWork) 
   fs::create_symlink(fifo, dir_ / "to_fifo.ply");
   fs::create_directory(dir_ / "pictures");
   ASSERT_EQ(::mkfifo((dir_ / "pictures" / "render_feature_top.png").c_str(), 0644), 0) << std::strerror(errno);
+  for (const char *path : {"synth_frames/frame_000001.pcd", "synth_poses/poses.txt"}) {
+    fs::create_directories((dir_ / path).parent_path());
+    ASSERT_EQ(::mkfifo((dir_ / path).c_str(), 0644), 0) << std::strerror(errno);
+  }
   const auto q = [&](const std::string &name) { return " " + shellQuote(dir_ / name); };
   const std::string deadline = "timeout -s KILL 30 " + test::cliPath() + " ";
   const std::string sample = deadline + "sample" + q("a.ply");
@@ -413,6 +425,9 @@ TEST_F(OutputSafety, PipesAndOtherSpecialFilesAreRefusedAsOutputsBeforeAnyWork) 
       // The shell's pipe behind /dev/stdout (test::runCommand reads the output through one).
       {sample + " -o /dev/stdout", "-o: '/dev/stdout' is a pipe (FIFO)"},
       {deadline + "render" + q("a.ply") + " -o" + q("pictures"), "is a pipe (FIFO)"},
+      // synth writes its frames and poses.txt into its folder: a pipe there under either name held the run.
+      {deadline + "synth -o" + q("synth_frames") + " --frames 2", "frame_000001.pcd' is a pipe (FIFO)"},
+      {deadline + "synth -o" + q("synth_poses") + " --frames 1", "poses.txt' is a pipe (FIFO)"},
   };
   for (const Refusal &c : cases) {
     std::string log;
@@ -424,6 +439,7 @@ TEST_F(OutputSafety, PipesAndOtherSpecialFilesAreRefusedAsOutputsBeforeAnyWork) 
     EXPECT_FALSE(fs::exists(dir_ / "out.ply")) << c.args;
   }
   EXPECT_TRUE(fs::is_fifo(fifo));
+  EXPECT_FALSE(fs::exists(dir_ / "synth_frames" / "frame_000000.pcd")) << "synth wrote a frame before the refusal";
   // The null device discards an output under any name, as before.
   std::string log;
   EXPECT_EQ(test::runCommand(sample + " -o /dev/null", &log), 0) << log;

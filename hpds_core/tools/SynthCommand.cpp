@@ -3,6 +3,8 @@
 #include <filesystem>
 #include <iostream>
 #include <stdexcept>
+#include <string>
+#include <vector>
 
 #include "CliOptions.hpp"
 #include "Commands.hpp"
@@ -32,6 +34,12 @@ SceneKind parseScene(const std::string &s) {
   throw std::invalid_argument("--scene: unknown scene '" + s + "' (expected urban, planar_urban or curved_objects)");
 }
 
+std::string frameName(int index, const std::string &format) {
+  char name[64];
+  std::snprintf(name, sizeof name, "frame_%06d.%s", index, format.c_str());
+  return name;
+}
+
 void runSynth(SynthArgs a) {
   if (a.format != "pcd" && a.format != "bin" && a.format != "ply")
     throw std::invalid_argument("--format: expected pcd, ply or bin, got '" + a.format + "'");
@@ -40,16 +48,19 @@ void runSynth(SynthArgs a) {
     throw std::invalid_argument("--beams x --azimuth-steps: " + std::to_string(a.lidar.beams) + " x " +
                                 std::to_string(a.lidar.azimuth_steps) + " rays per frame, more than the " +
                                 std::to_string(kMaxPointsPerFrame) + " a synthetic frame may have");
-  checkPaths({}, {}, {{"-o", a.out_dir, {}}});
+  // Every file the run writes is named to checkPaths: a pipe already in the folder under one of those names would
+  // otherwise hold the run (writing a frame or poses.txt blocks until something reads it).
+  std::vector<std::string> files;
+  for (int i = 0; i < a.lidar.frames; ++i) files.push_back(frameName(i, a.format));
+  files.push_back("poses.txt");
+  checkPaths({}, {}, {{"-o", a.out_dir, files}});
   const SyntheticLidar lidar(a.lidar);
   RunFolder folder(a.out_dir);
   std::vector<Eigen::Isometry3d> poses;
   std::size_t points = 0;
   for (int i = 0; i < a.lidar.frames; ++i) {
     const SyntheticFrame f = lidar.frame(i);
-    char name[64];
-    std::snprintf(name, sizeof name, "frame_%06d.%s", i, a.format.c_str());
-    writePointCloud((std::filesystem::path(a.out_dir) / name).string(), f.frame.points);
+    writePointCloud((std::filesystem::path(a.out_dir) / frameName(i, a.format)).string(), f.frame.points);
     poses.push_back(f.frame.sensor_to_fixed);
     points += f.frame.points.size();
   }
