@@ -51,12 +51,11 @@ inline SyntheticLidarConfig smallLidar(SceneKind scene = SceneKind::Urban, int f
 
 /// The orientation NormalEstimator.hpp promises, written from its contract: a normal n of a sample whose unit
 /// direction to its viewpoint is v faces the viewpoint (n.v >= 0), except that one within 11.5 degrees of
-/// perpendicular to v (|n.v| < 0.2) and within 60 degrees of `up` (|n.up| >= 0.5) faces it along `up`
-/// ((n.up)(v.up) >= 0), unless the sample is level with the sensor (|v.up| < 1e-3).
+/// perpendicular to v (|n.v| < 0.2) and within 60 degrees of `up` (|n.up| >= 0.5) of a sample below the sensor
+/// (v.up >= 1e-3) faces up (n.up >= 0).
 inline bool orientedAsPromised(const Eigen::Vector3d &n, const Eigen::Vector3d &v,
                                const Eigen::Vector3d &up = Eigen::Vector3d::UnitZ()) {
-  if (std::abs(n.dot(v)) < 0.2 && std::abs(n.dot(up)) >= 0.5 && std::abs(v.dot(up)) >= 1e-3)
-    return n.dot(up) * v.dot(up) >= 0.0;
+  if (std::abs(n.dot(v)) < 0.2 && std::abs(n.dot(up)) >= 0.5 && v.dot(up) >= 1e-3) return n.dot(up) >= 0.0;
   return n.dot(v) >= 0.0;
 }
 

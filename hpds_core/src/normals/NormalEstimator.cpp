@@ -72,14 +72,16 @@ void orientTowardViewpoints(const Hierarchy &h, const std::vector<SampleId> &ids
   // A neighbourhood left on one scan line (45 % of the ground samples of the demo frames at the defaults) is spread
   // along the line and, by the range noise, along its rays: its PCA normal is perpendicular to the view, and the view
   // alone gave it either sign (a fifth of the ground faced down). So does a far plane seen at a grazing angle below
-  // its normal's error. Within kTie of perpendicular, a normal near `up` (within 60 degrees) is turned toward the
-  // viewpoint along `up`: up below the sensor, down above it. That is right for ground, roofs and ceilings, which a
-  // sensor can only see from their upper (lower) side; wrong only for an underside below the sensor seen at a grazing
-  // angle (the lower half of a sphere's outline). A normal far from `up` (a wall's) keeps the view's sign.
-  // kTie = 0.2 (11.5 degrees): the scan line's rays differ from the sample's own by a few degrees; on real frames
-  // 0.1 left more ground facing down (VLS-128 1.2 against 0.8 %), on the synthetic scenes both are the same.
+  // its normal's error. Within kTie of perpendicular, a normal near `up` (within 60 degrees) of a sample below the
+  // sensor faces up: a surface below the sensor that is near horizontal can only be seen from above (ground, roofs,
+  // a road going down or up; wrong only for an underside seen grazing, the lower half of a sphere's outline). Above
+  // the sensor no side is the likelier one (ceilings face down, a road rising above the sensor's height up: forcing
+  // either turned all of the other wrong), so the view decides there. A normal far from `up` (a wall's) keeps the
+  // view's sign. kTie = 0.2 (11.5 degrees): the scan line's rays differ from the sample's own by a few degrees; on
+  // real frames 0.1 left more ground facing down (VLS-128 1.2 against 0.8 %), on the synthetic scenes both are the
+  // same.
   constexpr double kTie = 0.2, kNearUp = 0.5;
-  // Below the direction code's error (5e-4 rad) a sample is level with the sensor: neither side is "toward" it.
+  // Below the direction code's error (5e-4 rad) a sample is level with the sensor, not below it.
   constexpr double kLevel = 1e-3;
   // ~20 ns per sample: a thread only pays for itself from tens of thousands.
   parallelFor(ids.size(), threads, [&](std::size_t b, std::size_t e) {
@@ -92,8 +94,8 @@ void orientTowardViewpoints(const Hierarchy &h, const std::vector<SampleId> &ids
       double toward = double(n.normal[0]) * v[0] + double(n.normal[1]) * v[1] + double(n.normal[2]) * v[2];
       if (std::abs(toward) < kTie) {
         const double along = double(n.normal[0]) * up[0] + double(n.normal[1]) * up[1] + double(n.normal[2]) * up[2];
-        const double above = double(v[0]) * up[0] + double(v[1]) * up[1] + double(v[2]) * up[2];
-        if (std::abs(along) >= kNearUp && std::abs(above) >= kLevel) toward = along * above;
+        const double sensor_above = double(v[0]) * up[0] + double(v[1]) * up[1] + double(v[2]) * up[2];
+        if (std::abs(along) >= kNearUp && sensor_above >= kLevel) toward = along;
       }
       if (toward < 0.0) n.normal[0] = -n.normal[0], n.normal[1] = -n.normal[1], n.normal[2] = -n.normal[2];
     }

@@ -135,8 +135,6 @@ FrameResult Pipeline::addFrame(const Frame &frame) {
 
   hit_cache_valid_ = false;
   hit_cache_.clear();
-  const Eigen::Vector3d up = frame.sensor_to_fixed.linear().col(2).normalized();  // a rotation (checked above)
-  sensor_up_ = {up.x(), up.y(), up.z()};
 
   // 1. Scan mode starts every frame on an empty hierarchy.
   if (!map_mode) hierarchy_.clear();
@@ -195,8 +193,7 @@ FrameResult Pipeline::addFrame(const Frame &frame) {
   fine_grids_.reset();
   early_done_ = 0;
   early_slot_.clear();
-  NormalParams normal_params = normalParamsFor(config_, output_level_);
-  normal_params.up = sensor_up_;
+  const NormalParams normal_params = normalParamsFor(config_, output_level_);
   const bool ahead = fine_level_ >= 0 && resolveThreads(config_.threads) > 1;
   // Map mode estimates the normals of every output sample the frame hits, old ones too: none to take early.
   const bool early = ahead && !map_mode && normal_params.k == 0 && normal_params.radius > 0.0;
@@ -471,9 +468,7 @@ std::vector<SampleNormal> Pipeline::normals(const std::vector<SampleId> &ids,
 
 std::vector<SampleNormal> Pipeline::normalsOfLive(const std::vector<SampleId> &ids,
                                                   std::vector<LocalPca> *neighbourhoods) const {
-  NormalParams params = normalParamsFor(config_, output_level_);
-  // A scan's normals come from its one frame; a map's (those it did not keep from a frame) from many, in the map.
-  if (config_.mode == Mode::Scan) params.up = sensor_up_;
+  const NormalParams params = normalParamsFor(config_, output_level_);
   if (fine_level_ < 0) return estimateNormals(hierarchy_, ids, params, neighbourhoods);
   if (map_normals_) return keptNormals(ids, params, neighbourhoods);
   if (neighbourhoods) neighbourhoods->assign(ids.size(), LocalPca{});

@@ -10,8 +10,9 @@
 // - PCA by LocalPca's solveNormal (eigenvalues and normal agree with an iterative eigensolver to ~1e-15).
 // - The normal is oriented toward the viewpoint of the frame that contributed the sample. Where it is nearly
 //   perpendicular to the view (a neighbourhood on one scan line: its plane holds the ray, so the view cannot tell its
-//   sides apart), it is oriented toward the viewpoint along `up` instead: up for samples below the sensor, down above
-//   it, as ground and ceilings face a sensor mounted with its z axis up. See orientTowardViewpoints.
+//   sides apart) and the sample lies below the viewpoint, a normal near `up` (the frame's z) faces up: a surface
+//   below the sensor with such a normal is seen from above (ground, roofs). Above the sensor the view decides, as
+//   ceilings face down and rising ground up. See orientTowardViewpoints.
 // - Fewer than `min_neighbors` neighbours (the sample included) or a degenerate neighbourhood gives valid = false
 //   and NaN normal/curvature (PCL's convention for "not estimated"); never a garbage direction marked valid.
 // - curvature = l0 / (l0 + l1 + l2). Results are per id, independent of the thread count.
@@ -48,8 +49,8 @@ struct NormalParams {
   double max_growth = 1.0;            ///< grow line-like/too small neighbourhoods up to this factor (1 = off)
   double line_ratio = 0.05;           ///< l1 / l2 below this counts as line-like
   double max_plane_rms = 0.02;        ///< a grown neighbourhood must fit its plane within this * its radius (RMS)
-  /// Unit, in the hierarchy's frame: the axis that orients normals perpendicular to the view. The sensor's z axis
-  /// for normals of one frame's samples; a map's z axis (up, as ROS's REP 103 has it) for normals from a map.
+  /// Unit, in the hierarchy's frame: which way is up, for normals perpendicular to the view (see above). The z
+  /// axis, as ROS's REP 103 has it for sensor, body and map frames alike.
   std::array<double, 3> up = {0.0, 0.0, 1.0};
 };
 

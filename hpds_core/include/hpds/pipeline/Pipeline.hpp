@@ -166,8 +166,6 @@ class Pipeline {
   // samplesHitByLastFrame(0, output level, 2 r_L) of the last frame, as the map's normals took it.
   std::vector<SampleId> hit_cache_;
   bool hit_cache_valid_ = false;
-  // The last frame's sensor z axis in the fixed frame: the `up` (NormalParams) of normals estimated from that frame.
-  std::array<double, 3> sensor_up_ = {0.0, 0.0, 1.0};
   // With a second thread: the neighbourhoods it estimated while the frame was inserted, for the first early_done_
   // samples the insertion published (point indices in early_points_), and each sample's entry (early_slot_, by id;
   // kNoSample: none). The frame's first normals() takes them and lets them go.
