@@ -333,7 +333,7 @@ void benchStream(const Options &o) {
   // them for the normals instead of keeping per-frame ones (map mode's only way before). The first 30 frames.
   const std::size_t n_map = std::min<std::size_t>(frames.size(), 30);
   std::size_t kept_samples = 0, deep_samples = 0;
-  auto mapFramePath = [&](int keep_depth, std::size_t *samples) {
+  auto mapFramePath = [&](int keep_depth, std::size_t *held) {
     HpdsConfig dc;
     dc.mode = Mode::Map;
     dc.map.keep_depth = keep_depth;
@@ -343,7 +343,7 @@ void benchStream(const Options &o) {
       p.addFrame(frames[i]);
       (void)p.makeCloud(p.samplesHitByLastFrame(0, L, 2.0 * p.hierarchy().radius(L)), false);
     }
-    *samples = p.hierarchy().sampleCount();
+    *held = p.hierarchy().sampleCount();
   };
   const Paired t_defaults = pairedMedians(std::min(reps, 3), [&] { mapFramePath(-1, &kept_samples); },
                                           [&] { mapFramePath(7, &deep_samples); });
