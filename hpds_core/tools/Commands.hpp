@@ -4,11 +4,14 @@
 
 #include <CLI/CLI.hpp>
 
+#include "SynthBag.hpp"
+
 namespace hpds::cli {
 
 void addSampleCommand(CLI::App &app);
 void addVerifyCommand(CLI::App &app);
-void addSynthCommand(CLI::App &app);
+/// `open_bag`: the bag writer of a build with ROS (openSynthBag); without it, --bag fails with a clear error.
+void addSynthCommand(CLI::App &app, SynthBagOpener open_bag = nullptr);
 void addAnalyzeCommand(CLI::App &app);
 void addRenderCommand(CLI::App &app);
 

@@ -1,4 +1,5 @@
-// `hpds synth -o DIR`: writes a synthetic lidar stream (frames + KITTI poses) that `hpds sample` can read back.
+// `hpds synth -o DIR [--bag OUT.bag]`: writes a synthetic lidar stream (frames + KITTI poses) that `hpds sample` can
+// read back, and with --bag the same frames as a bag for `roslaunch hpds replay.launch` (SynthBag.hpp).
 #include <cstdio>
 #include <filesystem>
 #include <iostream>
@@ -9,6 +10,7 @@
 #include "CliOptions.hpp"
 #include "Commands.hpp"
 #include "OutputPaths.hpp"
+#include "SynthBag.hpp"
 #include "hpds/eval/SyntheticLidar.hpp"
 #include "hpds/pcl/PointCloudFile.hpp"
 #include "hpds/io/PoseFile.hpp"
@@ -25,6 +27,7 @@ struct SynthArgs {
   std::string format = "pcd";
   std::string scene = "urban";
   SyntheticLidarConfig lidar;
+  SynthBagOptions bag;  ///< bag.path empty: no bag
 };
 
 SceneKind parseScene(const std::string &s) {
@@ -40,7 +43,18 @@ std::string frameName(int index, const std::string &format) {
   return name;
 }
 
-void runSynth(SynthArgs a) {
+void runSynth(SynthArgs a, SynthBagOpener open_bag) {
+  if (!a.bag.path.empty()) {
+    // Before any work, as every usage error: a build without ROS has no bag writer.
+    if (!open_bag)
+      throw std::invalid_argument("--bag: this hpds was built without ROS (rosbag); build it with the ROS node "
+                                  "(-DHPDS_BUILD_NODE=ON) to write bags");
+    if (a.bag.topic.empty()) throw std::invalid_argument("--topic: empty topic name");
+    // tf2 refuses frame ids with ROS 1's leading slash, so the transforms would never match the clouds.
+    if (a.bag.frame_id.empty() || a.bag.frame_id.front() == '/')
+      throw std::invalid_argument("--frame-id: '" + a.bag.frame_id + "' is not a tf frame id (non-empty, no leading "
+                                  "'/')");
+  }
   if (a.format != "pcd" && a.format != "bin" && a.format != "ply")
     throw std::invalid_argument("--format: expected pcd, ply or bin, got '" + a.format + "'");
   a.lidar.scene = parseScene(a.scene);
@@ -53,27 +67,38 @@ void runSynth(SynthArgs a) {
   std::vector<std::string> files;
   for (int i = 0; i < a.lidar.frames; ++i) files.push_back(frameName(i, a.format));
   files.push_back("poses.txt");
-  checkPaths({}, {}, {{"-o", a.out_dir, files}});
+  // The bag is one more output: never one of the folder's files, whatever links lead there.
+  checkPaths({}, {{"--bag", a.bag.path, {".bag"}, "a bag", ""}}, {{"-o", a.out_dir, files}});
   const SyntheticLidar lidar(a.lidar);
   RunFolder folder(a.out_dir);
+  // Under a temporary name until the folder is complete: a failed run leaves an existing bag as it was.
+  std::unique_ptr<SynthBagWriter> bag = a.bag.path.empty() ? nullptr : open_bag(a.bag);
   std::vector<Eigen::Isometry3d> poses;
   std::size_t points = 0;
   for (int i = 0; i < a.lidar.frames; ++i) {
     const SyntheticFrame f = lidar.frame(i);
     writePointCloud((std::filesystem::path(a.out_dir) / frameName(i, a.format)).string(), f.frame.points);
     poses.push_back(f.frame.sensor_to_fixed);
+    if (bag) bag->write(f.frame);
     points += f.frame.points.size();
   }
   const std::string pose_path = (std::filesystem::path(a.out_dir) / "poses.txt").string();
   writeKittiPoses(pose_path, poses);
+  if (bag) {
+    bag->finish();
+    bag->commit();
+  }
   folder.keep();
   std::cout << "wrote " << a.lidar.frames << " frames (" << points << " points, scene " << toString(a.lidar.scene)
             << ") and " << pose_path << "\n";
+  if (bag)
+    std::cout << "wrote " << a.bag.path << " (" << a.bag.topic << " in frame " << a.bag.frame_id << ", /tf "
+              << kSynthBagFixedFrame << " -> " << a.bag.frame_id << ")\n";
 }
 
 }  // namespace
 
-void addSynthCommand(CLI::App &app) {
+void addSynthCommand(CLI::App &app, SynthBagOpener open_bag) {
   auto a = std::make_shared<SynthArgs>();
   CLI::App *cmd = app.add_subcommand("synth", "write a synthetic spinning-lidar stream (frames + KITTI poses)");
   cmd->add_option("-o,--output", a->out_dir, "output directory (frame_NNNNNN.<format> and poses.txt)")->required()
@@ -88,7 +113,16 @@ void addSynthCommand(CLI::App &app) {
   cmd->add_option("--speed", a->lidar.speed, "[m per frame] sensor speed")->capture_default_str()->check(finiteIn(-100.0, 100.0));
   cmd->add_option("--noise", a->lidar.range_noise, "[m] range noise sigma")->capture_default_str()->check(finiteIn(0.0, 10.0));
   cmd->add_option("--format", a->format, "pcd | ply | bin (KITTI: x y z intensity only)")->capture_default_str();
-  cmd->callback([a] { runSynth(*a); });
+  // Offered in every build, so that a build without ROS says why it cannot rather than not knowing the flag.
+  const char *bag_help = open_bag ? "also write the frames as a ROS bag (PointCloud2 + /tf odom -> frame) for "
+                                    "replay.launch"
+                                  : "ROS bag output: not in this build (built without ROS)";
+  CLI::Option *bag = cmd->add_option("--bag", a->bag.path, bag_help)->check(nonEmptyPath());
+  cmd->add_option("--topic", a->bag.topic, "--bag: PointCloud2 topic")->capture_default_str()->needs(bag);
+  cmd->add_option("--frame-id", a->bag.frame_id, "--bag: the clouds' frame (tf child of odom)")
+      ->capture_default_str()
+      ->needs(bag);
+  cmd->callback([a, open_bag] { runSynth(*a, open_bag); });
 }
 
 }  // namespace hpds::cli

@@ -13,7 +13,11 @@ int main(int argc, char **argv) {
   app.require_subcommand(1);
   hpds::cli::addSampleCommand(app);
   hpds::cli::addVerifyCommand(app);
+#ifdef HPDS_WITH_ROS
+  hpds::cli::addSynthCommand(app, hpds::cli::openSynthBag);
+#else
   hpds::cli::addSynthCommand(app);
+#endif
   hpds::cli::addAnalyzeCommand(app);
   hpds::cli::addRenderCommand(app);
 #ifdef HPDS_WITH_ROS
