@@ -51,6 +51,11 @@ class Collector {
       messages_.push_back(m);
     });
   }
+  // The subscription goes first: its shutdown waits for a callback running on the spinner's thread, which would
+  // otherwise write into members already destroyed (members go in reverse order, sub_ last).
+  ~Collector() { sub_.shutdown(); }
+  Collector(const Collector &) = delete;
+  Collector &operator=(const Collector &) = delete;
   std::size_t size() const {
     std::lock_guard<std::mutex> lock(mutex_);
     return messages_.size();
@@ -86,6 +91,10 @@ double minDistanceBelow(const std::vector<Eigen::Vector3d> &points, double limit
 class DiagnosticsReader {
  public:
   DiagnosticsReader(ros::NodeHandle &nh, const std::string &node_name);
+  // As Collector's: the subscription is shut down (waiting for a callback in progress) before values_ goes.
+  ~DiagnosticsReader() { sub_.shutdown(); }
+  DiagnosticsReader(const DiagnosticsReader &) = delete;
+  DiagnosticsReader &operator=(const DiagnosticsReader &) = delete;
   /// Value of `key` as a number, or -1 when not reported yet.
   double value(const std::string &key) const;
   std::size_t updates() const;

@@ -236,6 +236,10 @@ class LogCollector {
       lines_.push_back(*m);
     });
   }
+  // The subscription goes before lines_: its shutdown waits for a callback in progress on the spinner's thread.
+  ~LogCollector() { sub_.shutdown(); }
+  LogCollector(const LogCollector &) = delete;
+  LogCollector &operator=(const LogCollector &) = delete;
   /// True when a line of `level` holding every one of `parts` has arrived.
   bool has(std::uint8_t level, const std::vector<std::string> &parts) const {
     std::lock_guard<std::mutex> lock(mutex_);
