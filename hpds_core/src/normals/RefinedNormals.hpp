@@ -67,8 +67,9 @@ void refinedNeighbourhoodsOverCentroids(const double *base, const std::uint32_t 
 /// The PCA's normal (sign as solved) and curvature; invalidNormal() for an invalid PCA.
 [[nodiscard]] SampleNormal unorientedNormal(const LocalPca &pca);
 /// Turns every valid normals[i] toward the viewpoint of ids[i]'s frame; one nearly perpendicular to the view of a
-/// sample below the viewpoint up along `up` (unit; NormalParams::up; the rule and why: NormalEstimator.cpp). A separate pass in id
-/// order: the neighbourhood searches visit samples in cell order, where each view direction would be a cache miss.
+/// sample below the viewpoint up along `up` (unit; NormalParams::up; the rule and why: NormalEstimator.cpp). A
+/// separate pass in id order: the neighbourhood searches visit samples in cell order, where each view direction
+/// would be a cache miss.
 void orientTowardViewpoints(const Hierarchy &hierarchy, const std::vector<SampleId> &ids,
                             std::vector<SampleNormal> &normals, const std::array<double, 3> &up, int threads);
 
