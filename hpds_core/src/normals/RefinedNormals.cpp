@@ -149,7 +149,8 @@ std::optional<LocalPca> planeThroughLine(const BallView &v, double inner_r2, dou
   const Eigen::Vector3d u = line.unitOrthogonal(), w = line.cross(u);
   // Off the line: beyond three times its own scatter across it (range noise along the rays).
   const double off = std::max(3.0 * std::sqrt(std::max(0.0, es.eigenvalues()(1))), 0.1 * rho);
-  // Each point of the ball as (a, b): its offset from the line in the basis u, w; NaN for those on the line.
+  // Each point of the ball as (a, b), its offset from the line in the basis u, w (kept for the refit below); those
+  // off the line vote for the angle of the plane through it.
   scratch.clear();
   std::array<std::size_t, kBins> bins{};
   for (std::size_t t = 0; t < v.count; ++t) {
