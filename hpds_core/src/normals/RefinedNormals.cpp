@@ -100,6 +100,13 @@ void sweep(const RefinedSetup &s, const PointSet &points, const QuerySet &q, con
   }, /*grain=*/32, /*chunks_per_thread=*/8);
 }
 
+/// The growth's two tests of a neighbourhood of radius^2 `r2`, shared by the grown balls and the plane through a
+/// scan line: one scan line (l1 < line_ratio * l2), and flat (RMS distance to its plane <= max_plane_rms * radius).
+bool lineLike(const LocalPca &pca, const NormalParams &params) { return pca.l1 < params.line_ratio * pca.l2; }
+bool flat(const LocalPca &pca, const NormalParams &params, double r2) {
+  return pca.l0 <= params.max_plane_rms * params.max_plane_rms * r2;
+}
+
 /// A monotone stand-in for the angle of (a, b) modulo pi, in [0, 2): 0, 1 and 2 at 0, 90 and 180 degrees (within
 /// 4 degrees of linear in between); one division instead of atan2, which was most of planeThroughLine's cost.
 double diamondAngle(double a, double b) {
@@ -118,13 +125,14 @@ void diamondDirection(double p, double &c, double &s) {
 /// rotation about it; the plane through the line that points of the ball on both sides of it support is the
 /// surface the line lies on (a wall's rings above and below), where a flat ball would have been. Measured on
 /// planar_urban in scan mode: 7 % of the wall samples stopped so, nearly all more than 30 degrees off.
-/// `inner_r2`: the line's own ball (the previous footprint); `r2`, `rho`: the grown one. The plane must hold
+/// `rho`: the grown ball's radius; the line is the previous footprint's ball (radius rho / 2). The plane must hold
 /// params.min_neighbors points, at least kSide of them off the line on each side, and pass the growth's own tests
-/// (not line-like, RMS to the plane <= max_plane_rms * rho); nullopt otherwise.
-std::optional<LocalPca> planeThroughLine(const BallView &v, double inner_r2, double r2, double rho,
-                                         const NormalParams &params, std::vector<double> &scratch) {
+/// (not lineLike, flat); nullopt otherwise.
+std::optional<LocalPca> planeThroughLine(const BallView &v, double rho, const NormalParams &params,
+                                         std::vector<double> &scratch) {
   constexpr int kBins = 36;         // 5-degree bins of the plane's angle about the line
   constexpr std::size_t kSide = 3;  // points off the line on each side
+  const double r2 = rho * rho, inner_r2 = 0.25 * r2;
   auto at = [&](std::size_t t) {
     const double *p = v.xyz + 3 * std::size_t(v.inside[t]);
     return Eigen::Vector3d(p[0] - v.q[0], p[1] - v.q[1], p[2] - v.q[2]);
@@ -185,8 +193,7 @@ std::optional<LocalPca> planeThroughLine(const BallView &v, double inner_r2, dou
   }
   if (above < kSide || below < kSide || static_cast<int>(acc.count()) < params.min_neighbors) return std::nullopt;
   const LocalPca pca = acc.solveNormal();
-  const bool flat = pca.l0 <= params.max_plane_rms * params.max_plane_rms * rho * rho;
-  if (!pca.valid || !flat || pca.l1 < params.line_ratio * pca.l2) return std::nullopt;
+  if (!pca.valid || !flat(pca, params, r2) || lineLike(pca, params)) return std::nullopt;
   return pca;
 }
 
@@ -228,18 +235,18 @@ void growNeighbourhoods(const RefinedSetup &s, const QuerySet &q, std::vector<st
       bool settled = false;
       if (static_cast<int>(acc.count()) >= params.min_neighbors) {
         const LocalPca pca = acc.solveNormal();
-        const bool flat = pca.l0 <= params.max_plane_rms * params.max_plane_rms * r2;
-        const bool not_line = pca.l1 >= params.line_ratio * pca.l2;
-        const bool had_line = have[i] && chosen[i].l1 < params.line_ratio * chosen[i].l2;
-        if (pca.valid && (!have[i] || (flat && not_line))) {
+        const bool is_flat = flat(pca, params, r2);
+        const bool not_line = !lineLike(pca, params);
+        const bool had_line = have[i] && lineLike(chosen[i], params);
+        if (pca.valid && (!have[i] || (is_flat && not_line))) {
           chosen[i] = pca;
           have[i] = 1;
           if (not_line) return;
         }
-        settled = have[i] && !flat;
+        settled = have[i] && !is_flat;
         // A scan line whose grown ball reached another surface first: the plane through it, if one is supported.
         if (settled && had_line)
-          if (const std::optional<LocalPca> plane = planeThroughLine(v, 0.25 * r2, r2, rho[i], params, scratch)) {
+          if (const std::optional<LocalPca> plane = planeThroughLine(v, rho[i], params, scratch)) {
             chosen[i] = *plane;
             return;
           }
