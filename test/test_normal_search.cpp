@@ -426,6 +426,61 @@ TEST(SolveNormal, AgreesWithTheIterativeSolver) {
   EXPECT_GT(compared, 5000);
 }
 
+TEST(SolveNormal, PrincipalAxisAndMeanAgreeWithTheIterativeSolver) {
+  // eigenvector(l2) is the direction planeThroughLine takes for a scan line: checked on lines (noise-free ones too,
+  // where l0 = l1 = 0 and the PCA is no plane), strips and planes, far from the origin.
+  std::mt19937_64 rng(11);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  std::normal_distribution<double> g(0.0, 1.0);
+  int compared = 0;
+  for (double across : {0.0, 1e-3, 0.05, 0.5})
+    for (int t = 0; t < 300; ++t) {
+      Eigen::Vector3d d(g(rng), g(rng), g(rng));
+      d.normalize();
+      const Eigen::Vector3d e1 = d.unitOrthogonal(), e2 = d.cross(e1);
+      const Eigen::Vector3d origin(3000.0 * u(rng), 3000.0 * u(rng), 50.0 * u(rng));
+      std::vector<std::array<double, 3>> pts;
+      Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+      const int count = 3 + t % 60;
+      for (int i = 0; i < count; ++i) {
+        const Eigen::Vector3d p = origin + 1.5 * u(rng) * d + across * (u(rng) * e1 + 0.3 * u(rng) * e2);
+        pts.push_back({p.x(), p.y(), p.z()});
+        sum += p - Eigen::Vector3d(pts[0].data());
+      }
+      PcaAccumulator acc(pts[0].data());
+      for (const auto &p : pts) acc.add(p.data());
+      double m[3];
+      acc.mean(m);
+      for (int a = 0; a < 3; ++a) EXPECT_NEAR(m[a], sum(a) / count, 1e-12);
+      Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
+      for (const auto &p : pts) {
+        const Eigen::Vector3d e = Eigen::Vector3d(p.data()) - Eigen::Vector3d(pts[0].data()) - sum / count;
+        cov += e * e.transpose() / count;
+      }
+      const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(cov);
+      const LocalPca pca = acc.solveNormal();
+      double axis[3];
+      ASSERT_TRUE(acc.eigenvector(pca.l2, axis)) << "across " << across << ", trial " << t;
+      const Eigen::Vector3d a(axis[0], axis[1], axis[2]);
+      EXPECT_NEAR(a.norm(), 1.0, 1e-14);
+      const Eigen::Vector3d ev = es.eigenvalues();
+      if (ev(2) - ev(1) < 1e-6 * ev.sum()) continue;  // the axis is not defined to better than round-off
+      EXPECT_NEAR(std::fabs(a.dot(es.eigenvectors().col(2))), 1.0, 1e-9) << "across " << across << ", trial " << t;
+      ++compared;
+    }
+  EXPECT_GT(compared, 1000);
+  // Nothing added, or a repeated eigenvalue (isotropic): no direction.
+  const double origin[3] = {0.0, 0.0, 0.0};
+  PcaAccumulator none(origin);
+  double axis[3];
+  EXPECT_FALSE(none.eigenvector(0.0, axis));
+  PcaAccumulator iso(origin);
+  for (const std::array<double, 3> &p : std::vector<std::array<double, 3>>{{1, 0, 0}, {-1, 0, 0}, {0, 1, 0}, {0, -1, 0},
+                                                                          {0, 0, 1}, {0, 0, -1}})
+    iso.add(p.data());
+  EXPECT_FALSE(iso.eigenvector(iso.solveNormal().l2, axis));
+}
+
 TEST(SolveNormal, DegenerateNeighbourhoodsAreInvalid) {
   const std::vector<std::array<double, 3>> line = {{0, 0, 0}, {1, 1, 1}, {2, 2, 2}, {3, 3, 3}};
   const std::vector<std::array<double, 3>> point = {{7, 7, 7}, {7, 7, 7}, {7, 7, 7}};

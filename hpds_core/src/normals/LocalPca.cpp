@@ -39,13 +39,51 @@ LocalPca PcaAccumulator::solve(bool accurate) const {
   return out;
 }
 
+void PcaAccumulator::mean(double m[3]) const {
+  const double inv = n_ ? 1.0 / static_cast<double>(n_) : 0.0;
+  for (int a = 0; a < 3; ++a) m[a] = s_[a] * inv;
+}
+
+void PcaAccumulator::covariance(double c[6]) const {
+  const double inv = 1.0 / static_cast<double>(n_);
+  const double mx = s_[0] * inv, my = s_[1] * inv, mz = s_[2] * inv;
+  c[0] = ss_[0] * inv - mx * mx, c[1] = ss_[1] * inv - mx * my, c[2] = ss_[2] * inv - mx * mz;
+  c[3] = ss_[3] * inv - my * my, c[4] = ss_[4] * inv - my * mz, c[5] = ss_[5] * inv - mz * mz;
+}
+
+bool PcaAccumulator::kernelDirection(const double c[6], double l, double floor, double out[3]) {
+  const double xx = c[0], xy = c[1], xz = c[2], yy = c[3], yz = c[4], zz = c[5];
+  const double a = xx - l, d = yy - l, f = zz - l;
+  const double v0[3] = {xy * yz - xz * d, xz * xy - a * yz, a * d - xy * xy};  // row0 x row1
+  const double v1[3] = {xy * f - xz * yz, xz * xz - a * f, a * yz - xy * xz};  // row0 x row2
+  const double v2[3] = {d * f - yz * yz, yz * xz - xy * f, xy * yz - d * xz};  // row1 x row2
+  const double n0 = v0[0] * v0[0] + v0[1] * v0[1] + v0[2] * v0[2];
+  const double n1 = v1[0] * v1[0] + v1[1] * v1[1] + v1[2] * v1[2];
+  const double n2 = v2[0] * v2[0] + v2[1] * v2[1] + v2[2] * v2[2];
+  const double *v = v0;
+  double nn = n0;
+  if (n1 > nn) v = v1, nn = n1;
+  if (n2 > nn) v = v2, nn = n2;
+  if (!(nn > floor) || !std::isfinite(nn)) return false;
+  const double s = 1.0 / std::sqrt(nn);
+  out[0] = v[0] * s, out[1] = v[1] * s, out[2] = v[2] * s;
+  return true;
+}
+
+bool PcaAccumulator::eigenvector(double l, double v[3]) const {
+  if (n_ == 0) return false;
+  double c[6];
+  covariance(c);
+  const double trace = c[0] + c[3] + c[5];
+  return trace > 0.0 && kernelDirection(c, l, 1e-30 * trace * trace * trace * trace, v);
+}
+
 LocalPca PcaAccumulator::solveNormal() const {
   LocalPca out;
   if (n_ < 3) return out;
-  const double inv = 1.0 / static_cast<double>(n_);
-  const double mx = s_[0] * inv, my = s_[1] * inv, mz = s_[2] * inv;
-  const double xx = ss_[0] * inv - mx * mx, xy = ss_[1] * inv - mx * my, xz = ss_[2] * inv - mx * mz;
-  const double yy = ss_[3] * inv - my * my, yz = ss_[4] * inv - my * mz, zz = ss_[5] * inv - mz * mz;
+  double c[6];
+  covariance(c);
+  const double xx = c[0], xy = c[1], xz = c[2], yy = c[3], yz = c[4], zz = c[5];
   const double trace = xx + yy + zz;
   if (!std::isfinite(trace + xy + xz + yz) || !(trace > 0.0)) return out;
   // Eigenvalues m + sqrt(p) t of C = m I + B (m = trace / 3, p = tr(B^2) / 6), where t are the roots of the
@@ -106,6 +144,10 @@ LocalPca PcaAccumulator::solveNormal() const {
       // Done when the step, or Newton's estimate of the new iterate's error (step^2 f'' / 2f'), is at round-off.
       if (std::fabs(step) <= tol || step * step * std::fabs(3.0 * l - c2) <= tol * d1) break;
     }
+    // 0 <= l0 <= c1 / c2 always (l1 l2 >= l0^2). On a line (l0, l1 ~ 0) c0 and c1 are mostly round-off, and a
+    // Newton step from 0, c0 / c1, can land anywhere within the trace either side of 0 (l0 was 8 % of it on
+    // noise-free collinear points, with l1 then 0): the bounds keep l0 and l1 within c1 / c2 of the truth there.
+    l = std::max(0.0, std::min(l, c1 / c2));
     // The other two: l1 + l2 = c2 - l0, l1 l2 = c1 - l0 (l1 + l2); the small root in the cancellation-free form.
     const double sum = c2 - l, prod = c1 - l * sum;
     l2 = 0.5 * (sum + std::sqrt(std::max(0.0, sum * sum - 4.0 * prod)));
@@ -114,24 +156,9 @@ LocalPca PcaAccumulator::solveNormal() const {
   out.l0 = std::max(0.0, l);
   out.l1 = std::max(0.0, l1);
   out.l2 = std::max(0.0, l2);
-  // Normal: kernel of C - l0 I, the largest cross product of two of its rows.
-  const double a = xx - l, d = yy - l, f = zz - l;
-  const double v0[3] = {xy * yz - xz * d, xz * xy - a * yz, a * d - xy * xy};  // row0 x row1
-  const double v1[3] = {xy * f - xz * yz, xz * xz - a * f, a * yz - xy * xz};  // row0 x row2
-  const double v2[3] = {d * f - yz * yz, yz * xz - xy * f, xy * yz - d * xz};  // row1 x row2
-  const double n0 = v0[0] * v0[0] + v0[1] * v0[1] + v0[2] * v0[2];
-  const double n1 = v1[0] * v1[0] + v1[1] * v1[1] + v1[2] * v1[2];
-  const double n2 = v2[0] * v2[0] + v2[1] * v2[1] + v2[2] * v2[2];
-  const double *v = v0;
-  double nn = n0;
-  if (n1 > nn) v = v1, nn = n1;
-  if (n2 > nn) v = v2, nn = n2;
-  // Rank 1 (l0 = l1 exactly, to round-off): no cross product; Eigen's closed form picks a normal then.
-  if (!(nn > 1e-30 * trace * trace * trace * trace) || !std::isfinite(nn)) return solve(false);
-  const double s = 1.0 / std::sqrt(nn);
-  out.normal[0] = v[0] * s;
-  out.normal[1] = v[1] * s;
-  out.normal[2] = v[2] * s;
+  // Normal: kernel of C - l0 I. Rank 1 (l0 = l1 exactly, to round-off): no cross product; Eigen's closed form picks
+  // a normal then.
+  if (!kernelDirection(c, l, 1e-30 * trace * trace * trace * trace, out.normal)) return solve(false);
   const double sum = out.l0 + out.l1 + out.l2;
   out.valid = sum > 0.0 && out.l1 > 1e-9 * sum;
   return out;

@@ -67,6 +67,12 @@ std::size_t gridFor(const RefinedSetup &s, double rho) {
   return g;
 }
 
+/// Per-thread scratch of a sweep's callbacks, reused from query to query.
+struct SweepScratch {
+  std::vector<double> values;
+  std::vector<std::uint32_t> slots;
+};
+
 /// Calls fn(i, view, scratch) for the queries subset[...] with their neighbours of `points` within `radius`.
 template <typename Fn>
 void sweep(const RefinedSetup &s, const PointSet &points, const QuerySet &q, const std::vector<std::uint32_t> &subset,
@@ -95,7 +101,7 @@ void sweep(const RefinedSetup &s, const PointSet &points, const QuerySet &q, con
   // threads from 32 cells on, and 8 chunks per thread against the uneven cost (2 threads, HDL-32: those rounds
   // 0.82 -> 0.50 and 0.75 -> 0.51 ms against a thread per 256 cells in 4 chunks each).
   parallelFor(grid.cellCount(), s.params.threads, [&](std::size_t b, std::size_t e) {
-    std::vector<double> scratch;
+    SweepScratch scratch;
     grid.visit(b, e, [&](std::size_t t, const BallView &v) { fn(subset[t], v, scratch); });
   }, /*grain=*/32, /*chunks_per_thread=*/8);
 }
@@ -109,9 +115,13 @@ bool flat(const LocalPca &pca, const NormalParams &params, double r2) {
 
 /// A monotone stand-in for the angle of (a, b) modulo pi, in [0, 2): 0, 1 and 2 at 0, 90 and 180 degrees (within
 /// 4 degrees of linear in between); one division instead of atan2, which was most of planeThroughLine's cost.
-double diamondAngle(double a, double b) {
-  if (b < 0.0 || (b == 0.0 && a < 0.0)) a = -a, b = -b;
-  return a >= 0.0 ? b / (a + b) : 1.0 - a / (b - a);
+/// Written with selects, not branches: the signs of a and b follow no pattern from point to point.
+inline double diamondAngle(double a, double b) {
+  const bool flip = b < 0.0 || (b == 0.0 && a < 0.0);
+  const double fa = flip ? -a : a, fb = flip ? -b : b;
+  const bool first = fa >= 0.0;
+  const double ratio = (first ? fb : fa) / (first ? fa + fb : fb - fa);
+  return first ? ratio : 1.0 - ratio;
 }
 /// The unit direction (c, s) of diamond angle p.
 void diamondDirection(double p, double &c, double &s) {
@@ -129,47 +139,49 @@ void diamondDirection(double p, double &c, double &s) {
 /// params.min_neighbors points, at least kSide of them off the line on each side, and pass the growth's own tests
 /// (not lineLike, flat); nullopt otherwise.
 std::optional<LocalPca> planeThroughLine(const BallView &v, double rho, const NormalParams &params,
-                                         std::vector<double> &scratch) {
+                                         SweepScratch &scratch) {
   constexpr int kBins = 36;         // 5-degree bins of the plane's angle about the line
   constexpr std::size_t kSide = 3;  // points off the line on each side
   const double r2 = rho * rho, inner_r2 = 0.25 * r2;
-  auto at = [&](std::size_t t) {
-    const double *p = v.xyz + 3 * std::size_t(v.inside[t]);
-    return Eigen::Vector3d(p[0] - v.q[0], p[1] - v.q[1], p[2] - v.q[2]);
-  };
   // The line: the principal axis of the inner ball, through its mean (offsets from the query are within the ball,
-  // so one pass of sums loses nothing that matters here).
-  Eigen::Vector3d sum = Eigen::Vector3d::Zero();
-  Eigen::Matrix3d sum2 = Eigen::Matrix3d::Zero();
-  std::size_t n_inner = 0;
-  for (std::size_t t = 0; t < v.count; ++t)
-    if (v.d2[t] < inner_r2) {
-      const Eigen::Vector3d d = at(t);
-      sum += d;
-      sum2 += d * d.transpose();
-      ++n_inner;
-    }
-  if (n_inner < 2) return std::nullopt;
-  const Eigen::Vector3d mean = sum / static_cast<double>(n_inner);
-  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es;
-  es.computeDirect(sum2 / static_cast<double>(n_inner) - mean * mean.transpose());
-  const Eigen::Vector3d line = es.eigenvectors().col(2);
+  // so one pass of sums loses nothing that matters here). It held a line-like neighbourhood, so >= 3 points; on a
+  // noise-free line l1 is 0 and the PCA not valid as a plane, but l2 still gives the axis.
+  PcaAccumulator inner(v.q);
+  inner.addWithin(v.xyz, v.inside, v.d2, v.count, inner_r2);
+  const LocalPca spread = inner.solveNormal();
+  double axis[3], mean[3];
+  if (!(spread.l2 > 0.0) || !inner.eigenvector(spread.l2, axis)) return std::nullopt;
+  inner.mean(mean);
+  const Eigen::Vector3d line(axis[0], axis[1], axis[2]);
   const Eigen::Vector3d u = line.unitOrthogonal(), w = line.cross(u);
   // Off the line: beyond three times its own scatter across it (range noise along the rays).
-  const double off = std::max(3.0 * std::sqrt(std::max(0.0, es.eigenvalues()(1))), 0.1 * rho);
-  // Each point of the ball as (a, b), its offset from the line in the basis u, w (kept for the refit below); those
-  // off the line vote for the angle of the plane through it.
-  scratch.clear();
-  std::array<std::size_t, kBins> bins{};
+  const double off = std::max(3.0 * std::sqrt(spread.l1), 0.1 * rho), off2 = off * off;
+  // Each point of the ball as (a, b), its offset from the line in the basis u, w, with its slot and distance (kept
+  // for the refit below); those off the line vote for the angle of the plane through it. Branch-free: the signs
+  // of a and b and which points are off the line follow no pattern (the branches cost half of this function).
+  scratch.values.resize(3 * v.count);
+  scratch.slots.resize(v.count);
+  double *ab = scratch.values.data(), *d2s = ab + 2 * v.count;
+  std::uint32_t *slots = scratch.slots.data();
+  // Four histograms, point t voting in t % 4: neighbours mostly vote for the same bin, and one histogram's
+  // increments would wait on each other through memory.
+  std::uint32_t votes[4][kBins] = {};
+  std::size_t m = 0;
+  const double qx = v.q[0] + mean[0], qy = v.q[1] + mean[1], qz = v.q[2] + mean[2];
   for (std::size_t t = 0; t < v.count; ++t) {
-    if (!(v.d2[t] < r2)) continue;
-    const Eigen::Vector3d d = at(t) - mean;
-    const double a = d.dot(u), b = d.dot(w);
-    scratch.push_back(a);
-    scratch.push_back(b);
-    if (a * a + b * b < off * off) continue;
-    ++bins[std::min<std::size_t>(kBins - 1, static_cast<std::size_t>(diamondAngle(a, b) * (kBins / 2.0)))];
+    const double *p = v.xyz + 3 * std::size_t(v.inside[t]);
+    const double dx = p[0] - qx, dy = p[1] - qy, dz = p[2] - qz;
+    const double a = dx * u.x() + dy * u.y() + dz * u.z(), b = dx * w.x() + dy * w.y() + dz * w.z();
+    const bool kept = v.d2[t] < r2;
+    ab[2 * m] = a, ab[2 * m + 1] = b, d2s[m] = v.d2[t], slots[m] = v.inside[t];
+    // (0, 0), whose angle is NaN, is on the line: its bin is never counted, but the conversion must stay defined.
+    const double angle = std::max(0.0, diamondAngle(a, b));
+    const std::size_t bin = std::min<std::size_t>(kBins - 1, static_cast<std::size_t>(angle * (kBins / 2.0)));
+    votes[t & 3][bin] += kept && a * a + b * b >= off2 ? 1 : 0;
+    m += kept ? 1 : 0;
   }
+  std::array<std::size_t, kBins> bins{};
+  for (std::size_t k = 0; k < kBins; ++k) bins[k] = votes[0][k] + votes[1][k] + votes[2][k] + votes[3][k];
   // Two adjacent bins (cyclic: the angle is modulo pi), the first best on a tie.
   std::size_t best = 0, best_count = 0;
   for (std::size_t k = 0; k < kBins; ++k) {
@@ -181,17 +193,20 @@ std::optional<LocalPca> planeThroughLine(const BallView &v, double rho, const No
   double c = 0.0, sn = 0.0;
   diamondDirection(static_cast<double>(best + 1) * (2.0 / kBins), c, sn);
   const double band = 2.0 * params.max_plane_rms * rho;
-  PcaAccumulator acc(v.q);
-  std::size_t above = 0, below = 0, k = 0;
-  for (std::size_t t = 0; t < v.count; ++t) {
-    if (!(v.d2[t] < r2)) continue;
-    const double a = scratch[2 * k], b = scratch[2 * k + 1];
-    ++k;
-    if (std::abs(c * b - sn * a) > band) continue;
-    acc.add(v.xyz + 3 * std::size_t(v.inside[t]));
-    if (a * a + b * b >= off * off) (c * a + sn * b > 0.0 ? above : below) += 1;
+  // The points within the band, compacted in place (in visiting order, as the sums need).
+  std::size_t above = 0, below = 0, n = 0;
+  for (std::size_t k = 0; k < m; ++k) {
+    const double a = ab[2 * k], b = ab[2 * k + 1];
+    const bool in = std::abs(c * b - sn * a) <= band, off_line = a * a + b * b >= off2;
+    const bool up = c * a + sn * b > 0.0;
+    slots[n] = slots[k], d2s[n] = d2s[k];
+    n += in ? 1 : 0;
+    above += in && off_line && up ? 1 : 0;
+    below += in && off_line && !up ? 1 : 0;
   }
-  if (above < kSide || below < kSide || static_cast<int>(acc.count()) < params.min_neighbors) return std::nullopt;
+  if (above < kSide || below < kSide || static_cast<int>(n) < params.min_neighbors) return std::nullopt;
+  PcaAccumulator acc(v.q);
+  acc.addWithin(v.xyz, slots, d2s, n, r2);
   const LocalPca pca = acc.solveNormal();
   if (!pca.valid || !flat(pca, params, r2) || lineLike(pca, params)) return std::nullopt;
   return pca;
@@ -225,7 +240,7 @@ void growNeighbourhoods(const RefinedSetup &s, const QuerySet &q, std::vector<st
       } else {
         again[i] = 1;  // a later round
       }
-    sweep(s, s.fine, q, round, radius, [&](std::uint32_t i, const BallView &v, std::vector<double> &scratch) {
+    sweep(s, s.fine, q, round, radius, [&](std::uint32_t i, const BallView &v, SweepScratch &scratch) {
       const double r2 = rho[i] * rho[i];
       PcaAccumulator acc(v.q);
       acc.addWithin(v.xyz, v.inside, v.d2, v.count, r2);
@@ -358,7 +373,8 @@ std::vector<SampleNormal> estimateNormalsRefined(const Hierarchy &h, const std::
     const std::size_t k = static_cast<std::size_t>(params.k);
     for (std::size_t g = 0; g < s.radii.size() && !left.empty(); ++g) {
       const bool last = g + 1 == s.radii.size();
-      auto footprint = [&](std::uint32_t i, const BallView &v, std::vector<double> &d2s) {
+      auto footprint = [&](std::uint32_t i, const BallView &v, SweepScratch &scratch) {
+        std::vector<double> &d2s = scratch.values;
         const bool enough = v.count >= k;
         again[i] = 0;
         if (enough) {

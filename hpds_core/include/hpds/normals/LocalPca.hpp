@@ -68,8 +68,19 @@ class PcaAccumulator {
   /// ~1e-15 / (relative gap l1 - l0) rad (normal); more accurate than Eigen's closed form (solve(false)) where l0
   /// nears l1.
   [[nodiscard]] LocalPca solveNormal() const;
+  /// The mean of the points added, relative to the reference point (zero when none were).
+  void mean(double m[3]) const;
+  /// The unit eigenvector (sign arbitrary) of eigenvalue `l` of the covariance, e.g. l2 of solveNormal() for the
+  /// direction of a line-like neighbourhood: the largest cross product of two rows of C - l I. False where `l` is
+  /// not a simple eigenvalue to round-off (no row pair spans the other two eigenvectors) or nothing was added.
+  [[nodiscard]] bool eigenvector(double l, double v[3]) const;
 
  private:
+  /// The covariance about the mean: xx xy xz yy yz zz.
+  void covariance(double c[6]) const;
+  /// The kernel direction of C - l I from its rows' cross products; false below `floor` (squared norm).
+  static bool kernelDirection(const double c[6], double l, double floor, double v[3]);
+
   double ref_[3];
   double s_[3] = {0, 0, 0};
   double ss_[6] = {0, 0, 0, 0, 0, 0};
