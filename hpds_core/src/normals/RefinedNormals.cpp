@@ -20,6 +20,10 @@
 #include "hpds/util/ParallelFor.hpp"
 #include "sampling/BallGrid.hpp"
 
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
+
 namespace hpds {
 
 std::vector<double> refinedSearchRadii(const Hierarchy &h, const NormalParams &params) {
@@ -115,13 +119,28 @@ bool flat(const LocalPca &pca, const NormalParams &params, double r2) {
 
 /// A monotone stand-in for the angle of (a, b) modulo pi, in [0, 2): 0, 1 and 2 at 0, 90 and 180 degrees (within
 /// 4 degrees of linear in between); one division instead of atan2, which was most of planeThroughLine's cost.
-/// Written with selects, not branches: the signs of a and b follow no pattern from point to point.
+/// NaN (a = b = 0) gives 0.
 inline double diamondAngle(double a, double b) {
+#if defined(__SSE2__)
+  // With masks in SSE registers, the scalar branches' exact operations: the signs of a and b follow no pattern
+  // from point to point, and GCC kept the ternaries below as branches (mispredicted about every other point: a
+  // third of planeThroughLine's time).
+  const __m128d A = _mm_set_sd(a), B = _mm_set_sd(b), zero = _mm_setzero_pd(), sign = _mm_set_sd(-0.0);
+  const __m128d flip = _mm_or_pd(_mm_cmplt_sd(B, zero), _mm_and_pd(_mm_cmpeq_sd(B, zero), _mm_cmplt_sd(A, zero)));
+  const __m128d fa = _mm_xor_pd(A, _mm_and_pd(flip, sign)), fb = _mm_xor_pd(B, _mm_and_pd(flip, sign));
+  const __m128d first = _mm_cmpge_sd(fa, zero);
+  auto select = [](__m128d m, __m128d x, __m128d y) { return _mm_or_pd(_mm_and_pd(m, x), _mm_andnot_pd(m, y)); };
+  const __m128d ratio = _mm_div_sd(select(first, fb, fa), select(first, _mm_add_sd(fa, fb), _mm_sub_sd(fb, fa)));
+  const __m128d angle = select(first, ratio, _mm_sub_sd(_mm_set_sd(1.0), ratio));
+  return _mm_cvtsd_f64(_mm_max_sd(angle, zero));  // MAXSD gives its second operand for NaN
+#else
   const bool flip = b < 0.0 || (b == 0.0 && a < 0.0);
   const double fa = flip ? -a : a, fb = flip ? -b : b;
   const bool first = fa >= 0.0;
   const double ratio = (first ? fb : fa) / (first ? fa + fb : fb - fa);
-  return first ? ratio : 1.0 - ratio;
+  const double angle = first ? ratio : 1.0 - ratio;
+  return angle > 0.0 ? angle : 0.0;
+#endif
 }
 /// The unit direction (c, s) of diamond angle p.
 void diamondDirection(double p, double &c, double &s) {
@@ -156,9 +175,9 @@ std::optional<LocalPca> planeThroughLine(const BallView &v, double rho, const No
   const Eigen::Vector3d u = line.unitOrthogonal(), w = line.cross(u);
   // Off the line: beyond three times its own scatter across it (range noise along the rays).
   const double off = std::max(3.0 * std::sqrt(spread.l1), 0.1 * rho), off2 = off * off;
-  // Each point of the ball as (a, b), its offset from the line in the basis u, w, with its slot and distance (kept
-  // for the refit below); those off the line vote for the angle of the plane through it. Branch-free: the signs
-  // of a and b and which points are off the line follow no pattern (the branches cost half of this function).
+  // Each point of the ball as (a, b), its offset from the line in the basis u, w (kept for the refit below); those
+  // off the line vote for the angle of the plane through it. Branch-free, as which points are off the line follows
+  // no pattern.
   scratch.values.resize(3 * v.count);
   scratch.slots.resize(v.count);
   double *ab = scratch.values.data(), *d2s = ab + 2 * v.count;
@@ -166,19 +185,16 @@ std::optional<LocalPca> planeThroughLine(const BallView &v, double rho, const No
   // Four histograms, point t voting in t % 4: neighbours mostly vote for the same bin, and one histogram's
   // increments would wait on each other through memory.
   std::uint32_t votes[4][kBins] = {};
-  std::size_t m = 0;
   const double qx = v.q[0] + mean[0], qy = v.q[1] + mean[1], qz = v.q[2] + mean[2];
   for (std::size_t t = 0; t < v.count; ++t) {
     const double *p = v.xyz + 3 * std::size_t(v.inside[t]);
     const double dx = p[0] - qx, dy = p[1] - qy, dz = p[2] - qz;
     const double a = dx * u.x() + dy * u.y() + dz * u.z(), b = dx * w.x() + dy * w.y() + dz * w.z();
-    const bool kept = v.d2[t] < r2;
-    ab[2 * m] = a, ab[2 * m + 1] = b, d2s[m] = v.d2[t], slots[m] = v.inside[t];
-    // (0, 0), whose angle is NaN, is on the line: its bin is never counted, but the conversion must stay defined.
-    const double angle = std::max(0.0, diamondAngle(a, b));
+    ab[2 * t] = a, ab[2 * t + 1] = b;
+    // (0, 0) is on the line: its bin is never counted, but the conversion must stay defined (diamondAngle: 0).
+    const double angle = diamondAngle(a, b);
     const std::size_t bin = std::min<std::size_t>(kBins - 1, static_cast<std::size_t>(angle * (kBins / 2.0)));
-    votes[t & 3][bin] += kept && a * a + b * b >= off2 ? 1 : 0;
-    m += kept ? 1 : 0;
+    votes[t & 3][bin] += v.d2[t] < r2 && a * a + b * b >= off2 ? 1 : 0;
   }
   std::array<std::size_t, kBins> bins{};
   for (std::size_t k = 0; k < kBins; ++k) bins[k] = votes[0][k] + votes[1][k] + votes[2][k] + votes[3][k];
@@ -193,13 +209,13 @@ std::optional<LocalPca> planeThroughLine(const BallView &v, double rho, const No
   double c = 0.0, sn = 0.0;
   diamondDirection(static_cast<double>(best + 1) * (2.0 / kBins), c, sn);
   const double band = 2.0 * params.max_plane_rms * rho;
-  // The points within the band, compacted in place (in visiting order, as the sums need).
+  // The points of the ball within the band (in visiting order, as the sums need).
   std::size_t above = 0, below = 0, n = 0;
-  for (std::size_t k = 0; k < m; ++k) {
-    const double a = ab[2 * k], b = ab[2 * k + 1];
-    const bool in = std::abs(c * b - sn * a) <= band, off_line = a * a + b * b >= off2;
+  for (std::size_t t = 0; t < v.count; ++t) {
+    const double a = ab[2 * t], b = ab[2 * t + 1];
+    const bool in = v.d2[t] < r2 && std::abs(c * b - sn * a) <= band, off_line = a * a + b * b >= off2;
     const bool up = c * a + sn * b > 0.0;
-    slots[n] = slots[k], d2s[n] = d2s[k];
+    slots[n] = v.inside[t], d2s[n] = v.d2[t];
     n += in ? 1 : 0;
     above += in && off_line && up ? 1 : 0;
     below += in && off_line && !up ? 1 : 0;
