@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/Eigenvalues>
+#include <Eigen/Geometry>
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -469,6 +470,29 @@ TEST(SolveNormal, PrincipalAxisAndMeanAgreeWithTheIterativeSolver) {
       ++compared;
     }
   EXPECT_GT(compared, 1000);
+  // Two eigenvalues 1 and 1 + g: the axis of 1 + g is defined by g only. Where g is too small against the error of
+  // solveNormal's l2 (about 1e-8 of the trace there), no direction rather than a wrong one.
+  for (const double g : {1e-2, 1e-3, 1e-6, 1e-8, 1e-10}) {
+    const Eigen::Matrix3d rot = Eigen::Quaterniond(0.3, -0.5, 0.7, 0.2).normalized().toRotationMatrix();
+    const Eigen::Vector3d spread(std::sqrt(0.3 * 2.0), std::sqrt(2.0), std::sqrt((1.0 + g) * 2.0));
+    const double zero[3] = {0.0, 0.0, 0.0};
+    PcaAccumulator acc(zero);
+    for (int a = 0; a < 3; ++a)  // +-spread along each axis: covariance diag(spread^2) / 2 = (0.3, 1, 1 + g)
+      for (const double s : {-1.0, 1.0}) {
+        const Eigen::Vector3d p = rot * (s * spread(a) * Eigen::Vector3d::Unit(a));
+        acc.add(p.x(), p.y(), p.z());
+      }
+    double axis[3];
+    const bool got = acc.eigenvector(acc.solveNormal().l2, axis);
+    const double err = std::acos(std::min(1.0, std::fabs(Eigen::Vector3d(axis[0], axis[1], axis[2]).dot(rot.col(2)))));
+    if (g >= 1e-3) {
+      ASSERT_TRUE(got) << "gap " << g;
+      EXPECT_LT(err, 1e-4) << "gap " << g;
+    } else {
+      EXPECT_TRUE(!got || err < 1e-4) << "gap " << g << ": " << err << " rad";
+      EXPECT_FALSE(got) << "gap " << g;
+    }
+  }
   // Nothing added, or a repeated eigenvalue (isotropic): no direction.
   const double origin[3] = {0.0, 0.0, 0.0};
   PcaAccumulator none(origin);

@@ -9,6 +9,7 @@
 #include <vector>
 
 #include <Eigen/Eigenvalues>
+#include <Eigen/Geometry>
 #include <array>
 #include <cstring>
 #include <map>
@@ -151,6 +152,63 @@ TEST(RefinedNormals, AScanLineWhoseGrownBallReachesTheGroundKeepsThePlaneThrough
   (void)estimateNormals(h, lowest, p, &nb);
   for (std::size_t i = 0; i < lowest.size(); ++i)
     EXPECT_LT(nb[i].l1, p.line_ratio * nb[i].l2) << "lowest line's sample " << i << " was given a plane";
+}
+
+TEST(RefinedNormals, OfTwoPlanesThroughAScanLineTiedOnVotesTheFlatterIsTaken) {
+  // A scan line along x with two planes through it, as two rows each 0.6 m to either side: the plane z = 0 exact,
+  // the plane y = 0 with 5 mm of scatter. Every point is 5 cm from the next, so every one is a sample of levels
+  // 0..5 and both planes get exactly the same votes. The line's ball at 0.54 m holds the line only; at 1.08 m it
+  // holds both planes (not flat), so the plane through the line is chosen between the two: the flatter, z = 0.
+  // Four windows tie (each plane's bin with either neighbour). The first of them, the rule before, depended on where
+  // the bins fell about the line's axis, whose sign is arbitrary; one of these turns then got neither plane (its
+  // first window was 5 degrees off the flat plane, whose rows fell outside the refit's band).
+  std::mt19937_64 rng(21);
+  std::normal_distribution<double> line_noise(0.0, 0.002), row_noise(0.0, 0.005);
+  std::uniform_real_distribution<double> angle(-3.14159, 3.14159);
+  std::vector<Eigen::Vector3d> scene;
+  for (int i = -60; i <= 60; ++i) {
+    const double x = 0.05 * i + 0.0013;
+    scene.emplace_back(x, line_noise(rng), line_noise(rng));
+    for (const double side : {-0.6, 0.6}) {
+      scene.emplace_back(x, side, 0.0);            // the plane z = 0
+      scene.emplace_back(x, row_noise(rng), side);  // the plane y = 0, scattered
+    }
+  }
+  int flatter = 0;
+  constexpr int kTurns = 12;
+  for (int turn = 0; turn < kTurns; ++turn) {
+    const Eigen::Matrix3d rot = (Eigen::AngleAxisd(angle(rng), Eigen::Vector3d::UnitZ()) *
+                                 Eigen::AngleAxisd(angle(rng), Eigen::Vector3d::UnitY()) *
+                                 Eigen::AngleAxisd(angle(rng), Eigen::Vector3d::UnitX()))
+                                    .toRotationMatrix();
+    const Eigen::Vector3d shift(20.0, -7.0, 3.0);
+    std::vector<double> xyz;
+    for (const Eigen::Vector3d &p : scene) {
+      const Eigen::Vector3d q = rot * p + shift;
+      xyz.insert(xyz.end(), {q.x(), q.y(), q.z()});
+    }
+    const Eigen::Vector3d view = rot * Eigen::Vector3d(0.0, 3.0, 4.0) + shift;
+    const Hierarchy h = test::buildShuffled(xyz, kCell, 6, 31 + turn, {view.x(), view.y(), view.z()});
+    const int level = 3;  // r_3 = 0.108 m: footprints 0.27, 0.54 and 1.08 m
+    std::vector<SampleId> query;
+    for (SampleId id : h.samplesUpTo(5))
+      if ((Eigen::Vector3d(h.position(id)) - (rot * Eigen::Vector3d(0.0013, 0.0, 0.0) + shift)).norm() < 0.01)
+        query.push_back(id);
+    ASSERT_EQ(query.size(), 1u) << "turn " << turn;
+    NormalParams p = params(level, 0, 2.5 * h.radius(level));
+    p.min_neighbors = 5;
+    p.neighborhood_level_offset = 2;
+    p.max_growth = 4.0;
+    std::vector<LocalPca> nb;
+    const std::vector<SampleNormal> n = estimateNormals(h, query, p, &nb);
+    ASSERT_TRUE(n[0].valid) << "turn " << turn;
+    const Eigen::Vector3d got(n[0].normal[0], n[0].normal[1], n[0].normal[2]);
+    const double to_flat = std::abs(got.dot(rot * Eigen::Vector3d::UnitZ()));
+    const double to_scattered = std::abs(got.dot(rot * Eigen::Vector3d::UnitY()));
+    EXPECT_TRUE(to_flat > 0.999 || to_scattered > 0.999) << "turn " << turn << ": neither plane";
+    flatter += to_flat > 0.999 ? 1 : 0;
+  }
+  EXPECT_EQ(flatter, kTurns);
 }
 
 TEST(RefinedNormals, TooFewNeighboursGrowTheFootprintUntilThereAreEnough) {

@@ -114,9 +114,9 @@ BrutePca brutePca(const Hierarchy &h, SampleId q, int finest, double rho) {
 
 /// Where a line's grown ball is not flat: the plane through the line (principal axis of the ball of radius rho / 2)
 /// at the angle about it that most points of the ball off the line fall within 10 degrees of (36 bins of the
-/// diamond angle, the best two adjacent, the first on a tie), refitted to the points within 4 % of rho of it; kept
-/// if 3 or more of those lie off the line on each side and their PCA passes the growth's tests. RefinedNormals.cpp's
-/// planeThroughLine, by brute force over the samples.
+/// diamond angle, the best two adjacent), refitted to the points within 4 % of rho of it; kept if 3 or more of those
+/// lie off the line on each side and their PCA passes the growth's tests. Of windows tied on votes, the flattest
+/// such plane (smallest l0). RefinedNormals.cpp's planeThroughLine, by brute force over the samples.
 bool brutePlaneThroughLine(const Hierarchy &h, SampleId q, int finest, double rho, const NormalParams &p,
                            BrutePca &out) {
   const Eigen::Vector3d c(h.position(q));
@@ -145,34 +145,40 @@ bool brutePlaneThroughLine(const Hierarchy &h, SampleId q, int finest, double rh
     if (std::hypot(a, b) >= off) ++bins[std::min(35, static_cast<int>(diamond(a, b) * 18.0))];
   }
   auto window = [&](int k) { return bins[k] + bins[(k + 1) % 36]; };
-  int best = 0;
-  for (int k = 1; k < 36; ++k)
-    if (window(k) > window(best)) best = k;
-  if (window(best) < 6) return false;
-  const double pd = (best + 1) / 18.0;  // back from the diamond angle to a direction in u, w
-  const Eigen::Vector3d along = ((1.0 - pd) * u + (pd <= 1.0 ? pd : 2.0 - pd) * w).normalized();
-  const Eigen::Vector3d normal = line.cross(along).normalized();
-  std::vector<Eigen::Vector3d> plane;
-  int above = 0, below = 0;
-  for (const auto &d : ball) {
-    const Eigen::Vector3d e = d - mean;
-    if (std::abs(e.dot(normal)) > 2.0 * p.max_plane_rms * rho) continue;
-    plane.push_back(d);
-    if (std::hypot(e.dot(u), e.dot(w)) >= off) (e.dot(along) > 0.0 ? above : below) += 1;
+  int most = 0;
+  for (int k = 0; k < 36; ++k) most = std::max(most, window(k));
+  if (most < 6) return false;
+  bool found = false;
+  for (int k = 0; k < 36; ++k) {
+    if (window(k) != most) continue;
+    const double pd = (k + 1) / 18.0;  // back from the diamond angle to a direction in u, w
+    const Eigen::Vector3d along = ((1.0 - pd) * u + (pd <= 1.0 ? pd : 2.0 - pd) * w).normalized();
+    const Eigen::Vector3d normal = line.cross(along).normalized();
+    std::vector<Eigen::Vector3d> plane;
+    int above = 0, below = 0;
+    for (const auto &d : ball) {
+      const Eigen::Vector3d e = d - mean;
+      if (std::abs(e.dot(normal)) > 2.0 * p.max_plane_rms * rho) continue;
+      plane.push_back(d);
+      if (std::hypot(e.dot(u), e.dot(w)) >= off) (e.dot(along) > 0.0 ? above : below) += 1;
+    }
+    if (above < 3 || below < 3 || static_cast<int>(plane.size()) < p.min_neighbors) continue;
+    Eigen::Vector3d pm = Eigen::Vector3d::Zero();
+    for (const auto &d : plane) pm += d / static_cast<double>(plane.size());
+    Eigen::Matrix3d pc = Eigen::Matrix3d::Zero();
+    for (const auto &d : plane) pc += (d - pm) * (d - pm).transpose() / static_cast<double>(plane.size());
+    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> ps(pc);
+    const Eigen::Vector3d l = ps.eigenvalues().cwiseMax(0.0);
+    if (!(l(1) > 1e-9 * l.sum()) || l(0) > p.max_plane_rms * p.max_plane_rms * rho * rho ||
+        l(1) < p.line_ratio * l(2))
+      continue;
+    if (found && !(l(0) < out.values(0))) continue;
+    out.values = l;
+    out.vectors = ps.eigenvectors();
+    out.count = plane.size();
+    found = true;
   }
-  if (above < 3 || below < 3 || static_cast<int>(plane.size()) < p.min_neighbors) return false;
-  Eigen::Vector3d pm = Eigen::Vector3d::Zero();
-  for (const auto &d : plane) pm += d / static_cast<double>(plane.size());
-  Eigen::Matrix3d pc = Eigen::Matrix3d::Zero();
-  for (const auto &d : plane) pc += (d - pm) * (d - pm).transpose() / static_cast<double>(plane.size());
-  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> ps(pc);
-  const Eigen::Vector3d l = ps.eigenvalues().cwiseMax(0.0);
-  if (!(l(1) > 1e-9 * l.sum()) || l(0) > p.max_plane_rms * p.max_plane_rms * rho * rho || l(1) < p.line_ratio * l(2))
-    return false;
-  out.values = l;
-  out.vectors = ps.eigenvectors();
-  out.count = plane.size();
-  return true;
+  return found;
 }
 
 /// The neighbourhood NormalEstimator.hpp's contract picks for a fixed radius, brute force: levels 0..level+offset

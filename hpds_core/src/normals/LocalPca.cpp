@@ -75,7 +75,12 @@ bool PcaAccumulator::eigenvector(double l, double v[3]) const {
   double c[6];
   covariance(c);
   const double trace = c[0] + c[3] + c[5];
-  return trace > 0.0 && kernelDirection(c, l, 1e-30 * trace * trace * trace * trace, v);
+  // The largest row cross product of C - l I is the product of l's gaps to the other two eigenvalues (each at most
+  // the trace) times 0.58..1: below 1e-5 of the trace squared, l is within about 1e-4 of the trace of another
+  // eigenvalue, and the direction would rest on l's last digits (solveNormal's l1 and l2 lose about half their
+  // digits when close: 0.15 rad off at a gap of 1e-8).
+  const double t2 = trace * trace;
+  return trace > 0.0 && kernelDirection(c, l, 1e-10 * t2 * t2, v);
 }
 
 LocalPca PcaAccumulator::solveNormal() const {

@@ -156,7 +156,7 @@ void diamondDirection(double p, double &c, double &s) {
 /// planar_urban in scan mode: 7 % of the wall samples stopped so, nearly all more than 30 degrees off.
 /// `rho`: the grown ball's radius; the line is the previous footprint's ball (radius rho / 2). The plane must hold
 /// params.min_neighbors points, at least kSide of them off the line on each side, and pass the growth's own tests
-/// (not lineLike, flat); nullopt otherwise.
+/// (not lineLike, flat); nullopt otherwise. Of planes tied on votes, the flattest that passes.
 std::optional<LocalPca> planeThroughLine(const BallView &v, double rho, const NormalParams &params,
                                          SweepScratch &scratch) {
   constexpr int kBins = 36;         // 5-degree bins of the plane's angle about the line
@@ -198,34 +198,38 @@ std::optional<LocalPca> planeThroughLine(const BallView &v, double rho, const No
   }
   std::array<std::size_t, kBins> bins{};
   for (std::size_t k = 0; k < kBins; ++k) bins[k] = votes[0][k] + votes[1][k] + votes[2][k] + votes[3][k];
-  // Two adjacent bins (cyclic: the angle is modulo pi), the first best on a tie.
-  std::size_t best = 0, best_count = 0;
-  for (std::size_t k = 0; k < kBins; ++k) {
-    const std::size_t c = bins[k] + bins[(k + 1) % kBins];
-    if (c > best_count) best = k, best_count = c;
-  }
+  // Two adjacent bins (cyclic: the angle is modulo pi) with the most votes. On a tie, the window whose plane refits
+  // flattest (smallest l0): the line's axis has an arbitrary sign, which mirrors the bins, so "the first" would
+  // depend on it (about 5 % of the HDL-32's calls tie; the sign of Eigen's axis and of ours differed on half).
+  std::size_t best_count = 0;
+  for (std::size_t k = 0; k < kBins; ++k) best_count = std::max(best_count, bins[k] + bins[(k + 1) % kBins]);
   if (best_count < 2 * kSide) return std::nullopt;
-  // The plane holds the line and the direction (c, sn) in u, w; its normal is line x that direction, (-sn, c) in u, w.
-  double c = 0.0, sn = 0.0;
-  diamondDirection(static_cast<double>(best + 1) * (2.0 / kBins), c, sn);
   const double band = 2.0 * params.max_plane_rms * rho;
-  // The points of the ball within the band (in visiting order, as the sums need).
-  std::size_t above = 0, below = 0, n = 0;
-  for (std::size_t t = 0; t < v.count; ++t) {
-    const double a = ab[2 * t], b = ab[2 * t + 1];
-    const bool in = v.d2[t] < r2 && std::abs(c * b - sn * a) <= band, off_line = a * a + b * b >= off2;
-    const bool up = c * a + sn * b > 0.0;
-    slots[n] = v.inside[t], d2s[n] = v.d2[t];
-    n += in ? 1 : 0;
-    above += in && off_line && up ? 1 : 0;
-    below += in && off_line && !up ? 1 : 0;
+  std::optional<LocalPca> chosen;
+  for (std::size_t k = 0; k < kBins; ++k) {
+    if (bins[k] + bins[(k + 1) % kBins] != best_count) continue;
+    // The plane holds the line and the direction (c, sn) in u, w; its normal is line x that direction, (-sn, c).
+    double c = 0.0, sn = 0.0;
+    diamondDirection(static_cast<double>(k + 1) * (2.0 / kBins), c, sn);
+    // The points of the ball within the band (in visiting order, as the sums need).
+    std::size_t above = 0, below = 0, n = 0;
+    for (std::size_t t = 0; t < v.count; ++t) {
+      const double a = ab[2 * t], b = ab[2 * t + 1];
+      const bool in = v.d2[t] < r2 && std::abs(c * b - sn * a) <= band, off_line = a * a + b * b >= off2;
+      const bool up = c * a + sn * b > 0.0;
+      slots[n] = v.inside[t], d2s[n] = v.d2[t];
+      n += in ? 1 : 0;
+      above += in && off_line && up ? 1 : 0;
+      below += in && off_line && !up ? 1 : 0;
+    }
+    if (above < kSide || below < kSide || static_cast<int>(n) < params.min_neighbors) continue;
+    PcaAccumulator acc(v.q);
+    acc.addWithin(v.xyz, slots, d2s, n, r2);
+    const LocalPca pca = acc.solveNormal();
+    if (!pca.valid || !flat(pca, params, r2) || lineLike(pca, params)) continue;
+    if (!chosen || pca.l0 < chosen->l0) chosen = pca;
   }
-  if (above < kSide || below < kSide || static_cast<int>(n) < params.min_neighbors) return std::nullopt;
-  PcaAccumulator acc(v.q);
-  acc.addWithin(v.xyz, slots, d2s, n, r2);
-  const LocalPca pca = acc.solveNormal();
-  if (!pca.valid || !flat(pca, params, r2) || lineLike(pca, params)) return std::nullopt;
-  return pca;
+  return chosen;
 }
 
 /// Step 2 of the estimator for the queries `pending` (indices into q), footprints starting at rho[i]: every

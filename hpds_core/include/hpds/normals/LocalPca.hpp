@@ -71,8 +71,9 @@ class PcaAccumulator {
   /// The mean of the points added, relative to the reference point (zero when none were).
   void mean(double m[3]) const;
   /// The unit eigenvector (sign arbitrary) of eigenvalue `l` of the covariance, e.g. l2 of solveNormal() for the
-  /// direction of a line-like neighbourhood: the largest cross product of two rows of C - l I. False where `l` is
-  /// not a simple eigenvalue to round-off (no row pair spans the other two eigenvectors) or nothing was added.
+  /// direction of a line-like neighbourhood: the largest cross product of two rows of C - l I, accurate to about
+  /// (error of l) / (gap to the nearest other eigenvalue) rad. False where that gap is below about 1e-4 of the
+  /// trace (the direction is then not defined well enough by an l from solveNormal) or nothing was added.
   [[nodiscard]] bool eigenvector(double l, double v[3]) const;
 
  private:
