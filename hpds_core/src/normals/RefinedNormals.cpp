@@ -200,7 +200,7 @@ std::optional<LocalPca> planeThroughLine(const BallView &v, double rho, const No
   for (std::size_t k = 0; k < kBins; ++k) bins[k] = votes[0][k] + votes[1][k] + votes[2][k] + votes[3][k];
   // Two adjacent bins (cyclic: the angle is modulo pi) with the most votes. On a tie, the window whose plane refits
   // flattest (smallest l0): the line's axis has an arbitrary sign, which mirrors the bins, so "the first" would
-  // depend on it (about 5 % of the HDL-32's calls tie; the sign of Eigen's axis and of ours differed on half).
+  // depend on it. Ties are common: a plane whose votes fall in one bin ties the two windows on either side of it.
   std::size_t best_count = 0;
   for (std::size_t k = 0; k < kBins; ++k) best_count = std::max(best_count, bins[k] + bins[(k + 1) % kBins]);
   if (best_count < 2 * kSide) return std::nullopt;
