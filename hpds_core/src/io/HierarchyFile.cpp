@@ -492,7 +492,7 @@ void loadMap(const std::string &path, Pipeline &pipeline) {
   std::vector<std::uint8_t> normals;
   LoadedHierarchy loaded = parseFile(path, &pipeline.config().hierarchy, &normals);
   // Checked before the map is replaced, so that a refused file changes nothing.
-  MapNormals kept(normalParamsFor(pipeline.config(), pipeline.outputLevel()).line_ratio);  // as the pipeline's
+  MapNormals kept;
   const std::size_t count = loaded.hierarchy.sampleCount();
   if (!normals.empty())
     for (std::size_t i = 0; i < count; ++i)

@@ -11,7 +11,8 @@ void MapNormals::resetSlots(const std::vector<SampleId> &fresh, std::size_t id_b
 }
 
 std::vector<SampleId> MapNormals::improvable(const Hierarchy &hierarchy, const std::vector<SampleId> &hit,
-                                             const double viewpoint[3], std::vector<float> &ranges) const {
+                                             const double viewpoint[3], double line_ratio,
+                                             std::vector<float> &ranges) const {
   std::vector<SampleId> out;
   ranges.clear();
   for (SampleId id : hit) {
@@ -19,7 +20,7 @@ std::vector<SampleId> MapNormals::improvable(const Hierarchy &hierarchy, const s
     const double dx = p[0] - viewpoint[0], dy = p[1] - viewpoint[1], dz = p[2] - viewpoint[2];
     const float range = static_cast<float>(std::sqrt(dx * dx + dy * dy + dz * dz));
     const Entry *e = id < entries_.size() ? &entries_[id] : nullptr;
-    if (!e || e->state != kValid || range < e->range || lineLike(e->eigen[1], e->eigen[2])) {
+    if (!e || e->state != kValid || range < e->range || lineLike(e->eigen[1], e->eigen[2], line_ratio)) {
       out.push_back(id);
       ranges.push_back(range);
     }
@@ -27,12 +28,14 @@ std::vector<SampleId> MapNormals::improvable(const Hierarchy &hierarchy, const s
   return out;
 }
 
-void MapNormals::offer(SampleId id, const SampleNormal &normal, const LocalPca &neighbourhood, float range) {
+void MapNormals::offer(SampleId id, const SampleNormal &normal, const LocalPca &neighbourhood, float range,
+                       double line_ratio) {
   Entry &e = slot(id);
   bool take = e.state == kEmpty || (normal.valid && (e.state == kInvalid || range < e.range));
   if (normal.valid && e.state == kValid) {
-    const bool was_line = lineLike(e.eigen[1], e.eigen[2]);
-    const bool is_line = lineLike(static_cast<float>(neighbourhood.l1), static_cast<float>(neighbourhood.l2));
+    const bool was_line = lineLike(e.eigen[1], e.eigen[2], line_ratio);
+    const bool is_line =
+        lineLike(static_cast<float>(neighbourhood.l1), static_cast<float>(neighbourhood.l2), line_ratio);
     if (was_line != is_line) take = was_line;
   }
   if (!take) return;

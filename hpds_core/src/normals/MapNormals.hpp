@@ -32,18 +32,18 @@ namespace hpds {
 
 class MapNormals {
  public:
-  /// `line_ratio`: NormalParams::line_ratio of the normals offered.
-  explicit MapNormals(double line_ratio) : line_ratio_(static_cast<float>(line_ratio)) {}
   /// Forgets every entry (a replaced map).
   void clear() { std::vector<Entry>().swap(entries_); }
   /// Grows to `id_bound` slots and empties those of `fresh` (samples new since the last call).
   void resetSlots(const std::vector<SampleId> &fresh, std::size_t id_bound);
   /// Of `hit`, the samples a frame seen from `viewpoint` (fixed frame) could give a better entry: empty, invalid,
   /// line-like, or valid from farther away. `ranges` gets their distances to the viewpoint, same order.
+  /// `line_ratio`: NormalParams::line_ratio of the normals kept and offered.
   [[nodiscard]] std::vector<SampleId> improvable(const Hierarchy &hierarchy, const std::vector<SampleId> &hit,
-                                                 const double viewpoint[3], std::vector<float> &ranges) const;
-  /// Offers an estimate for `id` from a frame `range` metres away (see contract).
-  void offer(SampleId id, const SampleNormal &normal, const LocalPca &neighbourhood, float range);
+                                                 const double viewpoint[3], double line_ratio,
+                                                 std::vector<float> &ranges) const;
+  /// Offers an estimate for `id` from a frame `range` metres away (see contract), judged with `line_ratio` as above.
+  void offer(SampleId id, const SampleNormal &normal, const LocalPca &neighbourhood, float range, double line_ratio);
   /// The valid normal kept for `id` and the neighbourhood it came from (its normal and eigenvalues; float
   /// precision); false when there is none.
   bool lookup(SampleId id, SampleNormal &normal, LocalPca *neighbourhood) const;
@@ -66,13 +66,14 @@ class MapNormals {
     std::uint8_t state = kEmpty;
   };
   /// In float, as kept: an entry and the estimate it is compared with are judged alike.
-  [[nodiscard]] bool lineLike(float l1, float l2) const { return l1 < line_ratio_ * l2; }
+  [[nodiscard]] static bool lineLike(float l1, float l2, double line_ratio) {
+    return l1 < static_cast<float>(line_ratio) * l2;
+  }
   /// `id`'s entry, growing the table (empty entries) to hold it.
   Entry &slot(SampleId id) {
     if (id >= entries_.size()) entries_.resize(std::size_t(id) + 1);
     return entries_[id];
   }
-  float line_ratio_;
   std::vector<Entry> entries_;
 };
 

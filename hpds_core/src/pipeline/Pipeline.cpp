@@ -101,8 +101,7 @@ Pipeline::Pipeline(const HpdsConfig &config)
       build_depth_(buildDepthFor(config_, output_level_)),
       fine_level_(fineLevelFor(config_, output_level_)),
       hierarchy_(config_.hierarchy.cell_size, config_.hierarchy.max_depth) {
-  if (config_.mode == Mode::Map && fine_level_ >= 0)
-    map_normals_ = std::make_shared<MapNormals>(normalParamsFor(config_, output_level_).line_ratio);
+  if (config_.mode == Mode::Map && fine_level_ >= 0) map_normals_ = std::make_shared<MapNormals>();
 }
 
 void Pipeline::requireLevel(int level) {
@@ -345,12 +344,13 @@ void Pipeline::updateMapNormals(const std::vector<SampleId> &fresh, const double
   hit_cache_valid_ = true;
   const std::vector<SampleId> &hit = hit_cache_;
   std::vector<float> ranges;
-  const std::vector<SampleId> ids = map_normals_->improvable(hierarchy_, hit, viewpoint, ranges);
+  const std::vector<SampleId> ids = map_normals_->improvable(hierarchy_, hit, viewpoint, params.line_ratio, ranges);
   if (!ids.empty()) {
     std::vector<LocalPca> neighbourhoods(ids.size());
     const std::vector<SampleNormal> normals =
         estimateNormalsRefined(hierarchy_, ids, params, &fine_points_, &neighbourhoods, fine_grids_.get(), nullptr);
-    for (std::size_t i = 0; i < ids.size(); ++i) map_normals_->offer(ids[i], normals[i], neighbourhoods[i], ranges[i]);
+    for (std::size_t i = 0; i < ids.size(); ++i)
+      map_normals_->offer(ids[i], normals[i], neighbourhoods[i], ranges[i], params.line_ratio);
   }
   // The frame's grids serve this estimate only.
   if (fine_grids_)
