@@ -53,6 +53,16 @@ NormalParams params(int level, int k, double radius) {
   return p;
 }
 
+/// The refined estimator on `h` at `level` as the defaults run it (footprint 2.5 r_L, averaging points two levels
+/// finer, 5 neighbours at least), growing up to `max_growth`.
+NormalParams refinedParams(const Hierarchy &h, int level, double max_growth) {
+  NormalParams p = params(level, 0, 2.5 * h.radius(level));
+  p.min_neighbors = 5;
+  p.neighborhood_level_offset = 2;
+  p.max_growth = max_growth;
+  return p;
+}
+
 TEST(RefinedNormals, FinerLevelsAverageRangeNoise) {
   std::mt19937_64 rng(1);
   std::uniform_real_distribution<double> u(0.0, 4.0);
@@ -138,10 +148,7 @@ TEST(RefinedNormals, AScanLineWhoseGrownBallReachesTheGroundKeepsThePlaneThrough
   }
   ASSERT_GT(wall.size(), 20u);
   ASSERT_GT(lowest.size(), 20u);
-  NormalParams p = params(level, 0, 2.5 * h.radius(level));
-  p.min_neighbors = 5;
-  p.neighborhood_level_offset = 2;
-  p.max_growth = 8.0;
+  const NormalParams p = refinedParams(h, level, 8.0);
   std::vector<LocalPca> nb;
   const std::vector<SampleNormal> wn = estimateNormals(h, wall, p, &nb);
   for (std::size_t i = 0; i < wall.size(); ++i) {
@@ -195,10 +202,7 @@ TEST(RefinedNormals, OfTwoPlanesThroughAScanLineTiedOnVotesTheFlatterIsTaken) {
       if ((Eigen::Vector3d(h.position(id)) - (rot * Eigen::Vector3d(0.0013, 0.0, 0.0) + shift)).norm() < 0.01)
         query.push_back(id);
     ASSERT_EQ(query.size(), 1u) << "turn " << turn;
-    NormalParams p = params(level, 0, 2.5 * h.radius(level));
-    p.min_neighbors = 5;
-    p.neighborhood_level_offset = 2;
-    p.max_growth = 4.0;
+    const NormalParams p = refinedParams(h, level, 4.0);
     std::vector<LocalPca> nb;
     const std::vector<SampleNormal> n = estimateNormals(h, query, p, &nb);
     ASSERT_TRUE(n[0].valid) << "turn " << turn;
