@@ -72,26 +72,31 @@ std::vector<double> cellCentroids(const double *xyz, const std::uint32_t *indice
   // they fit int32 with room for the offsets below; anything else takes the wide path.
   constexpr double kLimit = 1073741824.0;  // 2^30
   std::vector<std::int32_t> cell(3 * count);
-  std::int32_t lo[3] = {INT32_MAX, INT32_MAX, INT32_MAX}, hi[3] = {INT32_MIN, INT32_MIN, INT32_MIN};
+  // The running bounds in scalars: as arrays indexed by axis, GCC kept them in memory, a store-to-load chain per
+  // coordinate that cost more than the rest of this loop.
+  std::int32_t lo0 = INT32_MAX, lo1 = INT32_MAX, lo2 = INT32_MAX, hi0 = INT32_MIN, hi1 = INT32_MIN, hi2 = INT32_MIN;
   std::size_t kept = 0;
   std::vector<std::uint32_t> pos(count);  // input position of the kept points
+  const auto floorOf = [](double v) {
+    const std::int32_t t = static_cast<std::int32_t>(v);
+    return t - (v < static_cast<double>(t) ? 1 : 0);
+  };
   for (std::size_t i = 0; i < count; ++i) {
     const double *p = xyz + 3 * std::size_t(indices[i]);
-    const double q[3] = {p[0] * inv, p[1] * inv, p[2] * inv};
-    if (!(std::fabs(q[0]) < kLimit && std::fabs(q[1]) < kLimit && std::fabs(q[2]) < kLimit)) {
-      if (std::isfinite(q[0]) && std::isfinite(q[1]) && std::isfinite(q[2])) return wideCentroids(xyz, indices, count, inv);
+    const double q0 = p[0] * inv, q1 = p[1] * inv, q2 = p[2] * inv;
+    if (!(std::fabs(q0) < kLimit && std::fabs(q1) < kLimit && std::fabs(q2) < kLimit)) {
+      if (std::isfinite(q0) && std::isfinite(q1) && std::isfinite(q2)) return wideCentroids(xyz, indices, count, inv);
       continue;  // a non-finite coordinate
     }
+    const std::int32_t c0 = floorOf(q0), c1 = floorOf(q1), c2 = floorOf(q2);
     std::int32_t *c = &cell[3 * kept];
-    for (int a = 0; a < 3; ++a) {
-      const std::int32_t t = static_cast<std::int32_t>(q[a]);
-      c[a] = t - (q[a] < static_cast<double>(t) ? 1 : 0);
-      lo[a] = std::min(lo[a], c[a]);
-      hi[a] = std::max(hi[a], c[a]);
-    }
+    c[0] = c0, c[1] = c1, c[2] = c2;
+    lo0 = std::min(lo0, c0), lo1 = std::min(lo1, c1), lo2 = std::min(lo2, c2);
+    hi0 = std::max(hi0, c0), hi1 = std::max(hi1, c1), hi2 = std::max(hi2, c2);
     pos[kept++] = static_cast<std::uint32_t>(i);
   }
   if (kept == 0) return {};
+  const std::int32_t lo[3] = {lo0, lo1, lo2}, hi[3] = {hi0, hi1, hi2};
   if (box)  // a cell of margin on each side absorbs the round-off of p * inv
     for (int a = 0; a < 3; ++a) {
       box[a] = (static_cast<double>(lo[a]) - 1.0) * edge;
