@@ -34,6 +34,9 @@ void writeBytes(const fs::path &p, const std::vector<std::uint8_t> &b) {
   f.write(reinterpret_cast<const char *>(b.data()), static_cast<std::streamsize>(b.size()));
 }
 
+// Bytes of the kept normals' settings in a version-3 header (HierarchyFile.cpp's layout).
+constexpr std::size_t kNormalSettingsBytes = 4 + 8 + 4 + 4 + 4 + 8 + 8 + 8 + 3 * 8;
+
 std::uint32_t u32At(const std::vector<std::uint8_t> &b, std::size_t at) {
   std::uint32_t v;
   std::memcpy(&v, b.data() + at, 4);
@@ -139,7 +142,8 @@ TEST_F(MapFile, RoundTripKeepsEverySampleBitForBit) {
   // Exact size: nothing but the header, the entries (with the normals the map keeps) and the checksum.
   const auto &l = pipeline_->hierarchy().recordLayout();
   const std::vector<std::uint8_t> bytes = readBytes(p);
-  const std::uint32_t normal_bytes = u32At(bytes, u32At(bytes, 12) - 8);
+  // The normals' size, then the settings they were estimated with, close the header.
+  const std::uint32_t normal_bytes = u32At(bytes, u32At(bytes, 12) - 8 - kNormalSettingsBytes);
   EXPECT_EQ(normal_bytes, 33u) << "a map-mode pipeline with normals keeps them";
   EXPECT_EQ(fs::file_size(p),
             u32At(bytes, 12) + pipeline_->hierarchy().sampleCount() * (41 + l.point_step + normal_bytes) + 4);
@@ -192,6 +196,90 @@ TEST_F(MapFile, LoadedMapContinuesExactlyLikeAnUninterruptedRun) {
   for (int i = 5; i < 12; ++i) second.addFrame(lidar_->frame(i).frame);
   EXPECT_EQ(sampleSet(whole.hierarchy()), sampleSet(second.hierarchy()));
   EXPECT_GT(whole.hierarchy().sampleCount(), 1000u);
+}
+
+// Output normals of every output sample, as bytes (NaN for invalid ones compares equal this way).
+std::vector<std::uint8_t> outputNormalBytes(const Pipeline &p) {
+  const std::vector<SampleNormal> n = p.normals(p.outputSamples());
+  std::vector<std::uint8_t> b(n.size() * 16);
+  for (std::size_t i = 0; i < n.size(); ++i) {
+    std::memcpy(b.data() + 16 * i, n[i].normal, 12);
+    const float valid = n[i].valid ? 1.0f : 0.0f;
+    std::memcpy(b.data() + 16 * i + 12, &valid, 4);
+  }
+  return b;
+}
+
+TEST_F(MapFile, KeptNormalsOfOtherSettingsAreDroppedWithAWarning) {
+  const auto dir = test::scratchDir("map_normal_settings");
+  const fs::path p = savedMap(dir);
+  // The map's own settings: its kept normals come back, and with them the normals it output.
+  Pipeline same(mapConfig());
+  EXPECT_EQ(loadMap(p.string(), same), "");
+  EXPECT_EQ(outputNormalBytes(same), outputNormalBytes(*pipeline_));
+
+  // Other settings each: the kept normals are dropped and the warning names both settings. The oracle is the same map
+  // loaded without any kept normals (saveHierarchy leaves them out), where every normal is this run's own estimate.
+  const fs::path bare = dir / "bare.hpdsmap";
+  saveHierarchy(bare.string(), pipeline_->hierarchy(), pipeline_->framesProcessed());
+  for (const auto &[edit, key] : std::vector<std::pair<std::function<void(HpdsConfig &)>, std::string>>{
+           {[](HpdsConfig &c) { c.normals.max_growth = 4.0; }, "max_growth 4"},
+           {[](HpdsConfig &c) { c.normals.radius = 0.6; }, "radius 0.6 m"},
+           {[](HpdsConfig &c) { c.normals.neighborhood_level_offset = 1; }, "neighborhood_level_offset 1"},
+           // At the map's own cell (derived from the spacing before), the coarsest level with r_D <= 0.25 m.
+           {[&](HpdsConfig &c) {
+              c.hierarchy.cell_size = pipeline_->config().hierarchy.cell_size;
+              c.output.spacing = 0.25;
+            },
+            "output level 4"}}) {
+    HpdsConfig other = mapConfig();
+    edit(other);
+    Pipeline loaded(other);
+    const std::string w = loadMap(p.string(), loaded);
+    EXPECT_NE(w.find("other settings"), std::string::npos) << key << ": " << w;
+    EXPECT_NE(w.find(key), std::string::npos) << key << ": " << w;
+    EXPECT_NE(w.find("dropped"), std::string::npos) << key << ": " << w;
+    Pipeline oracle(other);
+    EXPECT_EQ(loadMap(bare.string(), oracle), "") << key;
+    EXPECT_EQ(outputNormalBytes(loaded), outputNormalBytes(oracle)) << key;
+    // Both then continue alike: the next frame's normals are this run's in both.
+    loaded.addFrame(lidar_->frame(8).frame);
+    oracle.addFrame(lidar_->frame(8).frame);
+    EXPECT_EQ(outputNormalBytes(loaded), outputNormalBytes(oracle)) << key;
+  }
+  // The test could fail: with its kept normals, the map's output differs from its own fresh estimate.
+  Pipeline fresh(mapConfig());
+  (void)loadMap(bare.string(), fresh);
+  EXPECT_NE(outputNormalBytes(fresh), outputNormalBytes(same));
+  // threads changes no result, so it is not a setting that drops them.
+  HpdsConfig two = mapConfig();
+  two.threads = 2;
+  Pipeline threaded(two);
+  EXPECT_EQ(loadMap(p.string(), threaded), "");
+  EXPECT_EQ(outputNormalBytes(threaded), outputNormalBytes(*pipeline_));
+}
+
+TEST_F(MapFile, VersionTwoFilesKeepTheirNormalsWhateverTheSettings) {
+  // A version-2 file is this build's file without the settings block: its kept normals load as before (it cannot
+  // say what made them).
+  const auto dir = test::scratchDir("map_version2");
+  std::vector<std::uint8_t> b = readBytes(savedMap(dir));
+  const std::uint32_t header_size = u32At(b, 12);
+  b.erase(b.begin() + (header_size - 4 - kNormalSettingsBytes), b.begin() + (header_size - 4));
+  b[8] = 2;
+  const std::uint32_t v2_size = header_size - static_cast<std::uint32_t>(kNormalSettingsBytes);
+  std::memcpy(b.data() + 12, &v2_size, 4);
+  refreshCrcs(b);
+  const fs::path p = dir / "v2.hpdsmap";
+  writeBytes(p, b);
+  HpdsConfig other = mapConfig();
+  other.normals.max_growth = 4.0;
+  Pipeline loaded(other);
+  EXPECT_EQ(loadMap(p.string(), loaded), "");
+  Pipeline same(mapConfig());
+  EXPECT_EQ(loadMap(p.string(), same), "");
+  EXPECT_EQ(outputNormalBytes(same), outputNormalBytes(*pipeline_));
+  expectIdentical(pipeline_->hierarchy(), loadHierarchy(p.string()).hierarchy);
 }
 
 TEST_F(MapFile, MismatchedConfigAndScanModeAreRefusedAndLeaveThePipelineUnchanged) {
@@ -310,7 +398,10 @@ TEST_F(MapFile, ForgedFilesWithValidChecksumsAreRefusedByMeaning) {
   const fs::path p = dir / "forged.hpdsmap";
   const std::uint32_t header_size = u32At(good, 12);
   const std::uint32_t step = u32At(good, 40);
-  const std::uint32_t normal_bytes = u32At(good, header_size - 8);
+  // The saved map keeps normals: their size, then their settings, close the header.
+  const std::size_t normal_at = header_size - 4 - kNormalSettingsBytes - 4;
+  const std::uint32_t normal_bytes = u32At(good, normal_at);
+  ASSERT_EQ(normal_bytes, 33u);
   const std::size_t entry = 41 + step + normal_bytes;
   auto forged = [&](auto &&edit, const std::string &what, const std::string &why) {
     std::vector<std::uint8_t> b = good;
@@ -319,7 +410,7 @@ TEST_F(MapFile, ForgedFilesWithValidChecksumsAreRefusedByMeaning) {
     writeBytes(p, b);
     expectRefused(p, what, why);
   };
-  forged([](auto &b) { b[8] = 3; }, "unsupported hpds map version 3", "version 3");
+  forged([](auto &b) { b[8] = 4; }, "unsupported hpds map version 4", "version 4");
   forged([](auto &b) { b[8] = 0; }, "unsupported hpds map version 0", "version 0");
   forged([](auto &b) { b[0] = 'X'; }, "bad magic", "magic");
   forged([](auto &b) { b[24] = 22; }, "invalid hierarchy parameters", "max_depth 22");
@@ -335,7 +426,11 @@ TEST_F(MapFile, ForgedFilesWithValidChecksumsAreRefusedByMeaning) {
   forged([&](auto &b) { b[48 + 4 + u32At(good, 48) + 4] = 9; }, "datatype 9", "bad field datatype");
   forged([&](auto &b) { std::memset(b.data() + 48 + 4 + u32At(good, 48), 0xFF, 4); }, "invalid record layout",
          "field offset beyond the record");
-  forged([&](auto &b) { b[header_size - 8] = 7; }, "kept normals of 7 bytes", "a normal size this build never writes");
+  forged([&](auto &b) { b[normal_at] = 7; }, "kept normals of 7 bytes", "a normal size this build never writes");
+  // The settings' level (the first i32 after the normals' size), and their radius as NaN.
+  forged([&](auto &b) { b[normal_at + 4] = 200; }, "impossible kept normals' settings", "settings level 200");
+  forged([&](auto &b) { std::memset(b.data() + normal_at + 8, 0xFF, 8); }, "impossible kept normals' settings",
+         "settings radius NaN");
   // Kept normals a map file cannot hold: refused by loadMap, naming the sample, with the pipeline unchanged.
   for (const auto &[edit, why] : std::vector<std::pair<std::function<void(std::vector<std::uint8_t> &)>, std::string>>{
            {[&](auto &b) { b[header_size + entry - 1] = 9; }, "state 9"},
@@ -473,6 +568,21 @@ TEST(MapFileCli, SaveThenLoadContinuesTheMap) {
             0)
       << log;
   EXPECT_EQ(log.find("the loaded map holds levels"), std::string::npos) << "continued at its own spacing\n" << log;
+  EXPECT_EQ(log.find("kept normals"), std::string::npos) << "continued with its own normal settings\n" << log;
+  // Continued with other normal settings (a config file): the map loads, its kept normals do not, and it is said.
+  {
+    std::ofstream(tmp / "growth.yaml") << "normals:\n  max_growth: 4\n";
+    ASSERT_EQ(runHpds("sample " + frame(2) + " --poses " + posesFile(tmp / "p2g.txt", 2, 3) + common + " --config " +
+                          shellQuote(tmp / "growth.yaml") + " -o " + shellQuote(tmp / "growth.ply") + " --load-map " +
+                          shellQuote(tmp / "m.hpdsmap"),
+                      &log),
+              0)
+        << log;
+    EXPECT_NE(log.find("hpds: warning: the map's kept normals were estimated with other settings than this run's "
+                       "(max_growth 8 in the map, max_growth 4 here): they are dropped"),
+              std::string::npos)
+        << log;
+  }
   // Continued at a finer spacing than the map was built to (levels 0..5 without normals; 0.05 m derives the same
   // cell at level 6): said, with what to set.
   ASSERT_EQ(runHpds("sample " + frame(0) + " --poses " + posesFile(tmp / "p0.txt", 0, 1) + common +

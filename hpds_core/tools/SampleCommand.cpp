@@ -89,10 +89,11 @@ int runSample(const SampleArgs &a) {
   int loaded_deepest = -1;
   std::uint32_t loaded_frames = 0;
   if (!a.load_map.empty()) {
-    loadMap(a.load_map, pipeline);
+    const std::string normals_warning = loadMap(a.load_map, pipeline);
     loaded_deepest = deepestPopulatedLevel(pipeline.hierarchy());
     loaded_frames = pipeline.framesProcessed();
-    if (const std::string w = shallowMapWarning(pipeline); !w.empty()) std::cerr << "hpds: warning: " << w << "\n";
+    for (const std::string &w : {shallowMapWarning(pipeline), normals_warning})
+      if (!w.empty()) std::cerr << "hpds: warning: " << w << "\n";
   }
   RunReport report = reportFor("sample", pipeline);
 

@@ -137,13 +137,14 @@ std::string FrameProcessor::shallowSaveWarning() const {
   return hpds::shallowSaveWarning(pipeline_, loaded_deepest_, loaded_frames_);
 }
 
-void FrameProcessor::loadMap(const std::string &path) {
-  hpds::loadMap(path, pipeline_);  // strong guarantee: throws before anything changes
+std::string FrameProcessor::loadMap(const std::string &path) {
+  std::string warning = hpds::loadMap(path, pipeline_);  // strong guarantee: throws before anything changes
   loaded_deepest_ = hpds::deepestPopulatedLevel(pipeline_.hierarchy());
   loaded_frames_ = pipeline_.framesProcessed();
   // The loaded map has not been published as a local map yet: send one with the next frame.
   local_map_sent_ = false;
   last_local_map_stamp_ = 0.0;
+  return warning;
 }
 
 ProcessedFrame FrameProcessor::process(const sensor_msgs::PointCloud2 &msg, const Eigen::Isometry3d &sensor_to_target,

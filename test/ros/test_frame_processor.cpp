@@ -487,8 +487,15 @@ TEST(FrameProcessor, SavedMapLoadsIntoAnotherProcessorAndContinuesIdentically) {
   // b has a map of its own (another frame) that the load replaces entirely.
   FrameProcessor b(config);
   ASSERT_TRUE(b.process(frame(3), lidar.pose(3), OutputRequest::all()).processed);
-  b.loadMap(file);
+  EXPECT_EQ(b.loadMap(file), "") << "the same normal settings: nothing to say";
   EXPECT_EQ(b.pipeline().hierarchy().sampleCount(), saved);
+  // Other normal settings: the map loads, its kept normals do not, and the processor says so (the node logs it).
+  NodeConfig other = config;
+  other.hpds.normals.max_growth = 2.0;
+  FrameProcessor o(other);
+  const std::string w = o.loadMap(file);
+  EXPECT_NE(w.find("max_growth 8 in the map, max_growth 2 here"), std::string::npos) << w;
+  EXPECT_EQ(o.pipeline().hierarchy().sampleCount(), saved);
   EXPECT_EQ(b.pipeline().framesProcessed(), 2u);
   for (int i = 2; i < 4; ++i) {
     SCOPED_TRACE(i);

@@ -14,18 +14,24 @@
 #include <cstring>
 #include <limits>
 #include <stdexcept>
+#include <string>
 #include <vector>
 
 #include "hpds/io/AtomicFile.hpp"
+#include "hpds/normals/NormalEstimator.hpp"
 #include "hpds/pipeline/Pipeline.hpp"
 #include "normals/MapNormals.hpp"
 
-// Byte layout of version 2 (little-endian, no padding; version 1 is the same without normal_bytes and normals):
+// Byte layout of version 3 (little-endian, no padding; version 2 is the same without the normals' settings, version 1
+// also without normal_bytes and normals):
 //   0  char[8] magic "HPDSMAP\0"      8  u32 version          12 u32 header_size (bytes, CRC included)
 //   16 f64 cell_size                  24 u32 max_depth        28 u32 next_frame
 //   32 u64 sample_count               40 u32 point_step       44 u32 field_count
 //   48 per field: u32 name_len, name bytes, u32 offset, u8 datatype, u32 count
 //   then u32 normal_bytes: 0, or MapNormals::kFileBytes when the entries carry the normals a map keeps
+//   then, when normal_bytes is not 0, the settings those normals were estimated with (NormalParams but threads):
+//        i32 level, f64 radius, i32 k, i32 min_neighbors, i32 neighborhood_level_offset, f64 max_growth,
+//        f64 line_ratio, f64 max_plane_rms, f64 up[3]
 //   header_size - 4: u32 CRC-32 of bytes [0, header_size - 4)
 //   body: sample_count entries of kEntryFixedBytes + point_step + normal_bytes bytes:
 //         f64 x y z, u8 level, u32 frame_index, f32 to_viewpoint[3] (unit direction since the map keeps only
@@ -170,10 +176,78 @@ std::string describeConfig(double cell_size, int max_depth) {
   return buf;
 }
 
-/// `normals`: when given, receives the entries' kept normals (MapNormals::kFileBytes each, in file order), or
-/// stays empty when the file holds none.
+/// The settings kept normals depend on, as a map file stores them (NormalParams without threads, which changes no
+/// result).
+struct KeptNormalSettings {
+  std::int32_t level = 0, k = 0, min_neighbors = 0, neighborhood_level_offset = 0;
+  double radius = 0.0, max_growth = 0.0, line_ratio = 0.0, max_plane_rms = 0.0;
+  double up[3] = {0.0, 0.0, 0.0};
+
+  static KeptNormalSettings of(const NormalParams &p) {
+    KeptNormalSettings s;
+    s.level = p.level, s.k = p.k, s.min_neighbors = p.min_neighbors;
+    s.neighborhood_level_offset = p.neighborhood_level_offset;
+    s.radius = p.radius, s.max_growth = p.max_growth, s.line_ratio = p.line_ratio, s.max_plane_rms = p.max_plane_rms;
+    for (int a = 0; a < 3; ++a) s.up[a] = p.up[a];
+    return s;
+  }
+  // Exact: estimates from settings that differ in any bit may differ.
+  bool operator==(const KeptNormalSettings &o) const {
+    return level == o.level && k == o.k && min_neighbors == o.min_neighbors &&
+           neighborhood_level_offset == o.neighborhood_level_offset && radius == o.radius &&
+           max_growth == o.max_growth && line_ratio == o.line_ratio && max_plane_rms == o.max_plane_rms &&
+           up[0] == o.up[0] && up[1] == o.up[1] && up[2] == o.up[2];
+  }
+  /// Each setting as "name value", in file order.
+  std::vector<std::string> items() const {
+    auto item = [](const char *name, double v, const char *unit = "") {
+      char buf[96];
+      std::snprintf(buf, sizeof buf, "%s %.9g%s", name, v, unit);
+      return std::string(buf);
+    };
+    char up_text[128];
+    std::snprintf(up_text, sizeof up_text, "up (%.9g, %.9g, %.9g)", up[0], up[1], up[2]);
+    return {item("output level", level),     item("radius", radius, " m"),
+            item("k", k),                     item("min_neighbors", min_neighbors),
+            item("neighborhood_level_offset", neighborhood_level_offset),
+            item("max_growth", max_growth),   item("line_ratio", line_ratio),
+            item("max_plane_rms", max_plane_rms), up_text};
+  }
+  std::string describe() const {
+    std::string out;
+    for (const std::string &i : items()) out += (out.empty() ? "" : ", ") + i;
+    return out;
+  }
+  /// The settings that differ from `here`'s: "map's value -> here's value", or empty.
+  std::string differences(const KeptNormalSettings &here) const {
+    const std::vector<std::string> a = items(), b = here.items();
+    std::string out;
+    for (std::size_t i = 0; i < a.size(); ++i)
+      if (a[i] != b[i]) out += (out.empty() ? "" : ", ") + a[i] + " in the map, " + b[i] + " here";
+    return out.empty() ? "equal to 9 digits: " + describe() : out;
+  }
+  void write(ByteWriter &w) const {
+    w.put(level), w.put(radius), w.put(k), w.put(min_neighbors), w.put(neighborhood_level_offset);
+    w.put(max_growth), w.put(line_ratio), w.put(max_plane_rms), w.put(up[0]), w.put(up[1]), w.put(up[2]);
+  }
+  bool read(ByteReader &r) {
+    return r.get(level) && r.get(radius) && r.get(k) && r.get(min_neighbors) && r.get(neighborhood_level_offset) &&
+           r.get(max_growth) && r.get(line_ratio) && r.get(max_plane_rms) && r.get(up[0]) && r.get(up[1]) &&
+           r.get(up[2]);
+  }
+};
+
+/// What a file says of its kept normals.
+struct FileNormals {
+  std::vector<std::uint8_t> bytes;  ///< MapNormals::kFileBytes per sample, in file order; empty when none
+  bool has_settings = false;        ///< false: version 2, which did not record them
+  KeptNormalSettings settings;
+};
+
+/// `normals`: when given, receives the entries' kept normals and their settings (bytes empty when the file holds
+/// none).
 LoadedHierarchy parse(Source &src, std::uint64_t total_size, const std::string &name, const HierarchyConfig *expected,
-                      std::vector<std::uint8_t> *normals = nullptr) {
+                      FileNormals *normals = nullptr) {
   if (total_size == 0) fail(name, "empty file (0 bytes), not an hpds map");
   std::array<std::uint8_t, 16> start{};
   const std::size_t got = static_cast<std::size_t>(std::min<std::uint64_t>(total_size, start.size()));
@@ -237,6 +311,15 @@ LoadedHierarchy parse(Source &src, std::uint64_t total_size, const std::string &
   if (normal_bytes != 0 && normal_bytes != MapNormals::kFileBytes)
     fail(name, "corrupt header: kept normals of " + std::to_string(normal_bytes) + " bytes per sample (this build "
                "writes " + std::to_string(MapNormals::kFileBytes) + ")");
+  KeptNormalSettings settings;
+  if (version >= 3 && normal_bytes != 0) {
+    if (!settings.read(r)) fail(name, "corrupt header: it ends inside the kept normals' settings");
+    // Written from a validated configuration; anything else is a file written wrong.
+    if (settings.level < 0 || settings.level > kMaxDepthLimit || !std::isfinite(settings.radius) ||
+        !std::isfinite(settings.max_growth) || !std::isfinite(settings.line_ratio) ||
+        !std::isfinite(settings.max_plane_rms))
+      fail(name, "corrupt header: impossible kept normals' settings (" + settings.describe() + ")");
+  }
   if (r.pos() != header_size - 4 - 16) fail(name, "corrupt header: unexpected bytes after the field list");
   try {
     layout.validate();
@@ -269,8 +352,12 @@ LoadedHierarchy parse(Source &src, std::uint64_t total_size, const std::string &
 
   LoadedHierarchy out{Hierarchy(cell_size, static_cast<int>(max_depth)), next_frame};
   out.hierarchy.setRecordLayout(layout);
-  if (normals) normals->clear();
-  if (normals && normal_bytes) normals->reserve(static_cast<std::size_t>(sample_count) * normal_bytes);
+  if (normals) {
+    *normals = FileNormals{};
+    normals->has_settings = version >= 3 && normal_bytes != 0;
+    normals->settings = settings;
+    if (normal_bytes) normals->bytes.reserve(static_cast<std::size_t>(sample_count) * normal_bytes);
+  }
   std::vector<std::uint8_t> chunk;
   std::uint32_t crc = 0;
   // A sample the hierarchy refuses is only reported once the checksum has passed: a damaged body should be called
@@ -297,7 +384,7 @@ LoadedHierarchy parse(Source &src, std::uint64_t total_size, const std::string &
         out.hierarchy.restoreSample(xyz, level, frame, to_view, e + kEntryFixedBytes);
         if (normals && normal_bytes) {
           const std::uint8_t *kept = e + kEntryFixedBytes + point_step;
-          normals->insert(normals->end(), kept, kept + normal_bytes);
+          normals->bytes.insert(normals->bytes.end(), kept, kept + normal_bytes);
         }
       } catch (const std::exception &ex) {
         refused = "sample " + std::to_string(done + i) + ": " + ex.what();
@@ -327,8 +414,10 @@ void checkSavable(const std::string &path, const Hierarchy &hierarchy) {
   for (const PointField &f : layout.fields)
     if (f.name.size() > kMaxFieldNameBytes) fail(path, "cannot save: a field name longer than 4096 bytes");
 }
-/// saveHierarchy's bytes, with the kept normals of a map-mode pipeline when `normals` is given.
-void writeMap(AtomicFile &file, const Hierarchy &hierarchy, std::uint32_t next_frame, const MapNormals *normals) {
+/// saveHierarchy's bytes, with the kept normals of a map-mode pipeline, estimated with `settings`, when `normals` is
+/// given.
+void writeMap(AtomicFile &file, const Hierarchy &hierarchy, std::uint32_t next_frame, const MapNormals *normals,
+              const KeptNormalSettings &settings = {}) {
   checkSavable(file.target(), hierarchy);
   const std::uint32_t normal_bytes = normals ? static_cast<std::uint32_t>(MapNormals::kFileBytes) : 0;
   const PointLayout &layout = hierarchy.recordLayout();
@@ -351,6 +440,7 @@ void writeMap(AtomicFile &file, const Hierarchy &hierarchy, std::uint32_t next_f
     h.put(f.count);
   }
   h.put(normal_bytes);
+  if (normals) settings.write(h);
   const auto header_size = static_cast<std::uint32_t>(h.bytes.size() + 4);
   std::memcpy(h.bytes.data() + 12, &header_size, 4);
   h.put(crc32(h.bytes.data(), h.bytes.size()));
@@ -389,11 +479,11 @@ void writeMap(AtomicFile &file, const Hierarchy &hierarchy, std::uint32_t next_f
 
 /// writeMap into `path` itself.
 void writeMapFile(const std::string &path, const Hierarchy &hierarchy, std::uint32_t next_frame,
-                  const MapNormals *normals) {
+                  const MapNormals *normals, const KeptNormalSettings &settings = {}) {
   checkSavable(path, hierarchy);
   // Temporary file, fsync and rename (AtomicFile): a failure or a kill leaves any previous map at `path` untouched.
   AtomicFile file(path);
-  writeMap(file, hierarchy, next_frame, normals);
+  writeMap(file, hierarchy, next_frame, normals, settings);
   file.commit();
 }
 }  // namespace
@@ -408,8 +498,7 @@ void saveHierarchy(AtomicFile &file, const Hierarchy &hierarchy, std::uint32_t n
 
 namespace {
 /// parse() over the file at `path`; `normals` as there.
-LoadedHierarchy parseFile(const std::string &path, const HierarchyConfig *expected,
-                          std::vector<std::uint8_t> *normals) {
+LoadedHierarchy parseFile(const std::string &path, const HierarchyConfig *expected, FileNormals *normals) {
   if (!hostIsLittleEndian()) fail(path, "map files are little-endian; this host is not");
   Fd fd(::open(path.c_str(), O_RDONLY | O_CLOEXEC));
   if (fd.get() < 0) {
@@ -445,12 +534,21 @@ bool isOtherFormatName(const std::string &path) {
   return false;
 }
 
+namespace {
+/// The settings the pipeline's kept normals are estimated with (Pipeline::updateMapNormals).
+KeptNormalSettings keptSettingsOf(const Pipeline &pipeline) {
+  return KeptNormalSettings::of(normalParamsFor(pipeline.config(), pipeline.outputLevel()));
+}
+}  // namespace
+
 void saveMap(const std::string &path, const Pipeline &pipeline) {
-  writeMapFile(path, pipeline.hierarchy(), pipeline.framesProcessed(), pipeline.map_normals_.get());
+  writeMapFile(path, pipeline.hierarchy(), pipeline.framesProcessed(), pipeline.map_normals_.get(),
+               keptSettingsOf(pipeline));
 }
 
 void saveMap(AtomicFile &file, const Pipeline &pipeline) {
-  writeMap(file, pipeline.hierarchy(), pipeline.framesProcessed(), pipeline.map_normals_.get());
+  writeMap(file, pipeline.hierarchy(), pipeline.framesProcessed(), pipeline.map_normals_.get(),
+           keptSettingsOf(pipeline));
 }
 
 int deepestPopulatedLevel(const Hierarchy &hierarchy) {
@@ -486,22 +584,32 @@ std::string shallowSaveWarning(const Pipeline &pipeline, int loaded_deepest, std
          std::to_string(loaded_deepest) + " to continue the map at its full depth";
 }
 
-void loadMap(const std::string &path, Pipeline &pipeline) {
+std::string loadMap(const std::string &path, Pipeline &pipeline) {
   if (pipeline.config().mode != Mode::Map)
     throw std::invalid_argument("loading a map needs mode: map (scan mode starts every frame on an empty hierarchy)");
-  std::vector<std::uint8_t> normals;
+  FileNormals normals;
   LoadedHierarchy loaded = parseFile(path, &pipeline.config().hierarchy, &normals);
   // Checked before the map is replaced, so that a refused file changes nothing.
   MapNormals kept;
   const std::size_t count = loaded.hierarchy.sampleCount();
-  if (!normals.empty())
+  if (!normals.bytes.empty())
     for (std::size_t i = 0; i < count; ++i)
-      if (!kept.restore(static_cast<SampleId>(i), normals.data() + i * MapNormals::kFileBytes))
+      if (!kept.restore(static_cast<SampleId>(i), normals.bytes.data() + i * MapNormals::kFileBytes))
         fail(path, "invalid map: sample " + std::to_string(i) + " has an impossible kept normal");
   pipeline.replaceMap(std::move(loaded.hierarchy), loaded.next_frame);
   // A file without them (version 1, saved with normals off) leaves the samples to the map's own estimate until a
   // frame hits them; a pipeline without normals has no use for them.
-  if (pipeline.map_normals_ && !normals.empty()) *pipeline.map_normals_ = std::move(kept);
+  if (!pipeline.map_normals_ || normals.bytes.empty()) return {};
+  // Normals estimated with other settings (another output level, radius, growth...) would stay in the output next to
+  // this run's until a closer frame replaced each: they are dropped, and the samples get this run's estimate (from
+  // the map until a frame hits them). Version 2 files did not record their settings: taken as they are.
+  const KeptNormalSettings ours = keptSettingsOf(pipeline);
+  if (normals.has_settings && !(normals.settings == ours))
+    return "the map's kept normals were estimated with other settings than this run's (" +
+           normals.settings.differences(ours) + "): they are dropped, and its " + std::to_string(count) +
+           " samples get normals estimated with this run's settings";
+  *pipeline.map_normals_ = std::move(kept);
+  return {};
 }
 
 }  // namespace hpds

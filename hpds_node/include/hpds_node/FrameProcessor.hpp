@@ -122,8 +122,8 @@ class FrameProcessor {
   void saveMap(const std::string &path) const;
   /// Map mode: replaces the map with the one in `path` (see contract). Throws std::invalid_argument in scan mode and
   /// std::runtime_error ("<path>: <problem>") for a missing, corrupt, truncated or incompatible file, leaving the
-  /// processor unchanged.
-  void loadMap(const std::string &path);
+  /// processor unchanged. Returns hpds::loadMap's warning (kept normals of other settings, dropped), or empty.
+  std::string loadMap(const std::string &path);
   /// Map mode, after a loadMap: what a save would lose (hpds::shallowSaveWarning: this run builds fewer levels than
   /// the loaded map held, so its deeper levels would not cover the frames since), or empty.
   [[nodiscard]] std::string shallowSaveWarning() const;

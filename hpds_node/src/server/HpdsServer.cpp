@@ -197,11 +197,15 @@ std::pair<bool, std::string> HpdsServer::runMapCommand(bool save) {
         msg << "; warning: " << w;
       }
     } else {
-      processor.loadMap(path);
-      if (const std::string w = hpds::shallowMapWarning(processor.pipeline()); !w.empty())
-        ROS_WARN_STREAM_NAMED("hpds", "hpds: " << w);
+      const std::string normals_warning = processor.loadMap(path);
       msg << "loaded " << pipeline.hierarchy().sampleCount() << " samples (next frame index "
           << pipeline.framesProcessed() << ") from '" << path << "'";
+      // As with a weaker save: the caller and the log both hear it.
+      for (const std::string &w : {hpds::shallowMapWarning(processor.pipeline()), normals_warning})
+        if (!w.empty()) {
+          ROS_WARN_STREAM_NAMED("hpds", "hpds: " << w);
+          msg << "; warning: " << w;
+        }
     }
     return {true, msg.str()};
   } catch (const std::exception &e) {

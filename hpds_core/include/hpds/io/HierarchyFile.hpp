@@ -1,13 +1,14 @@
 // HierarchyFile: saving a map-mode hierarchy to disk and loading it back (persistence across runs).
 //
 // Contract
-// - Format (version 2, all numbers little-endian; version 1 files, without kept normals, load too), see
-//   HierarchyFile.cpp for the byte layout:
+// - Format (version 3, all numbers little-endian; version 2 files, whose kept normals do not say what settings
+//   made them, and version 1 files, without kept normals, load too), see HierarchyFile.cpp for the byte layout:
 //   header  = magic "HPDSMAP\0", version, cell_size, max_depth, next frame index, sample count, record layout
 //             (point_step and every field: name, offset, datatype, count), CRC-32 of the header;
 //   body    = one fixed-size entry per live sample: x y z (float64), level (uint8), frame index (uint32),
 //             to_viewpoint (3 x float32), the record (point_step bytes) and, from saveMap of a map-mode pipeline with
-//             kept normals (Pipeline.hpp), that normal; then CRC-32 of the body.
+//             kept normals (Pipeline.hpp), that normal (the header then also records the normal settings they were
+//             estimated with); then CRC-32 of the body.
 //   The file size is fully determined by the header, so truncation and trailing bytes are detected before any
 //   sample is read, and nothing is allocated beyond what the file holds.
 // - saveHierarchy writes atomically (AtomicFile.hpp): a temporary file in the same directory, fsync'ed, then renamed
@@ -39,7 +40,7 @@ namespace hpds {
 
 class Pipeline;
 
-inline constexpr std::uint32_t kHierarchyFileVersion = 2;
+inline constexpr std::uint32_t kHierarchyFileVersion = 3;
 
 /// A hierarchy read from a file, with the frame index the next inserted frame should get.
 struct LoadedHierarchy {
@@ -87,7 +88,9 @@ void saveMap(AtomicFile &file, const Pipeline &pipeline);
 
 /// Map mode only: loads `path`, checked against the pipeline's hierarchy config, and replaces the pipeline's map with
 /// it (strong guarantee: on any error the pipeline is unchanged). Throws std::runtime_error for file problems and
-/// std::invalid_argument when the pipeline is not in map mode.
-void loadMap(const std::string &path, Pipeline &pipeline);
+/// std::invalid_argument when the pipeline is not in map mode. Returns a warning (empty when there is nothing to
+/// say) when the file's kept normals were estimated with other normal settings than the pipeline's (output level,
+/// normals.*): those are dropped, and the samples get normals with the pipeline's settings instead.
+std::string loadMap(const std::string &path, Pipeline &pipeline);
 
 }  // namespace hpds

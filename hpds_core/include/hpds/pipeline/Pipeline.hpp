@@ -139,7 +139,7 @@ class Pipeline {
   // Map files carry the kept normals (io/HierarchyFile.hpp).
   friend void saveMap(const std::string &path, const Pipeline &pipeline);
   friend void saveMap(AtomicFile &file, const Pipeline &pipeline);
-  friend void loadMap(const std::string &path, Pipeline &pipeline);
+  friend std::string loadMap(const std::string &path, Pipeline &pipeline);
 
   void requireLiveIds(const std::vector<SampleId> &ids, const char *what) const;
   /// Map mode: offers the map's normals estimates for the output samples the last frame hit (`fresh`: its new ids).
