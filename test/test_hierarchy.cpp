@@ -178,6 +178,30 @@ TEST(ViewDirection, RoundTripsExactlyAndKeepsTheDirection) {
       }
 }
 
+TEST(ViewDirection, UnscaledDecodingIsTheSameDirection) {
+  // Every code an encoder can produce, sampled on a lattice, plus the fold's edges: the unscaled vector is the decoded
+  // unit vector times its length, to float rounding, and the zero code gives the zero vector.
+  std::size_t tried = 0;
+  for (int a = -32767; a <= 32767; a += 97)
+    for (int b = -32767; b <= 32767; b += 89)
+      for (const std::uint32_t code : {std::uint32_t(std::uint16_t(a)) | std::uint32_t(std::uint16_t(b)) << 16,
+                                       std::uint32_t(std::uint16_t(a)) | std::uint32_t(32767) << 16}) {
+        double u[3];
+        viewDirectionUnscaled(code, u);
+        const double len = std::sqrt(u[0] * u[0] + u[1] * u[1] + u[2] * u[2]);
+        ASSERT_GT(len, 0.5) << std::hex << code;  // |u|_1 = 1, so |u|_2 >= 1 / sqrt(3)
+        const std::array<float, 3> d = decodeViewDirection(code);
+        for (int k = 0; k < 3; ++k) ASSERT_NEAR(u[k] / len, d[k], 1e-7) << std::hex << code << " axis " << k;
+        ++tried;
+      }
+  EXPECT_GT(tried, 200000u);
+  double z[3] = {1, 1, 1};
+  viewDirectionUnscaled(encodeViewDirection(0.0, 0.0, 0.0), z);
+  EXPECT_EQ(z[0], 0.0);
+  EXPECT_EQ(z[1], 0.0);
+  EXPECT_EQ(z[2], 0.0);
+}
+
 // ---------------------------------------------------------------- brute-force reference of the greedy rule
 
 struct RefSample {

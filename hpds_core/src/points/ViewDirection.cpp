@@ -5,8 +5,8 @@
 namespace hpds {
 
 namespace {
-constexpr double kScale = 32767.0;
-constexpr std::uint32_t kZeroCode = 0x80008000u;  // -32768 in both halves: never produced by a direction
+constexpr double kScale = kViewCodeScale;
+constexpr std::uint32_t kZeroCode = kViewZeroCode;
 
 double signOf(double v) { return v < 0.0 ? -1.0 : 1.0; }
 }  // namespace

@@ -117,6 +117,8 @@ class Hierarchy {
   /// Unit direction from the sample to the viewpoint of the frame that contributed it ((0,0,0) when the sample
   /// lies at that viewpoint).
   [[nodiscard]] std::array<float, 3> toViewpoint(SampleId id) const { return decodeViewDirection(view_[id]); }
+  /// The same direction packed (ViewDirection.hpp), e.g. for viewDirectionUnscaled.
+  [[nodiscard]] std::uint32_t viewCode(SampleId id) const { return view_[id]; }
   /// The sample's input record (recordLayout().point_step bytes), or nullptr without records.
   [[nodiscard]] const std::uint8_t *record(SampleId id) const {
     return record_layout_.point_step ? &records_[std::size_t(id) * record_layout_.point_step] : nullptr;
