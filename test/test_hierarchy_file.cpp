@@ -36,6 +36,8 @@ void writeBytes(const fs::path &p, const std::vector<std::uint8_t> &b) {
 
 // Bytes of the kept normals' settings in a version-3 header (HierarchyFile.cpp's layout).
 constexpr std::size_t kNormalSettingsBytes = 4 + 8 + 4 + 4 + 4 + 8 + 8 + 8 + 3 * 8;
+// Bytes of a version-3 header's free-slot count, its last field.
+constexpr std::size_t kFreeCountBytes = 8;
 
 std::uint32_t u32At(const std::vector<std::uint8_t> &b, std::size_t at) {
   std::uint32_t v;
@@ -80,15 +82,18 @@ std::set<SampleKey> sampleSet(const Hierarchy &h) {
   return s;
 }
 
-void expectIdentical(const Hierarchy &a, const Hierarchy &b) {
+// The same live samples in the same (increasing id) order, ids aside: what a version-2 file, which compacted its
+// ids, gives back.
+void expectSameSamplesInOrder(const Hierarchy &a, const Hierarchy &b) {
   ASSERT_EQ(a.sampleCount(), b.sampleCount());
   ASSERT_EQ(a.recordLayout(), b.recordLayout());
   ASSERT_EQ(a.cellSize(), b.cellSize());
   ASSERT_EQ(a.maxDepth(), b.maxDepth());
   const std::size_t step = a.recordLayout().point_step;
-  SampleId j = 0;  // saved in increasing id order, loaded densely in that order
+  SampleId j = 0;
   for (SampleId i = 0; i < a.idBound(); ++i) {
     if (!a.isLive(i)) continue;
+    while (j < b.idBound() && !b.isLive(j)) ++j;
     ASSERT_TRUE(b.isLive(j));
     ASSERT_EQ(std::memcmp(a.position(i), b.position(j), 24), 0) << i;
     ASSERT_EQ(a.level(i), b.level(j));
@@ -100,8 +105,15 @@ void expectIdentical(const Hierarchy &a, const Hierarchy &b) {
     ASSERT_EQ(b.sampleInCell(b.level(j), b.position(j)), j);  // the grids know it
     ++j;
   }
-  EXPECT_EQ(b.idBound(), j);
   for (int l = 0; l <= a.maxDepth(); ++l) EXPECT_EQ(a.countAtLevel(l), b.countAtLevel(l));
+}
+
+// Identical, ids included: every sample at its own id, the same free slots in the same reuse order.
+void expectIdentical(const Hierarchy &a, const Hierarchy &b) {
+  expectSameSamplesInOrder(a, b);
+  ASSERT_EQ(a.idBound(), b.idBound());
+  for (SampleId i = 0; i < a.idBound(); ++i) ASSERT_EQ(a.isLive(i), b.isLive(i)) << i;
+  EXPECT_EQ(a.freeSlots(), b.freeSlots());
 }
 
 class MapFile : public ::testing::Test {
@@ -143,10 +155,12 @@ TEST_F(MapFile, RoundTripKeepsEverySampleBitForBit) {
   const auto &l = pipeline_->hierarchy().recordLayout();
   const std::vector<std::uint8_t> bytes = readBytes(p);
   // The normals' size, then the settings they were estimated with, close the header.
-  const std::uint32_t normal_bytes = u32At(bytes, u32At(bytes, 12) - 8 - kNormalSettingsBytes);
+  const std::uint32_t normal_bytes = u32At(bytes, u32At(bytes, 12) - 4 - kFreeCountBytes - kNormalSettingsBytes - 4);
   EXPECT_EQ(normal_bytes, 33u) << "a map-mode pipeline with normals keeps them";
-  EXPECT_EQ(fs::file_size(p),
-            u32At(bytes, 12) + pipeline_->hierarchy().sampleCount() * (41 + l.point_step + normal_bytes) + 4);
+  const std::size_t free_slots = pipeline_->hierarchy().freeSlots().size();
+  EXPECT_GT(free_slots, 0u);
+  EXPECT_EQ(fs::file_size(p), u32At(bytes, 12) + 4 * free_slots +
+                                  pipeline_->hierarchy().sampleCount() * (41 + l.point_step + normal_bytes) + 4);
   // Loading into a pipeline and saving again reproduces the file byte for byte, and the same output cloud, normals
   // included: the loaded samples keep the normals of the frames that saw them.
   Pipeline again(mapConfig());
@@ -158,7 +172,7 @@ TEST_F(MapFile, RoundTripKeepsEverySampleBitForBit) {
   // The hierarchy alone round-trips without them.
   saveHierarchy((dir / "plain.hpdsmap").string(), loaded.hierarchy, loaded.next_frame);
   const std::vector<std::uint8_t> plain = readBytes(dir / "plain.hpdsmap");
-  EXPECT_EQ(u32At(plain, u32At(plain, 12) - 8), 0u);
+  EXPECT_EQ(u32At(plain, u32At(plain, 12) - 8 - kFreeCountBytes), 0u);
   expectIdentical(pipeline_->hierarchy(), loadHierarchy((dir / "plain.hpdsmap").string()).hierarchy);
   // No temporaries are left beside the file.
   std::size_t entries = 0;
@@ -265,9 +279,14 @@ TEST_F(MapFile, VersionTwoFilesKeepTheirNormalsWhateverTheSettings) {
   const auto dir = test::scratchDir("map_version2");
   std::vector<std::uint8_t> b = readBytes(savedMap(dir));
   const std::uint32_t header_size = u32At(b, 12);
-  b.erase(b.begin() + (header_size - 4 - kNormalSettingsBytes), b.begin() + (header_size - 4));
+  std::uint64_t free_count = 0;
+  std::memcpy(&free_count, b.data() + header_size - 4 - kFreeCountBytes, 8);
+  ASSERT_GT(free_count, 0u);
+  // Version 2 had no free slots (its ids were compacted): the free ids go, and the settings and count from the header.
+  b.erase(b.begin() + header_size, b.begin() + header_size + 4 * free_count);
+  b.erase(b.begin() + (header_size - 4 - kFreeCountBytes - kNormalSettingsBytes), b.begin() + (header_size - 4));
   b[8] = 2;
-  const std::uint32_t v2_size = header_size - static_cast<std::uint32_t>(kNormalSettingsBytes);
+  const std::uint32_t v2_size = header_size - static_cast<std::uint32_t>(kNormalSettingsBytes + kFreeCountBytes);
   std::memcpy(b.data() + 12, &v2_size, 4);
   refreshCrcs(b);
   const fs::path p = dir / "v2.hpdsmap";
@@ -279,7 +298,96 @@ TEST_F(MapFile, VersionTwoFilesKeepTheirNormalsWhateverTheSettings) {
   Pipeline same(mapConfig());
   EXPECT_EQ(loadMap(p.string(), same), "");
   EXPECT_EQ(outputNormalBytes(same), outputNormalBytes(*pipeline_));
-  expectIdentical(pipeline_->hierarchy(), loadHierarchy(p.string()).hierarchy);
+  const Hierarchy v2 = loadHierarchy(p.string()).hierarchy;
+  expectSameSamplesInOrder(pipeline_->hierarchy(), v2);
+  EXPECT_EQ(v2.idBound(), v2.sampleCount()) << "a version-2 file's samples take ids 0..n-1";
+}
+
+// The fixture's map has free slots (an empty frame evicted samples and inserted none): an uninterrupted run reuses
+// them in its own order, so a loaded map must keep ids, holes and that order to continue with the same output
+// cloud, order included (a compacted map gave the same samples in another order).
+TEST_F(MapFile, LoadedMapWithFreeSlotsContinuesInTheSameOrder) {
+  const auto dir = test::scratchDir("map_free_slots");
+  ASSERT_LT(pipeline_->hierarchy().sampleCount(), pipeline_->hierarchy().idBound());
+  auto run = [&](Pipeline &p) {
+    for (int i = 0; i < 8; ++i) p.addFrame(lidar_->frame(i).frame);
+    Frame ahead = lidar_->frame(7).frame;
+    ahead.points = PointBuffer(ahead.points.layout(), 0);
+    ahead.sensor_to_fixed.translation().x() += 15.0;
+    p.addFrame(ahead);
+  };
+  Pipeline whole(mapConfig());
+  run(whole);
+  Pipeline first(mapConfig());
+  run(first);
+  saveMap((dir / "m.hpdsmap").string(), first);
+  Pipeline second(mapConfig());
+  EXPECT_EQ(loadMap((dir / "m.hpdsmap").string(), second), "");
+  EXPECT_EQ(second.hierarchy().idBound(), whole.hierarchy().idBound());
+  EXPECT_EQ(second.makeCloud(second.outputSamples(), true).bytes(), whole.makeCloud(whole.outputSamples(), true).bytes());
+  for (int i = 8; i < 12; ++i) {
+    whole.addFrame(lidar_->frame(i).frame);
+    second.addFrame(lidar_->frame(i).frame);
+    ASSERT_EQ(second.makeCloud(second.outputSamples(), true).bytes(), whole.makeCloud(whole.outputSamples(), true).bytes())
+        << "frame " << i;
+  }
+  EXPECT_EQ(second.hierarchy().idBound(), whole.hierarchy().idBound());
+}
+
+// A free slot is 4 bytes in the file but a record in memory: a file whose free slots would take more than 16 times its
+// body plus 64 MiB (here 1 100 free slots of 64 KiB records beside 2 samples) loads compacted instead.
+TEST(MapFileFreeSlots, FreeSlotsThatWouldTakeFarMoreMemoryThanTheFileLoadCompacted) {
+  const auto dir = test::scratchDir("map_compacted");
+  Hierarchy h(4.0, 3);
+  PointLayout big;
+  for (const char *n : {"x", "y", "z"}) big.append(n, FieldType::Float32);
+  big.append("blob", FieldType::UInt8, 65536);
+  h.setRecordLayout(big);
+  const float v[3] = {0, 0, 1};
+  for (int i = 0; i < 1102; ++i) {
+    const double p[3] = {0.5 + 4.0 * i, 0.5, 0.5};
+    h.restoreSample(p, 0, 1, v, nullptr);
+  }
+  const double origin[3] = {0.0, 0.0, 0.0};
+  EXPECT_EQ(h.evictOutside(origin, 6.0), 1100u);
+  saveHierarchy((dir / "holes.hpdsmap").string(), h, 3);
+  EXPECT_LT(fs::file_size(dir / "holes.hpdsmap"), 200000u);
+  const LoadedHierarchy loaded = loadHierarchy((dir / "holes.hpdsmap").string());
+  EXPECT_TRUE(loaded.ids_compacted);
+  expectSameSamplesInOrder(h, loaded.hierarchy);
+  EXPECT_EQ(loaded.hierarchy.idBound(), 2u);
+  EXPECT_TRUE(loaded.hierarchy.freeSlots().empty());
+  // Most of them reused: the ids are kept.
+  for (int i = 0; i < 1000; ++i) {
+    const double p[3] = {0.5, 4.5 + 4.0 * i, 0.5};
+    h.restoreSample(p, 0, 2, v, nullptr);
+  }
+  ASSERT_EQ(h.freeSlots().size(), 100u);
+  saveHierarchy((dir / "few.hpdsmap").string(), h, 3);
+  const LoadedHierarchy kept = loadHierarchy((dir / "few.hpdsmap").string());
+  EXPECT_FALSE(kept.ids_compacted);
+  expectIdentical(h, kept.hierarchy);
+}
+
+// Free slots of small records keep their ids even when they outnumber the samples many times (a map that an empty
+// frame far ahead has nearly emptied), and the map continues like the run that saved it.
+TEST_F(MapFile, AMapOfMostlyFreeSlotsKeepsItsIds) {
+  const auto dir = test::scratchDir("map_mostly_free");
+  Pipeline emptied(mapConfig());
+  for (int i = 0; i < 3; ++i) emptied.addFrame(lidar_->frame(i).frame);
+  Frame far = lidar_->frame(2).frame;  // an empty frame 40 m on: nearly every sample is evicted
+  far.points = PointBuffer(far.points.layout(), 0);
+  far.sensor_to_fixed.translation().x() += 40.0;
+  emptied.addFrame(far);
+  ASSERT_GT(emptied.hierarchy().freeSlots().size(), 4 * emptied.hierarchy().sampleCount());
+  saveMap((dir / "m.hpdsmap").string(), emptied);
+  Pipeline loaded(mapConfig());
+  EXPECT_EQ(loadMap((dir / "m.hpdsmap").string(), loaded), "");
+  expectIdentical(emptied.hierarchy(), loaded.hierarchy());
+  emptied.addFrame(lidar_->frame(3).frame);
+  loaded.addFrame(lidar_->frame(3).frame);
+  EXPECT_EQ(loaded.makeCloud(loaded.outputSamples(), true).bytes(),
+            emptied.makeCloud(emptied.outputSamples(), true).bytes());
 }
 
 TEST_F(MapFile, MismatchedConfigAndScanModeAreRefusedAndLeaveThePipelineUnchanged) {
@@ -399,10 +507,14 @@ TEST_F(MapFile, ForgedFilesWithValidChecksumsAreRefusedByMeaning) {
   const std::uint32_t header_size = u32At(good, 12);
   const std::uint32_t step = u32At(good, 40);
   // The saved map keeps normals: their size, then their settings, close the header.
-  const std::size_t normal_at = header_size - 4 - kNormalSettingsBytes - 4;
+  const std::size_t free_at = header_size - 4 - kFreeCountBytes;
+  const std::size_t normal_at = free_at - kNormalSettingsBytes - 4;
   const std::uint32_t normal_bytes = u32At(good, normal_at);
   ASSERT_EQ(normal_bytes, 33u);
   const std::size_t entry = 41 + step + normal_bytes;
+  const std::uint32_t free_count = u32At(good, free_at);
+  ASSERT_GT(free_count, 1u);
+  const std::size_t body = header_size + 4 * std::size_t(free_count);  // the first sample's entry
   auto forged = [&](auto &&edit, const std::string &what, const std::string &why) {
     std::vector<std::uint8_t> b = good;
     edit(b);
@@ -415,9 +527,9 @@ TEST_F(MapFile, ForgedFilesWithValidChecksumsAreRefusedByMeaning) {
   forged([](auto &b) { b[0] = 'X'; }, "bad magic", "magic");
   forged([](auto &b) { b[24] = 22; }, "invalid hierarchy parameters", "max_depth 22");
   forged([](auto &b) { std::memset(b.data() + 16, 0xFF, 8); }, "invalid hierarchy parameters", "NaN cell size");
-  forged([&](auto &b) { b[header_size + 24] = 7; }, "level 7", "level beyond max_depth");
-  forged([&](auto &b) { std::memset(b.data() + header_size, 0xFF, 8); }, "not finite", "NaN position");
-  forged([&](auto &b) { std::memcpy(b.data() + header_size + entry, b.data() + header_size, 25); }, "occupied",
+  forged([&](auto &b) { b[body + 24] = 7; }, "level 7", "level beyond max_depth");
+  forged([&](auto &b) { std::memset(b.data() + body, 0xFF, 8); }, "not finite", "NaN position");
+  forged([&](auto &b) { std::memcpy(b.data() + body + entry, b.data() + body, 25); }, "occupied",
          "two samples in one cell");
   forged([](auto &b) { b[40] += 1; }, "", "point_step changed without the body");
   forged([](auto &b) { std::uint64_t n; std::memcpy(&n, b.data() + 32, 8); n += 1; std::memcpy(b.data() + 32, &n, 8); },
@@ -427,16 +539,21 @@ TEST_F(MapFile, ForgedFilesWithValidChecksumsAreRefusedByMeaning) {
   forged([&](auto &b) { std::memset(b.data() + 48 + 4 + u32At(good, 48), 0xFF, 4); }, "invalid record layout",
          "field offset beyond the record");
   forged([&](auto &b) { b[normal_at] = 7; }, "kept normals of 7 bytes", "a normal size this build never writes");
+  // Free slots: an id beyond every slot, one listed twice, a count that does not match the body.
+  forged([&](auto &b) { std::memset(b.data() + header_size, 0xFF, 4); }, "beyond the", "free slot beyond the ids");
+  forged([&](auto &b) { std::memcpy(b.data() + header_size + 4, b.data() + header_size, 4); }, "listed twice",
+         "free slot twice");
+  forged([&](auto &b) { b[free_at] += 1; }, "free slots but", "one free slot more declared");
   // The settings' level (the first i32 after the normals' size), and their radius as NaN.
   forged([&](auto &b) { b[normal_at + 4] = 200; }, "impossible kept normals' settings", "settings level 200");
   forged([&](auto &b) { std::memset(b.data() + normal_at + 8, 0xFF, 8); }, "impossible kept normals' settings",
          "settings radius NaN");
   // Kept normals a map file cannot hold: refused by loadMap, naming the sample, with the pipeline unchanged.
   for (const auto &[edit, why] : std::vector<std::pair<std::function<void(std::vector<std::uint8_t> &)>, std::string>>{
-           {[&](auto &b) { b[header_size + entry - 1] = 9; }, "state 9"},
+           {[&](auto &b) { b[body + entry - 1] = 9; }, "state 9"},
            {[&](auto &b) {
-              b[header_size + entry - 1] = 2;
-              std::memset(b.data() + header_size + entry - normal_bytes, 0, 12);
+              b[body + entry - 1] = 2;
+              std::memset(b.data() + body + entry - normal_bytes, 0, 12);
             },
             "a valid normal of length 0"}}) {
     std::vector<std::uint8_t> b = good;

@@ -22,8 +22,8 @@
 #include "hpds/pipeline/Pipeline.hpp"
 #include "normals/MapNormals.hpp"
 
-// Byte layout of version 3 (little-endian, no padding; version 2 is the same without the normals' settings, version 1
-// also without normal_bytes and normals):
+// Byte layout of version 3 (little-endian, no padding; version 2 is the same without the normals' settings and the
+// free slots (its samples take ids 0..n-1), version 1 also without normal_bytes and normals):
 //   0  char[8] magic "HPDSMAP\0"      8  u32 version          12 u32 header_size (bytes, CRC included)
 //   16 f64 cell_size                  24 u32 max_depth        28 u32 next_frame
 //   32 u64 sample_count               40 u32 point_step       44 u32 field_count
@@ -32,11 +32,14 @@
 //   then, when normal_bytes is not 0, the settings those normals were estimated with (NormalParams but threads):
 //        i32 level, f64 radius, i32 k, i32 min_neighbors, i32 neighborhood_level_offset, f64 max_growth,
 //        f64 line_ratio, f64 max_plane_rms, f64 up[3]
+//   then u64 free_count: the free slots (ids of evicted samples not reused yet)
 //   header_size - 4: u32 CRC-32 of bytes [0, header_size - 4)
-//   body: sample_count entries of kEntryFixedBytes + point_step + normal_bytes bytes:
+//   body: free_count u32 ids, the free slots in the order they are reused (Hierarchy::freeSlots); the samples
+//         hold the other ids below sample_count + free_count, in increasing order. Then
+//         sample_count entries of kEntryFixedBytes + point_step + normal_bytes bytes:
 //         f64 x y z, u8 level, u32 frame_index, f32 to_viewpoint[3] (unit direction since the map keeps only
 //         that; older files' full vectors load the same), record bytes, the kept normal (MapNormals::save)
-//   last 4 bytes: u32 CRC-32 of the body entries
+//   last 4 bytes: u32 CRC-32 of the body (free slots and entries)
 
 namespace hpds {
 namespace {
@@ -44,6 +47,9 @@ namespace {
 constexpr char kMagic[8] = {'H', 'P', 'D', 'S', 'M', 'A', 'P', '\0'};
 constexpr std::size_t kFixedHeaderBytes = 48;
 constexpr std::size_t kEntryFixedBytes = 3 * 8 + 1 + 4 + 3 * 4;
+// Memory of one sample slot besides its record, rounded up: Hierarchy's position, level, frame and view direction,
+// and a kept normal.
+constexpr std::uint64_t kSlotBytes = 64;
 // Far above any real layout; they keep every size computed below from overflowing and bound the header read.
 constexpr std::uint32_t kMaxHeaderBytes = 1u << 24;
 constexpr std::uint32_t kMaxPointStep = 1u << 24;
@@ -320,6 +326,8 @@ LoadedHierarchy parse(Source &src, std::uint64_t total_size, const std::string &
         !std::isfinite(settings.max_plane_rms))
       fail(name, "corrupt header: impossible kept normals' settings (" + settings.describe() + ")");
   }
+  std::uint64_t free_count = 0;
+  if (version >= 3 && !r.get(free_count)) fail(name, "corrupt header: it ends before the free slots' count");
   if (r.pos() != header_size - 4 - 16) fail(name, "corrupt header: unexpected bytes after the field list");
   try {
     layout.validate();
@@ -342,12 +350,16 @@ LoadedHierarchy parse(Source &src, std::uint64_t total_size, const std::string &
 
   const std::uint64_t entry_bytes = kEntryFixedBytes + point_step + normal_bytes;
   const std::uint64_t body_bytes = total_size - header_size - 4;
-  if (sample_count >= kNoSample || sample_count > body_bytes / entry_bytes ||
-      sample_count * entry_bytes != body_bytes) {
-    const bool fits = sample_count <= body_bytes / entry_bytes;
+  // Both counts bounded by the body before any product: no overflow, and ids stay below kNoSample.
+  const bool counts_fit = free_count <= body_bytes / 4 && sample_count <= body_bytes / entry_bytes;
+  if (sample_count + free_count >= kNoSample || !counts_fit ||
+      free_count * 4 + sample_count * entry_bytes != body_bytes) {
+    const bool fits = counts_fit && free_count * 4 <= body_bytes &&
+                      sample_count <= (body_bytes - free_count * 4) / entry_bytes;
     fail(name, std::string(fits ? "unexpected trailing bytes" : "truncated") + ": the header declares " +
-                   std::to_string(sample_count) + " samples of " + std::to_string(entry_bytes) + " bytes but " +
-                   std::to_string(body_bytes) + " body bytes follow it");
+                   std::to_string(sample_count) + " samples of " + std::to_string(entry_bytes) + " bytes and " +
+                   std::to_string(free_count) + " free slots but " + std::to_string(body_bytes) +
+                   " body bytes follow it");
   }
 
   LoadedHierarchy out{Hierarchy(cell_size, static_cast<int>(max_depth)), next_frame};
@@ -363,6 +375,41 @@ LoadedHierarchy parse(Source &src, std::uint64_t total_size, const std::string &
   // A sample the hierarchy refuses is only reported once the checksum has passed: a damaged body should be called
   // damaged, not blamed on whichever sample the damage happened to hit first.
   std::string refused;
+  // The free slots first: which ids the samples skip, and the order the slots are reused in. A free slot costs 4
+  // bytes in the file but a record and a slot's arrays in memory. Where that would exceed 16 times the body plus
+  // 64 MiB (a free slot of 16 MiB records in a small forged file; no map with records of a few dozen bytes and fewer
+  // than ~50 free slots per sample), the ids are compacted instead: the same samples, continuing in another order.
+  const std::uint64_t id_bound = sample_count + free_count;
+  const std::uint64_t hole_budget = 16 * std::min(body_bytes, std::uint64_t(1) << 56) + (std::uint64_t(64) << 20);
+  out.ids_compacted = free_count > hole_budget / (point_step + kSlotBytes);
+  std::vector<SampleId> free_order;
+  std::vector<std::uint8_t> is_free;
+  if (free_count && !out.ids_compacted) {
+    free_order.reserve(static_cast<std::size_t>(free_count));
+    is_free.assign(static_cast<std::size_t>(id_bound), 0);
+  }
+  for (std::uint64_t done = 0; done < free_count;) {
+    const std::size_t n = static_cast<std::size_t>(std::min<std::uint64_t>(kChunkBytes / 4, free_count - done));
+    chunk.resize(4 * n);
+    if (!src.read(chunk.data(), chunk.size())) fail(name, "read failed in the free slots (file changed while reading?)");
+    crc = crc32(chunk.data(), chunk.size(), crc);
+    for (std::size_t i = 0; i < n && refused.empty() && !out.ids_compacted; ++i) {
+      std::uint32_t id = 0;
+      std::memcpy(&id, chunk.data() + 4 * i, 4);
+      if (id >= id_bound || is_free[id])
+        refused = "free slot " + std::to_string(id) + (id >= id_bound ? " beyond the " + std::to_string(id_bound) + " ids" : " listed twice");
+      else
+        is_free[id] = 1, free_order.push_back(id);
+    }
+    done += n;
+  }
+  std::uint64_t next_id = 0;  // the id the next sample gets: the free slots before it are put back first
+  auto skipFreeSlots = [&] {
+    while (next_id < id_bound && !is_free.empty() && is_free[static_cast<std::size_t>(next_id)]) {
+      out.hierarchy.restoreFreeSlot();
+      ++next_id;
+    }
+  };
   for (std::uint64_t done = 0; done < sample_count;) {
     const std::size_t n =
         static_cast<std::size_t>(std::min<std::uint64_t>(entriesPerChunk(entry_bytes), sample_count - done));
@@ -381,7 +428,9 @@ LoadedHierarchy parse(Source &src, std::uint64_t total_size, const std::string &
       try {
         if (!std::isfinite(xyz[0]) || !std::isfinite(xyz[1]) || !std::isfinite(xyz[2]))
           throw std::invalid_argument("position is not finite");
+        skipFreeSlots();
         out.hierarchy.restoreSample(xyz, level, frame, to_view, e + kEntryFixedBytes);
+        ++next_id;
         if (normals && normal_bytes) {
           const std::uint8_t *kept = e + kEntryFixedBytes + point_step;
           normals->bytes.insert(normals->bytes.end(), kept, kept + normal_bytes);
@@ -397,6 +446,10 @@ LoadedHierarchy parse(Source &src, std::uint64_t total_size, const std::string &
   std::memcpy(&stored_crc, tail, 4);
   if (crc != stored_crc) fail(name, "corrupt sample data (checksum mismatch)");
   if (!refused.empty()) fail(name, "invalid map: " + refused);
+  if (!out.ids_compacted) {
+    skipFreeSlots();  // those after the last sample
+    out.hierarchy.restoreFreeOrder(free_order);  // checked above: every free slot once
+  }
   return out;
 }
 
@@ -441,6 +494,8 @@ void writeMap(AtomicFile &file, const Hierarchy &hierarchy, std::uint32_t next_f
   }
   h.put(normal_bytes);
   if (normals) settings.write(h);
+  const std::vector<SampleId> &free_slots = hierarchy.freeSlots();
+  h.put(static_cast<std::uint64_t>(free_slots.size()));
   const auto header_size = static_cast<std::uint32_t>(h.bytes.size() + 4);
   std::memcpy(h.bytes.data() + 12, &header_size, 4);
   h.put(crc32(h.bytes.data(), h.bytes.size()));
@@ -457,6 +512,13 @@ void writeMap(AtomicFile &file, const Hierarchy &hierarchy, std::uint32_t next_f
     file.write(chunk.data(), chunk.size());
     chunk.clear();
   };
+  for (std::size_t at = 0; at < free_slots.size();) {
+    const std::size_t n = std::min(kChunkBytes / 4, free_slots.size() - at);
+    chunk.resize(4 * n);
+    std::memcpy(chunk.data(), free_slots.data() + at, 4 * n);
+    flush();
+    at += n;
+  }
   for (SampleId id = 0; id < hierarchy.idBound(); ++id) {
     if (!hierarchy.isLive(id)) continue;
     const std::size_t at = chunk.size();
@@ -592,24 +654,36 @@ std::string loadMap(const std::string &path, Pipeline &pipeline) {
   // Checked before the map is replaced, so that a refused file changes nothing.
   MapNormals kept;
   const std::size_t count = loaded.hierarchy.sampleCount();
-  if (!normals.bytes.empty())
-    for (std::size_t i = 0; i < count; ++i)
-      if (!kept.restore(static_cast<SampleId>(i), normals.bytes.data() + i * MapNormals::kFileBytes))
+  if (!normals.bytes.empty()) {
+    std::size_t i = 0;  // the file's i-th sample is the i-th live id
+    for (SampleId id = 0; id < loaded.hierarchy.idBound(); ++id) {
+      if (!loaded.hierarchy.isLive(id)) continue;
+      if (!kept.restore(id, normals.bytes.data() + i * MapNormals::kFileBytes))
         fail(path, "invalid map: sample " + std::to_string(i) + " has an impossible kept normal");
+      ++i;
+    }
+  }
+  const bool compacted = loaded.ids_compacted;
   pipeline.replaceMap(std::move(loaded.hierarchy), loaded.next_frame);
   // A file without them (version 1, saved with normals off) leaves the samples to the map's own estimate until a
   // frame hits them; a pipeline without normals has no use for them.
-  if (!pipeline.map_normals_ || normals.bytes.empty()) return {};
+  std::string warning;
+  if (compacted)
+    warning = "the map's free slots (ids of evicted samples) would take far more memory than the file holds (large "
+              "records): its ids were compacted, so it continues with the same samples in another order than the run "
+              "that saved it";
+  auto joined = [&warning](const std::string &more) { return warning.empty() ? more : warning + "; " + more; };
+  if (!pipeline.map_normals_ || normals.bytes.empty()) return warning;
   // Normals estimated with other settings (another output level, radius, growth...) would stay in the output next to
   // this run's until a closer frame replaced each: they are dropped, and the samples get this run's estimate (from
   // the map until a frame hits them). Version 2 files did not record their settings: taken as they are.
   const KeptNormalSettings ours = keptSettingsOf(pipeline);
   if (normals.has_settings && !(normals.settings == ours))
-    return "the map's kept normals were estimated with other settings than this run's (" +
-           normals.settings.differences(ours) + "): they are dropped, and its " + std::to_string(count) +
-           " samples get normals estimated with this run's settings";
+    return joined("the map's kept normals were estimated with other settings than this run's (" +
+                  normals.settings.differences(ours) + "): they are dropped, and its " + std::to_string(count) +
+                  " samples get normals estimated with this run's settings");
   *pipeline.map_normals_ = std::move(kept);
-  return {};
+  return warning;
 }
 
 }  // namespace hpds

@@ -103,6 +103,10 @@ SampleId Hierarchy::allocate() {
     free_ids_.pop_back();
     return id;
   }
+  return appendSlot();
+}
+
+SampleId Hierarchy::appendSlot() {
   if (level_.size() >= kNoSample) throw std::length_error("hierarchy: more than 2^32-1 sample slots");
   const SampleId id = static_cast<SampleId>(level_.size());
   if (level_.size() == level_.capacity()) {
@@ -356,6 +360,25 @@ SampleId Hierarchy::restoreSample(const double xyz[3], int level, std::uint32_t 
   grids_[level].insert(key, id);
   ++live_;
   return id;
+}
+
+void Hierarchy::restoreFreeSlot() { (void)appendSlot(); }
+
+void Hierarchy::restoreFreeOrder(const std::vector<SampleId> &order) {
+  const std::size_t free_slots = level_.size() - live_;
+  if (order.size() != free_slots)
+    throw std::invalid_argument("the free slots' order lists " + std::to_string(order.size()) + " ids for " +
+                                std::to_string(free_slots) + " free slots");
+  std::vector<std::uint8_t> seen(level_.size(), 0);
+  for (const SampleId id : order) {
+    if (id >= level_.size() || level_[id] != kFreeSlotLevel || seen[id])
+      throw std::invalid_argument("the free slots' order names id " + std::to_string(id) +
+                                  (id >= level_.size()     ? ", beyond every slot"
+                                   : seen[id]              ? " twice"
+                                                           : ", which holds a sample"));
+    seen[id] = 1;
+  }
+  free_ids_ = order;
 }
 
 std::size_t Hierarchy::evictOutside(const double center[3], double distance) {

@@ -162,7 +162,11 @@ TileFinishStats finishTile(const HpdsConfig &given, const TileGrid &grid, const 
   TileFinishStats stats;
   LoadedHierarchy loaded = loadHierarchy(map_path, &config.hierarchy);
   Hierarchy &h = loaded.hierarchy;
-  const SampleId own = static_cast<SampleId>(h.idBound());  // loaded ids are 0..n-1
+  // A tile's map is written from a fresh hierarchy (no evictions), so its ids are 0..n-1 and the band's samples
+  // restored below come after them; a map with free slots is not one of ours.
+  if (h.idBound() != h.sampleCount())
+    throw std::runtime_error(map_path + ": not a tile's map (it holds free slots of evicted samples)");
+  const SampleId own = static_cast<SampleId>(h.idBound());
   for (SampleId id = 0; id < own; ++id) {
     TileKey at;
     if (!grid.tileOf(h.position(id), at) || at != key)

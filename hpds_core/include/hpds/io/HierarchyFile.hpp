@@ -10,13 +10,16 @@
 //             kept normals (Pipeline.hpp), that normal (the header then also records the normal settings they were
 //             estimated with); then CRC-32 of the body.
 //   The file size is fully determined by the header, so truncation and trailing bytes are detected before any
-//   sample is read, and nothing is allocated beyond what the file holds.
+//   sample is read, and nothing is allocated beyond a small multiple of what the file holds.
 // - saveHierarchy writes atomically (AtomicFile.hpp): a temporary file in the same directory, fsync'ed, then renamed
 //   over `path`. A failure, an exception or a killed process leaves any previous file at `path` untouched; the
 //   temporary is removed (a killed process's by the next write into that folder).
-// - Samples are written in increasing id order and get ids 0..n-1 in that order when loaded: ids are not kept
-//   (evicted slots are compacted), everything else (positions bit for bit, levels, frame indices, viewpoint vectors,
-//   record bytes) is.
+// - Everything is kept: samples at their ids (positions bit for bit, levels, frame indices, viewpoint directions,
+//   record bytes), and the free slots evicted samples left with the order they are reused in, so that a loaded map
+//   continues exactly like an uninterrupted run, its output's order included. Version 2 and 1 files hold no free
+//   slots: their samples get ids 0..n-1 in file order. So do the samples of a file whose free slots would take more
+//   than 16 times its body plus 64 MiB of memory (LoadedHierarchy::ids_compacted, and loadMap warns): a free slot is
+//   4 bytes in the file but a record in memory.
 // - loadHierarchy never half-loads: the samples go into a fresh Hierarchy that is returned only when the whole file
 //   checked out. Errors are std::runtime_error "<path>: <problem>": missing/unreadable file, not a map file (magic),
 //   unsupported version, corrupt header or body (checksum), truncated or oversized file, invalid layout or
@@ -46,6 +49,8 @@ inline constexpr std::uint32_t kHierarchyFileVersion = 3;
 struct LoadedHierarchy {
   Hierarchy hierarchy;
   std::uint32_t next_frame = 0;
+  /// True when the file's free slots were dropped and its samples took ids 0..n-1 (see contract).
+  bool ids_compacted = false;
 };
 
 /// Writes `hierarchy` to `path` atomically (see contract); `next_frame` is stored for the loader.
@@ -90,7 +95,8 @@ void saveMap(AtomicFile &file, const Pipeline &pipeline);
 /// it (strong guarantee: on any error the pipeline is unchanged). Throws std::runtime_error for file problems and
 /// std::invalid_argument when the pipeline is not in map mode. Returns a warning (empty when there is nothing to
 /// say) when the file's kept normals were estimated with other normal settings than the pipeline's (output level,
-/// normals.*): those are dropped, and the samples get normals with the pipeline's settings instead.
+/// normals.*): those are dropped, and the samples get normals with the pipeline's settings instead; and when the
+/// file's ids were compacted (LoadedHierarchy::ids_compacted).
 std::string loadMap(const std::string &path, Pipeline &pipeline);
 
 }  // namespace hpds

@@ -89,6 +89,15 @@ class Hierarchy {
   /// that breaks this is corrupt). `record` may be null (zeroed record).
   SampleId restoreSample(const double xyz[3], int level, std::uint32_t frame_index, const float to_viewpoint[3],
                          const std::uint8_t *record);
+  /// Persistence, for a loader that puts samples back at their own ids: appends a free slot (the hole an evicted
+  /// sample left) as the next id. While the hierarchy has no free slot in its reuse order, restoreSample takes the
+  /// next id too, so free slots and samples restored in id order get their saved ids.
+  void restoreFreeSlot();
+  /// Persistence, once samples and free slots are back: the order free slots are reused in (freeSlots() of the saved
+  /// hierarchy). std::invalid_argument, changing nothing, unless `order` holds every free slot exactly once.
+  void restoreFreeOrder(const std::vector<SampleId> &order);
+  /// The free slots (ids below idBound() of evicted samples) in the order they are reused: the last one first.
+  [[nodiscard]] const std::vector<SampleId> &freeSlots() const { return free_ids_; }
 
   /// Removes every sample farther than `distance` from `center`; returns how many.
   std::size_t evictOutside(const double center[3], double distance);
@@ -225,6 +234,8 @@ class Hierarchy {
   void store(int d, const InsertBatch &batch, std::uint32_t pi, const double *q, const CellKey &finest, bool pass_valid,
              InsertResult &result);
   SampleId allocate();
+  /// Appends a free slot as the next id (not in the reuse order) and returns it.
+  SampleId appendSlot();
   void release(SampleId id);
 
   double cell_size_;
