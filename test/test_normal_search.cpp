@@ -294,6 +294,57 @@ TEST(BallGrid, PointsSortedAheadOverABoxMatchBruteForce) {
   EXPECT_EQ(BallGrid(BallGridPoints(points, 0.0, lo, hi), one).cellCount(), 0u);
 }
 
+TEST(BallGrid, GridsGroupedFromAFinerOneMatchBruteForce) {
+  // The averaging grids of the larger radii are grouped from the first one's cells (radius doubled 1 to 4 times)
+  // instead of sorted again: queries inside the box find exactly their neighbours, and points exactly on the finer
+  // cells' faces (a lattice of the finer edge from the box corner) change nothing. Over wide data (an outlier 10 000
+  // km out) the frame is a window: sorted afresh, also exact.
+  std::mt19937_64 rng(23);
+  std::vector<double> xyz = clusteredPoints(rng, 30, 150, -20.0, 20.0, 0.3, 0.2, 40);
+  const double lo[3] = {-25.0, -25.0, -10.0}, hi[3] = {25.0, 25.0, 10.0}, radius = 0.3;
+  const double edge = radius * (1.0 + 1e-8);
+  for (int i = 0; i < 300; ++i)  // on the finer cells' faces
+    xyz.insert(xyz.end(), {lo[0] + edge * (60 + i % 20), lo[1] + edge * (60 + i / 20), lo[2] + edge * (30 + i % 3)});
+  std::uniform_int_distribution<std::size_t> pick(0, xyz.size() / 3 - 1);
+  std::normal_distribution<double> g(0.0, 0.3);
+  for (const bool wide : {false, true}) {
+    std::vector<double> pts = xyz;
+    if (wide) pts.insert(pts.end(), {-1e7, 0.0, 0.0});
+    const PointSet points{pts.data(), nullptr, pts.size() / 3};
+    const double wide_lo[3] = {-1e7 - 1.0, lo[1], lo[2]};
+    const double *box_lo = wide ? wide_lo : lo;
+    const BallGridPoints first(points, radius, box_lo, hi);
+    std::vector<double> qxyz;
+    for (int i = 0; i < 300; ++i) {
+      const double *p = points.at(pick(rng));
+      qxyz.insert(qxyz.end(), {p[0] + g(rng), p[1] + g(rng), p[2] + g(rng)});
+    }
+    const PointSet queries{qxyz.data(), nullptr, qxyz.size() / 3};
+    for (int doublings = 1; doublings <= 4; ++doublings) {
+      const double r = std::ldexp(radius, doublings);
+      const BallGridPoints grouped(first, doublings, points, box_lo, hi);
+      EXPECT_EQ(grouped.radius(), r);
+      const auto once = viaSortedAhead(grouped, points, queries, 1), split = viaSortedAhead(grouped, points, queries, 5);
+      // Grouped, a cell's points come in the finer grid's order, not by index: some visit differs from a grid sorted
+      // afresh (the same neighbours). The window over wide data is sorted afresh: none does.
+      const auto fresh = viaSortedAhead(BallGridPoints(points, r, box_lo, hi), points, queries, 1);
+      std::size_t other_order = 0;
+      for (std::size_t i = 0; i < queries.size; ++i) other_order += once[i].points != fresh[i].points ? 1 : 0;
+      if (wide)
+        EXPECT_EQ(other_order, 0u) << doublings;
+      else
+        EXPECT_GT(other_order, 0u) << doublings;
+      for (std::size_t i = 0; i < queries.size; ++i) {
+        ASSERT_EQ(once[i].calls, 1) << "query " << i;
+        ASSERT_EQ(once[i].points, split[i].points) << "one order whatever the chunks";
+        std::vector<std::uint32_t> got = once[i].points;
+        std::sort(got.begin(), got.end());
+        ASSERT_EQ(got, bruteForce(points, queries.at(i), r)) << "query " << i << ", radius " << r << (wide ? ", wide" : "");
+      }
+    }
+  }
+}
+
 TEST(BallGrid, AFarOutlierBelowTheFrameLeavesTheRestTheirNeighbours) {
   // One glitched return 10 000 km below a frame on x and y (4e7 cells of 0.25 m): keys reach 2^21 cells per axis,
   // and a window counted from the low corner held only the outlier (every normal of the frame was invalid). The

@@ -383,7 +383,7 @@ AveragingGrids averagingGrids(const Hierarchy &h, const NormalParams &p, const s
   g.by_radius.resize(g.radii.size());
   const PointSet points{centroids.data(), nullptr, centroids.size() / 3};
   for (std::size_t r = 0; r < std::min(built, g.radii.size()); ++r)
-    g.by_radius[r] = std::make_unique<BallGridPoints>(points, g.radii[r], g.lo, g.hi);
+    g.by_radius[r] = g.make(r, points);  // as the pipeline sorts them ahead
   return g;
 }
 

@@ -38,6 +38,19 @@ std::vector<double> refinedSearchRadii(const Hierarchy &h, const NormalParams &p
   return radii;
 }
 
+std::unique_ptr<BallGridPoints> AveragingGrids::make(std::size_t g, const PointSet &points,
+                                                     const BallGridPoints *first) const {
+  if (g == 0 || g >= radii.size()) return std::make_unique<BallGridPoints>(points, radii.at(g), lo, hi);
+  int doublings = 0;
+  double r = radii[0];
+  while (r < radii[g] && doublings < 30) r *= 2.0, ++doublings;
+  if (r != radii[g]) return std::make_unique<BallGridPoints>(points, radii[g], lo, hi);
+  if (!by_radius.empty() && by_radius[0]) first = by_radius[0].get();
+  if (first) return std::make_unique<BallGridPoints>(*first, doublings, points, lo, hi);
+  const BallGridPoints made(points, radii[0], lo, hi);
+  return std::make_unique<BallGridPoints>(made, doublings, points, lo, hi);
+}
+
 std::size_t AveragingGrids::memUsage() const {
   std::size_t bytes = 0;
   for (const auto &g : by_radius)
@@ -56,6 +69,9 @@ struct RefinedSetup {
   bool over_centroids = false; ///< `fine` is the frame's centroids, searched through `grids` (or over their box)
   const AveragingGrids *grids = nullptr;
   AveragingGrids *keep = nullptr;  ///< over centroids: grids sorted here are kept in it for later calls
+  /// Over centroids without `keep`: the first grid when this call had to sort it, for the later rounds' grids to be
+  /// grouped from (owned by the caller of growNeighbourhoods).
+  std::unique_ptr<BallGridPoints> *first_here = nullptr;
 };
 
 /// Queries: element i at base + 3 * index[i].
@@ -85,6 +101,7 @@ void sweep(const RefinedSetup &s, const PointSet &points, const QuerySet &q, con
   for (std::size_t t = 0; t < subset.size(); ++t) qidx[t] = q.index[subset[t]];
   const PointSet queries{q.base, qidx.data(), qidx.size()};
   std::optional<BallGridPoints> sorted_here;
+  std::unique_ptr<BallGridPoints> made_here;
   const BallGridPoints *ahead = nullptr;
   if (s.over_centroids && points == s.fine && s.grids) {
     const std::size_t grids = std::min(s.grids->radii.size(), s.grids->by_radius.size());
@@ -93,8 +110,22 @@ void sweep(const RefinedSetup &s, const PointSet &points, const QuerySet &q, con
     if (g < grids && s.grids->by_radius[g]) {
       ahead = s.grids->by_radius[g].get();
     } else if (g < grids && s.keep == s.grids) {
-      s.keep->by_radius[g] = std::make_unique<BallGridPoints>(points, radius, s.grids->lo, s.grids->hi);
+      // The first grid is kept too: the later ones are grouped from it.
+      if (g > 0 && !s.keep->by_radius[0]) s.keep->by_radius[0] = s.keep->make(0, points);
+      s.keep->by_radius[g] = s.keep->make(g, points);
       ahead = s.keep->by_radius[g].get();
+    } else if (g < grids && s.first_here) {
+      // Not kept across calls, but across this call's rounds: the first grid, which the later ones group from.
+      if (!s.grids->by_radius[0] && !*s.first_here) *s.first_here = s.grids->make(0, points);
+      if (g == 0 && !s.grids->by_radius[0]) {
+        ahead = s.first_here->get();
+      } else {
+        made_here = s.grids->make(g, points, s.first_here->get());
+        ahead = made_here.get();
+      }
+    } else if (g < grids) {
+      made_here = s.grids->make(g, points);
+      ahead = made_here.get();
     } else {
       ahead = &sorted_here.emplace(points, radius, s.grids->lo, s.grids->hi);
     }
@@ -338,6 +369,8 @@ std::vector<SampleNormal> estimateNormalsRefined(const Hierarchy &h, const std::
   s.radii = refinedSearchRadii(h, params);
   s.over_centroids = centroids != nullptr;
   s.grids = centroids ? grids : nullptr;
+  std::unique_ptr<BallGridPoints> first_here;
+  s.first_here = &first_here;
   const double growth = std::max(1.0, params.max_growth);
   const double base = params.radius > 0.0 ? params.radius : 2.5 * h.radius(level);
   const double *hbase = h.position(0);

@@ -26,6 +26,11 @@ struct AveragingGrids {
   double lo[3] = {0.0, 0.0, 0.0}, hi[3] = {0.0, 0.0, 0.0};
   std::vector<std::unique_ptr<BallGridPoints>> by_radius;  ///< by index into radii; null: not built ahead
   [[nodiscard]] std::size_t memUsage() const;
+  /// The grid of radii[g] over `points` (the averaging points these grids serve): the first sorted, the others
+  /// grouped from it (BallGridPoints' nesting constructor; from by_radius[0], else from `first` when given, else from
+  /// a first grid made for the purpose), so a grid is the same whoever builds it and when. Does not store it.
+  [[nodiscard]] std::unique_ptr<BallGridPoints> make(std::size_t g, const PointSet &points,
+                                                     const BallGridPoints *first = nullptr) const;
 };
 
 /// Neighbourhoods already chosen for some of the queries (by refinedNeighbourhoodsOverCentroids), parallel to ids.

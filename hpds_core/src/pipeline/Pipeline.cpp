@@ -226,8 +226,7 @@ FrameResult Pipeline::addFrame(const Frame &frame) {
         auto sortAhead = [&] {
           while (next_grid < std::min(grids->radii.size(), kAheadRadii) && grids->by_radius[next_grid]) ++next_grid;
           if (next_grid >= std::min(grids->radii.size(), kAheadRadii)) return false;
-          grids->by_radius[next_grid] =
-              std::make_unique<BallGridPoints>(points, grids->radii[next_grid], grids->lo, grids->hi);
+          grids->by_radius[next_grid] = grids->make(next_grid, points);
           return true;
         };
         if (!early) {

@@ -107,8 +107,10 @@ void BallGridPoints::frame(double radius, const double lo[3], const double hi[3]
     if ((hi[a] - lo[a]) * inv_ + 4.0 >= static_cast<double>(kAxisCells))
       low = medianCoordinate(points.base, points.index, points.size, a, lo[a]) -
             0.5 * static_cast<double>(kAxisCells) * edge;
+    if (low != lo[a]) windowed_ = true;
     origin_[a] = low - 2.0 * edge;
     const double top = std::floor((hi[a] - origin_[a]) * inv_) + 2.0;  // largest cell + 2
+    if (top > static_cast<double>(kAxisCells)) windowed_ = true;
     dims[a] = static_cast<std::uint64_t>(std::min(top, static_cast<double>(kAxisCells)));
     limit_[a] = static_cast<double>(dims[a] - 1);
   }
@@ -138,6 +140,97 @@ BallGridPoints::BallGridPoints(const PointSet &points, double radius, const doub
     if (!(std::isfinite(lo[a]) && std::isfinite(hi[a]) && lo[a] <= hi[a])) return;
   frame(radius, lo, hi, points);
   sortPoints(points);
+}
+
+BallGridPoints::BallGridPoints(const BallGridPoints &finer, int doublings, const PointSet &points, const double lo[3],
+                               const double hi[3]) {
+  const double radius = std::ldexp(finer.radius_, doublings);
+  if (!(radius > 0.0) || !std::isfinite(radius)) return;
+  for (int a = 0; a < 3; ++a)
+    if (!(std::isfinite(lo[a]) && std::isfinite(hi[a]) && lo[a] <= hi[a])) return;
+  frame(radius, lo, hi, points);
+  if (!groupFrom(finer, doublings)) sortPoints(points);
+}
+
+bool BallGridPoints::groupFrom(const BallGridPoints &finer, int doublings) {
+  if (doublings < 1 || doublings > 20 || !finer.framed_ || finer.windowed_ || windowed_) return false;
+  // Edges: radius * (1 + 1e-8) at both, so this one is exactly 2^doublings of finer's; origins: box corner minus two
+  // edges at both, so in exact arithmetic finer's lies 2^(doublings + 1) - 2 finer cells above this one. A finer cell
+  // i is then inside cell (i + 2^(doublings + 1) - 2) >> doublings. The origins' own rounding moves that boundary by
+  // ~1e-16 of the coordinates, far below the 1e-8 of the radius that cells have to spare: a point within the radius
+  // of a query is still in one of the 27 cells around the query's.
+  if (std::ldexp(inv_, doublings) != finer.inv_) return false;
+  const std::uint64_t add = (std::uint64_t(2) << doublings) - 2;
+  const std::size_t cells = finer.cells_;
+  // The finer cells' coordinates, tracked as their keys ascend (x-major): a new x is a division, a new y within it
+  // one by reciprocal (exact after one correction: the remainder is below 2^42).
+  const double inv_stride_y = 1.0 / static_cast<double>(finer.stride_y_);
+  std::uint64_t ix = 0, iy = 0, x_base = 0, y_base = 0;
+  auto coarseKey = [&](std::uint64_t key, std::uint64_t &out) {
+    if (key >= x_base + finer.stride_x_) {
+      ix = key / finer.stride_x_;
+      x_base = ix * finer.stride_x_;
+      iy = 0, y_base = x_base;
+    }
+    if (key >= y_base + finer.stride_y_) {
+      const std::uint64_t rem = key - x_base;
+      iy = static_cast<std::uint64_t>(static_cast<double>(rem) * inv_stride_y);
+      while (iy * finer.stride_y_ > rem) --iy;
+      while ((iy + 1) * finer.stride_y_ <= rem) ++iy;
+      y_base = x_base + iy * finer.stride_y_;
+    }
+    const std::uint64_t iz = key - y_base;
+    const std::uint64_t cx = (ix + add) >> doublings, cy = (iy + add) >> doublings, cz = (iz + add) >> doublings;
+    // Inside this frame's cells with a neighbour on each side, as keyOf guarantees (the frames' rounding could put
+    // the last cell one further): else sorted afresh.
+    if (!(static_cast<double>(cx) < limit_[0] && static_cast<double>(cy) < limit_[1] &&
+          static_cast<double>(cz) < limit_[2]))
+      return false;
+    out = cx * stride_x_ + cy * stride_y_ + cz;
+    return true;
+  };
+  // Coarse key and finer cell: packed in one word when the key fits 32 bits (as forEachSorted), else as records;
+  // finer cells come in ascending key order, which the stable sort keeps within a coarse cell.
+  std::vector<std::uint64_t> packed;
+  std::vector<KeyedIndex> v;
+  if (key_bits_ <= 32) {
+    packed.resize(cells);
+    for (std::size_t c = 0; c < cells; ++c) {
+      std::uint64_t k;
+      if (!coarseKey(finer.ckey_[c], k)) return false;
+      packed[c] = k << 32 | c;
+    }
+    sortByKeyStable(packed, key_bits_, [](std::uint64_t x) { return x >> 32; });
+  } else {
+    v.resize(cells);
+    for (std::size_t c = 0; c < cells; ++c) {
+      std::uint64_t k;
+      if (!coarseKey(finer.ckey_[c], k)) return false;
+      v[c] = KeyedIndex{k, static_cast<std::uint32_t>(c)};
+    }
+    sortByKeyStable(v, key_bits_);
+  }
+  pos_.resize(finer.pos_.size());
+  pidx_.resize(finer.pidx_.size());
+  ckey_.clear();
+  cstart_.clear();
+  std::size_t slot = 0;
+  auto emit = [&](std::uint64_t key, std::size_t c) {
+    if (ckey_.empty() || key != ckey_.back()) {
+      ckey_.push_back(key);
+      cstart_.push_back(static_cast<std::uint32_t>(slot));
+    }
+    const std::size_t b = finer.cstart_[c], e = finer.cstart_[c + 1];
+    std::copy(finer.pos_.begin() + 3 * b, finer.pos_.begin() + 3 * e, pos_.begin() + 3 * slot);
+    std::copy(finer.pidx_.begin() + b, finer.pidx_.begin() + e, pidx_.begin() + slot);
+    slot += e - b;
+  };
+  for (const std::uint64_t x : packed) emit(x >> 32, static_cast<std::uint32_t>(x));
+  for (const KeyedIndex &r : v) emit(r.key, r.index);
+  cstart_.push_back(static_cast<std::uint32_t>(slot));
+  cells_ = ckey_.size();
+  ckey_.insert(ckey_.end(), 3, ~std::uint64_t(0));  // sentinels, as sortPoints
+  return true;
 }
 
 std::size_t BallGridPoints::memUsage() const {

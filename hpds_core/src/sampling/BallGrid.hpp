@@ -5,8 +5,8 @@
 //   R. A query's neighbours are the points at squared distance ax*ax + ay*ay + az*az < R*R, the axis differences
 //   taken in double as point - query: the same test, bit for bit, as FrameGridIndex.
 // - Neighbours are visited in a fixed order (the 27 cells of edge ~R around the query's cell by x, then y, then z;
-//   a cell's points by increasing index), so anything computed from them is independent of how the queries are
-//   split among threads.
+//   a cell's points by increasing index, or, in a grid grouped from a finer one, in that grid's order), so anything
+//   computed from them is independent of how the queries are split among threads.
 // - Keys address at most 2^21 cells per axis: from the data's bounding-box corner, or, where the data is wider, a
 //   window centred on the points' median along that axis. Points or queries outside it are left out (no neighbours
 //   / never visited): far outliers, alone within the radius anyway. Const; visit() may run concurrently on disjoint
@@ -61,6 +61,12 @@ class BallGridPoints {
  public:
   /// lo/hi: the box (both corners finite, lo <= hi on every axis); points outside it are left out, as far outliers.
   BallGridPoints(const PointSet &points, double radius, const double lo[3], const double hi[3]);
+  /// The same points and box at radius finer.radius() * 2^doublings (doublings >= 1): the cells nest (each is a block
+  /// of finer's cells, the frame aligned to finer's), so the points are grouped from finer's cells, not sorted again,
+  /// and a cell's points come in finer's cell order (then finer's order inside each) instead of by index. Where
+  /// finer's or this frame is a window over wide data, sorted from `points` as the other constructor does.
+  BallGridPoints(const BallGridPoints &finer, int doublings, const PointSet &points, const double lo[3],
+                 const double hi[3]);
   [[nodiscard]] double radius() const { return radius_; }
   /// Bytes held.
   [[nodiscard]] std::size_t memUsage() const;
@@ -80,8 +86,12 @@ class BallGridPoints {
   }
   void sortPoints(const PointSet &points);
 
+  /// The cells of this frame from finer's (see the nesting constructor); false when the frames do not nest.
+  bool groupFrom(const BallGridPoints &finer, int doublings);
+
   double radius_ = 0.0, r2_ = 0.0;
   bool framed_ = false;  ///< false: no finite box, no cells
+  bool windowed_ = false;  ///< some axis is a window over wider data (or capped at 2^21 cells): no nesting
   double origin_[3] = {}, limit_[3] = {}, inv_ = 0.0;
   std::uint64_t stride_x_ = 0, stride_y_ = 0;
   int key_bits_ = 0;
