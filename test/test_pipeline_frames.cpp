@@ -17,6 +17,7 @@
 
 #include "PipelineTestSupport.hpp"
 #include "hpds/eval/SyntheticLidar.hpp"
+#include "hpds/pipeline/FramePoints.hpp"
 #include "hpds/pipeline/Pipeline.hpp"
 #include "hpds/sampling/InsertionOrderer.hpp"
 
@@ -192,6 +193,69 @@ TEST(Pipeline, NanInfAndNoReturnPointsAreSkippedAndCounted) {
   keep.input.skip_zero_points = false;
   Pipeline p(keep);
   EXPECT_EQ(p.addFrame(makeFrame({{0, 0, 0}, {0, 0, 0}})).counters.accepted, 1u);
+}
+
+// poseFramePoints' identity pose (scan mode in the sensor's frame) skips the product: the same kept points, skip
+// counts and position bits as the contract's formula R p + t, -0.0 and range limits included, against an oracle
+// that computes that formula; and a pose that is not the identity still goes through it.
+TEST(Pipeline, IdentityPosePositionsAreTheFormulasBits) {
+  std::mt19937_64 rng(5);
+  std::uniform_real_distribution<double> u(-60.0, 60.0);
+  std::uniform_int_distribution<int> kind(0, 9);
+  std::vector<std::array<double, 3>> pts;
+  for (int i = 0; i < 3000; ++i) {
+    std::array<double, 3> p = {u(rng), u(rng), u(rng) / 10.0};
+    const int k = kind(rng);
+    if (k == 0) p[i % 3] = NAN;
+    if (k == 1) p = {0.0, 0.0, 0.0};
+    if (k == 2) p[i % 3] = -0.0;
+    if (k == 3) p[(i + 1) % 3] = -INFINITY;
+    pts.push_back(p);
+  }
+  InputConfig in;
+  in.min_range = 2.0;
+  in.max_range = 50.0;
+  Eigen::Isometry3d turn = Eigen::Isometry3d::Identity();
+  turn.linear() = Eigen::AngleAxisd(0.3, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+  turn.translation() = Eigen::Vector3d(-0.0, 4.0, 1.0);
+  for (const Eigen::Isometry3d &pose : {Eigen::Isometry3d(Eigen::Isometry3d::Identity()), turn}) {
+    Frame f = makeFrame(pts, FieldType::Float32);
+    f.sensor_to_fixed = pose;
+    std::vector<double> xyz;
+    std::vector<std::uint32_t> kept;
+    SkippedPoints skipped;
+    poseFramePoints(f, in, xyz, kept, skipped);
+    std::vector<std::uint32_t> want;
+    SkippedPoints want_skipped;
+    const Eigen::Matrix3d R = pose.linear();
+    const Eigen::Vector3d t = pose.translation();
+    for (std::uint32_t i = 0; i < pts.size(); ++i) {
+      const double x = static_cast<float>(pts[i][0]), y = static_cast<float>(pts[i][1]), z = static_cast<float>(pts[i][2]);
+      if (!(std::isfinite(x) && std::isfinite(y) && std::isfinite(z))) {
+        ++want_skipped.invalid;
+        continue;
+      }
+      if (x == 0.0 && y == 0.0 && z == 0.0) {
+        ++want_skipped.zero;
+        continue;
+      }
+      const double r2 = x * x + y * y + z * z;
+      if (r2 < in.min_range * in.min_range || r2 > in.max_range * in.max_range) {
+        ++want_skipped.range;
+        continue;
+      }
+      want.push_back(i);
+      const double w[3] = {R(0, 0) * x + R(0, 1) * y + R(0, 2) * z + t.x(), R(1, 0) * x + R(1, 1) * y + R(1, 2) * z + t.y(),
+                           R(2, 0) * x + R(2, 1) * y + R(2, 2) * z + t.z()};
+      ASSERT_EQ(std::memcmp(w, &xyz[3 * std::size_t(i)], sizeof w), 0) << "point " << i;
+    }
+    EXPECT_EQ(kept, want);
+    EXPECT_EQ(skipped.invalid, want_skipped.invalid);
+    EXPECT_EQ(skipped.zero, want_skipped.zero);
+    EXPECT_EQ(skipped.range, want_skipped.range);
+    EXPECT_GT(want.size(), 1000u);
+    EXPECT_GT(want_skipped.range, 100u);
+  }
 }
 
 TEST(Pipeline, EmptyAndAllInvalidFramesAreHarmless) {

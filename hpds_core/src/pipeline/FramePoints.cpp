@@ -28,6 +28,37 @@ void poseFramePoints(const Frame &frame, const InputConfig &input, std::vector<d
     std::memcpy(&v, p, sizeof v);
     return static_cast<double>(v);
   };
+  // Scan mode in the sensor's own frame (the node's default) has the identity pose: a finite point is then its own
+  // position, and x + 0.0 gives the bits the product would (1 x + 0 y + 0 z + 0, a -0.0 included).
+  const bool identity = R == Eigen::Matrix3d::Identity() && t == Eigen::Vector3d::Zero();
+  if (identity && f32) {
+    const std::size_t ox = fx->offset, oy = fy->offset, oz = fz->offset;
+    candidates.resize(n);
+    std::size_t kept = 0;
+    for (std::size_t i = 0; i < n; ++i) {
+      const std::uint8_t *rec = pts.record(i);
+      const double x = loadF32(rec + ox), y = loadF32(rec + oy), z = loadF32(rec + oz);
+      if (!(std::isfinite(x) && std::isfinite(y) && std::isfinite(z))) {
+        ++skipped.invalid;
+        continue;
+      }
+      if (input.skip_zero_points && x == 0.0 && y == 0.0 && z == 0.0) {
+        ++skipped.zero;
+        continue;
+      }
+      const double dx = x - v.x(), dy = y - v.y(), dz = z - v.z();
+      const double r2 = dx * dx + dy * dy + dz * dz;
+      if (r2 < min_r2 || r2 > max_r2) {
+        ++skipped.range;
+        continue;
+      }
+      double *o = &xyz[3 * i];
+      o[0] = x + 0.0, o[1] = y + 0.0, o[2] = z + 0.0;
+      candidates[kept++] = static_cast<std::uint32_t>(i);
+    }
+    candidates.resize(kept);
+    return;
+  }
   for (std::size_t i = 0; i < n; ++i) {
     const std::uint8_t *rec = pts.record(i);
     const double x = f32 ? loadF32(rec + fx->offset) : readAsDouble(rec, *fx);
