@@ -369,6 +369,33 @@ TEST(MapFileFreeSlots, FreeSlotsThatWouldTakeFarMoreMemoryThanTheFileLoadCompact
   expectIdentical(h, kept.hierarchy);
 }
 
+// A map of 4 MiB records whose samples were all evicted is a few dozen bytes of file; loading its free slots
+// reserved 1024 records of headroom (4 GiB; a forged file with 16 MiB records asked for 16 GiB). The headroom is
+// capped at 64 MiB of records.
+TEST(MapFileFreeSlots, FreeSlotsOfHugeRecordsReserveBoundedMemory) {
+  const auto dir = test::scratchDir("map_huge_free");
+  Hierarchy h(4.0, 3);
+  PointLayout huge;
+  for (const char *n : {"x", "y", "z"}) huge.append(n, FieldType::Float32);
+  huge.append("blob", FieldType::UInt32, 1u << 20);  // 4 MiB
+  h.setRecordLayout(huge);
+  const float v[3] = {0, 0, 1};
+  for (int i = 0; i < 3; ++i) {
+    const double p[3] = {0.5 + 4.0 * i, 0.5, 0.5};
+    h.restoreSample(p, 0, 1, v, nullptr);
+  }
+  EXPECT_LE(h.memUsage(), std::size_t(256) << 20);
+  const double far_away[3] = {1000.0, 0.0, 0.0};
+  ASSERT_EQ(h.evictOutside(far_away, 1.0), 3u);
+  saveHierarchy((dir / "empty.hpdsmap").string(), h, 1);
+  EXPECT_LT(fs::file_size(dir / "empty.hpdsmap"), 1000u);
+  const LoadedHierarchy loaded = loadHierarchy((dir / "empty.hpdsmap").string());
+  EXPECT_FALSE(loaded.ids_compacted);
+  EXPECT_EQ(loaded.hierarchy.idBound(), 3u);
+  EXPECT_EQ(loaded.hierarchy.freeSlots(), h.freeSlots());
+  EXPECT_LE(loaded.hierarchy.memUsage(), std::size_t(256) << 20);
+}
+
 // Free slots of small records keep their ids even when they outnumber the samples many times (a map that an empty
 // frame far ahead has nearly emptied), and the map continues like the run that saved it.
 TEST_F(MapFile, AMapOfMostlyFreeSlotsKeepsItsIds) {

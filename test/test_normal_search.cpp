@@ -3,6 +3,8 @@
 // not the candidate set (subsets, duplicates, unsorted ids, finer-level samples).
 #include <gtest/gtest.h>
 
+#include <iomanip>
+
 #include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
 #include <algorithm>
@@ -343,6 +345,60 @@ TEST(BallGrid, GridsGroupedFromAFinerOneMatchBruteForce) {
       }
     }
   }
+}
+
+// Far from the origin with small radii the two frames' corners round apart by more than the cells' 1e-8 of spare
+// width (|coordinates| / radius above ~5e7), and grouped cells would split pairs closer than the radius across two
+// cells of the query's grid. Pairs built exactly on such faces (the grouped face and the coarse grid's own, one ulp
+// apart) must still find each other; the grouped grid then sorts afresh.
+TEST(BallGrid, GroupedGridsFarFromTheOriginMatchBruteForce) {
+  std::mt19937_64 rng(5);
+  std::size_t pairs = 0;
+  for (const double base : {5.0e6, 9.9e6, 1.0e6, 100.0})
+    for (const double radius : {0.005, 0.02})
+      for (int doublings = 1; doublings <= 3; ++doublings)
+        for (int trial = 0; trial < 40; ++trial) {
+          const double low = base + std::uniform_real_distribution<double>(0.0, 1.0)(rng);
+          const double r = std::ldexp(radius, doublings);
+          const double lo[3] = {low, 0.0, 0.0}, hi[3] = {low + 40.0 * r, 10.0, 10.0};
+          // The frames' arithmetic (BallGridPoints::frame, no window): finer and coarse edges and corners.
+          const double ef = radius * (1.0 + 1e-8), inv_f = 1.0 / ef, of = low - 2.0 * ef;
+          const double ec = r * (1.0 + 1e-8), inv_c = 1.0 / ec, oc = low - 2.0 * ec;
+          const std::int64_t add = (std::int64_t(2) << doublings) - 2;
+          auto grouped = [&](double x) { return (std::int64_t(std::floor((x - of) * inv_f)) + add) >> doublings; };
+          auto own = [&](double x) { return std::int64_t(std::floor((x - oc) * inv_c)); };
+          auto face = [](auto cell, std::int64_t k, double a, double b) {  // first x in [a, b] with cell(x) >= k
+            for (;;) {
+              const double m = a + (b - a) / 2;
+              if (m == a || m == b) return cell(a) >= k ? a : b;
+              (cell(m) >= k ? b : a) = m;
+            }
+          };
+          std::vector<double> pts, qs;
+          for (std::int64_t k = 3; k < 30; ++k) {
+            const double at = oc + static_cast<double>(k) * ec;
+            const double g0 = face(grouped, k, at - 1e-3, at + 1e-3), o0 = face(own, k, at - 1e-3, at + 1e-3);
+            const double g1 = face(grouped, k + 1, at + ec - 1e-3, at + ec + 1e-3);
+            const double o1 = face(own, k + 1, at + ec - 1e-3, at + ec + 1e-3);
+            // A point just below a grouped face with a query just at the next own face, and the other way round.
+            for (const auto &[pt, q] : {std::pair{std::nextafter(g0, -INFINITY), o1}, std::pair{g1, std::nextafter(o0, -INFINITY)}})
+              if ((pt - q) * (pt - q) < r * r) {
+                pts.insert(pts.end(), {pt, 5.0, 5.0});
+                qs.insert(qs.end(), {q, 5.0, 5.0});
+              }
+          }
+          if (pts.empty()) continue;
+          const PointSet points{pts.data(), nullptr, pts.size() / 3}, queries{qs.data(), nullptr, qs.size() / 3};
+          const BallGridPoints first(points, radius, lo, hi);
+          const auto found = viaSortedAhead(BallGridPoints(first, doublings, points, lo, hi), points, queries, 1);
+          for (std::size_t i = 0; i < queries.size; ++i, ++pairs) {
+            std::vector<std::uint32_t> got = found[i].points;
+            std::sort(got.begin(), got.end());
+            ASSERT_EQ(got, bruteForce(points, queries.at(i), r))
+                << std::setprecision(17) << "corner " << low << ", radius " << radius << " x 2^" << doublings;
+          }
+        }
+  EXPECT_GT(pairs, 200u);
 }
 
 TEST(BallGrid, AFarOutlierBelowTheFrameLeavesTheRestTheirNeighbours) {

@@ -47,9 +47,9 @@ namespace {
 constexpr char kMagic[8] = {'H', 'P', 'D', 'S', 'M', 'A', 'P', '\0'};
 constexpr std::size_t kFixedHeaderBytes = 48;
 constexpr std::size_t kEntryFixedBytes = 3 * 8 + 1 + 4 + 3 * 4;
-// Memory of one sample slot besides its record, rounded up: Hierarchy's position, level, frame and view direction,
-// and a kept normal.
-constexpr std::uint64_t kSlotBytes = 64;
+// Memory of one sample slot besides its record, rounded up: Hierarchy's position, level, frame and view direction
+// (33 bytes), a kept normal (36) and the arrays' headroom.
+constexpr std::uint64_t kSlotBytes = 96;
 // Far above any real layout; they keep every size computed below from overflowing and bound the header read.
 constexpr std::uint32_t kMaxHeaderBytes = 1u << 24;
 constexpr std::uint32_t kMaxPointStep = 1u << 24;
@@ -447,8 +447,12 @@ LoadedHierarchy parse(Source &src, std::uint64_t total_size, const std::string &
   if (crc != stored_crc) fail(name, "corrupt sample data (checksum mismatch)");
   if (!refused.empty()) fail(name, "invalid map: " + refused);
   if (!out.ids_compacted) {
-    skipFreeSlots();  // those after the last sample
-    out.hierarchy.restoreFreeOrder(free_order);  // checked above: every free slot once
+    try {
+      skipFreeSlots();  // those after the last sample
+      out.hierarchy.restoreFreeOrder(free_order);  // checked above: every free slot once
+    } catch (const std::exception &ex) {  // e.g. out of memory: named like every other failure
+      fail(name, std::string("cannot restore the free slots: ") + ex.what());
+    }
   }
   return out;
 }

@@ -94,6 +94,7 @@ void BallGridPoints::frame(double radius, const double lo[3], const double hi[3]
   // Cells a hair wider than the radius, so that round-off in the cell computation cannot put a point within the
   // radius two cells away from the query's.
   const double edge = radius * (1.0 + 1e-8);
+  edge_ = edge;
   inv_ = 1.0 / edge;
   // Two cells of margin below and one above: every cell c of a point has c - 1 >= 0 and c + 1 < dims, so the 27
   // neighbours of a cell are plain key offsets. Keys are linear, x-major and z fastest.
@@ -156,11 +157,19 @@ bool BallGridPoints::groupFrom(const BallGridPoints &finer, int doublings) {
   if (doublings < 1 || doublings > 20 || !finer.framed_ || finer.windowed_ || windowed_) return false;
   // Edges: radius * (1 + 1e-8) at both, so this one is exactly 2^doublings of finer's; origins: box corner minus two
   // edges at both, so in exact arithmetic finer's lies 2^(doublings + 1) - 2 finer cells above this one. A finer cell
-  // i is then inside cell (i + 2^(doublings + 1) - 2) >> doublings. The origins' own rounding moves that boundary by
-  // ~1e-16 of the coordinates, far below the 1e-8 of the radius that cells have to spare: a point within the radius
-  // of a query is still in one of the 27 cells around the query's.
+  // i is then inside cell (i + 2^(doublings + 1) - 2) >> doublings. Each origin is rounded on its own, which moves
+  // the grouped cells' faces against the ones queries are keyed by: a point within the radius of a query is still
+  // in one of the 27 cells around the query's while that shift stays below the 1e-8 of the radius that cells have
+  // to spare. Far from the origin with small radii (coordinates beyond ~3e7 radii: a 5 cm footprint at a UTM
+  // northing) one ulp of the corner exceeds half of that: then this grid is sorted afresh.
   if (std::ldexp(inv_, doublings) != finer.inv_) return false;
   const std::uint64_t add = (std::uint64_t(2) << doublings) - 2;
+  for (int a = 0; a < 3; ++a) {
+    const double shift = (finer.origin_[a] - origin_[a]) - static_cast<double>(add) * finer.edge_;
+    // Half the spare width: the other half covers the rounding of the keys themselves (below ~1e-9 of a cell
+    // at 2^21 cells per axis).
+    if (!(std::fabs(shift) <= 0.5e-8 * edge_)) return false;
+  }
   const std::size_t cells = finer.cells_;
   // The finer cells' coordinates, tracked as their keys ascend (x-major): a new x is a division, a new y within it
   // one by reciprocal (exact after one correction: the remainder is below 2^42).

@@ -92,7 +92,7 @@ class BallGridPoints {
   double radius_ = 0.0, r2_ = 0.0;
   bool framed_ = false;  ///< false: no finite box, no cells
   bool windowed_ = false;  ///< some axis is a window over wider data (or capped at 2^21 cells): no nesting
-  double origin_[3] = {}, limit_[3] = {}, inv_ = 0.0;
+  double origin_[3] = {}, limit_[3] = {}, inv_ = 0.0, edge_ = 0.0;
   std::uint64_t stride_x_ = 0, stride_y_ = 0;
   int key_bits_ = 0;
   std::uint64_t column_offset_[9] = {};  // key offset of the (dx, dy) columns' dz = -1 cell

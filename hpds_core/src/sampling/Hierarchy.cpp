@@ -111,8 +111,12 @@ SampleId Hierarchy::appendSlot() {
   const SampleId id = static_cast<SampleId>(level_.size());
   if (level_.size() == level_.capacity()) {
     // Grow by an eighth instead of doubling: per-sample arrays are most of a long-running map's memory, and a map
-    // with eviction reaches its size once (the copies stay amortised O(1) per sample).
-    const std::size_t cap = level_.size() + level_.size() / 8 + 1024;
+    // with eviction reaches its size once (the copies stay amortised O(1) per sample). The fixed headroom is 1024
+    // slots, but at most 64 MiB of records: with 16 MiB records 1024 slots were 16 GiB for a map file's first
+    // sample or free slot (a forged 415-byte file asked for that).
+    const std::size_t step = std::max<std::size_t>(1, record_layout_.point_step);
+    const std::size_t headroom = std::max<std::size_t>(1, std::min<std::size_t>(1024, (std::size_t(64) << 20) / step));
+    const std::size_t cap = level_.size() + level_.size() / 8 + headroom;
     level_.reserve(cap);
     frame_.reserve(cap);
     view_.reserve(cap);
