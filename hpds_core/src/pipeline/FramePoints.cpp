@@ -28,6 +28,24 @@ void poseFramePoints(const Frame &frame, const InputConfig &input, std::vector<d
     std::memcpy(&v, p, sizeof v);
     return static_cast<double>(v);
   };
+  // The skip rules, in the points' own frame: true, and counted, for a point left out.
+  const auto skip = [&](double x, double y, double z) {
+    if (!std::isfinite(x) || !std::isfinite(y) || !std::isfinite(z)) {
+      ++skipped.invalid;
+      return true;
+    }
+    if (input.skip_zero_points && x == 0.0 && y == 0.0 && z == 0.0) {
+      ++skipped.zero;
+      return true;
+    }
+    const double dx = x - v.x(), dy = y - v.y(), dz = z - v.z();
+    const double r2 = dx * dx + dy * dy + dz * dz;
+    if (r2 < min_r2 || r2 > max_r2) {
+      ++skipped.range;
+      return true;
+    }
+    return false;
+  };
   // Scan mode in the sensor's own frame (the node's default) has the identity pose: a finite point is then its own
   // position, and x + 0.0 gives the bits the product would (1 x + 0 y + 0 z + 0, a -0.0 included).
   const bool identity = R == Eigen::Matrix3d::Identity() && t == Eigen::Vector3d::Zero();
@@ -38,20 +56,7 @@ void poseFramePoints(const Frame &frame, const InputConfig &input, std::vector<d
     for (std::size_t i = 0; i < n; ++i) {
       const std::uint8_t *rec = pts.record(i);
       const double x = loadF32(rec + ox), y = loadF32(rec + oy), z = loadF32(rec + oz);
-      if (!(std::isfinite(x) && std::isfinite(y) && std::isfinite(z))) {
-        ++skipped.invalid;
-        continue;
-      }
-      if (input.skip_zero_points && x == 0.0 && y == 0.0 && z == 0.0) {
-        ++skipped.zero;
-        continue;
-      }
-      const double dx = x - v.x(), dy = y - v.y(), dz = z - v.z();
-      const double r2 = dx * dx + dy * dy + dz * dz;
-      if (r2 < min_r2 || r2 > max_r2) {
-        ++skipped.range;
-        continue;
-      }
+      if (skip(x, y, z)) continue;
       double *o = &xyz[3 * i];
       o[0] = x + 0.0, o[1] = y + 0.0, o[2] = z + 0.0;
       candidates[kept++] = static_cast<std::uint32_t>(i);
@@ -64,20 +69,7 @@ void poseFramePoints(const Frame &frame, const InputConfig &input, std::vector<d
     const double x = f32 ? loadF32(rec + fx->offset) : readAsDouble(rec, *fx);
     const double y = f32 ? loadF32(rec + fy->offset) : readAsDouble(rec, *fy);
     const double z = f32 ? loadF32(rec + fz->offset) : readAsDouble(rec, *fz);
-    if (!std::isfinite(x) || !std::isfinite(y) || !std::isfinite(z)) {
-      ++skipped.invalid;
-      continue;
-    }
-    if (input.skip_zero_points && x == 0.0 && y == 0.0 && z == 0.0) {
-      ++skipped.zero;
-      continue;
-    }
-    const double dx = x - v.x(), dy = y - v.y(), dz = z - v.z();
-    const double r2 = dx * dx + dy * dy + dz * dz;
-    if (r2 < min_r2 || r2 > max_r2) {
-      ++skipped.range;
-      continue;
-    }
+    if (skip(x, y, z)) continue;
     const double wx = R(0, 0) * x + R(0, 1) * y + R(0, 2) * z + t.x();
     const double wy = R(1, 0) * x + R(1, 1) * y + R(1, 2) * z + t.y();
     const double wz = R(2, 0) * x + R(2, 1) * y + R(2, 2) * z + t.z();
