@@ -69,9 +69,9 @@ struct RefinedSetup {
   bool over_centroids = false; ///< `fine` is the frame's centroids, searched through `grids` (or over their box)
   const AveragingGrids *grids = nullptr;
   AveragingGrids *keep = nullptr;  ///< over centroids: grids sorted here are kept in it for later calls
-  /// Over centroids without `keep`: the first grid when this call had to sort it, for the later rounds' grids to be
-  /// grouped from (owned by the caller of growNeighbourhoods).
-  std::unique_ptr<BallGridPoints> *first_here = nullptr;
+  /// Over centroids without `keep`: the first grid when this estimate had to sort it, for its later rounds' grids to
+  /// be grouped from (a setup lives for one estimate).
+  mutable std::unique_ptr<BallGridPoints> first_here;
 };
 
 /// Queries: element i at base + 3 * index[i].
@@ -114,18 +114,15 @@ void sweep(const RefinedSetup &s, const PointSet &points, const QuerySet &q, con
       if (g > 0 && !s.keep->by_radius[0]) s.keep->by_radius[0] = s.keep->make(0, points);
       s.keep->by_radius[g] = s.keep->make(g, points);
       ahead = s.keep->by_radius[g].get();
-    } else if (g < grids && s.first_here) {
-      // Not kept across calls, but across this call's rounds: the first grid, which the later ones group from.
-      if (!s.grids->by_radius[0] && !*s.first_here) *s.first_here = s.grids->make(0, points);
+    } else if (g < grids) {
+      // Not kept across calls, but across this estimate's rounds: the first grid, which the later ones group from.
+      if (!s.grids->by_radius[0] && !s.first_here) s.first_here = s.grids->make(0, points);
       if (g == 0 && !s.grids->by_radius[0]) {
-        ahead = s.first_here->get();
+        ahead = s.first_here.get();
       } else {
-        made_here = s.grids->make(g, points, s.first_here->get());
+        made_here = s.grids->make(g, points, s.first_here.get());
         ahead = made_here.get();
       }
-    } else if (g < grids) {
-      made_here = s.grids->make(g, points);
-      ahead = made_here.get();
     } else {
       ahead = &sorted_here.emplace(points, radius, s.grids->lo, s.grids->hi);
     }
@@ -369,8 +366,6 @@ std::vector<SampleNormal> estimateNormalsRefined(const Hierarchy &h, const std::
   s.radii = refinedSearchRadii(h, params);
   s.over_centroids = centroids != nullptr;
   s.grids = centroids ? grids : nullptr;
-  std::unique_ptr<BallGridPoints> first_here;
-  s.first_here = &first_here;
   const double growth = std::max(1.0, params.max_growth);
   const double base = params.radius > 0.0 ? params.radius : 2.5 * h.radius(level);
   const double *hbase = h.position(0);
