@@ -403,9 +403,8 @@ TEST(BallGrid, GroupedGridsFarFromTheOriginMatchBruteForce) {
 
 TEST(BallGrid, AFarOutlierBelowTheFrameLeavesTheRestTheirNeighbours) {
   // One glitched return 10 000 km below a frame on x and y (4e7 cells of 0.25 m): keys reach 2^21 cells per axis,
-  // and a window counted from the low corner held only the outlier (every normal of the frame was invalid). The
-  // window is centred on the points' median there: the frame keeps exactly its neighbourhoods, and the outlier,
-  // alone, gets none.
+  // and a window counted from the low corner held only the outlier (every normal of the frame was invalid). Those
+  // axes are squeezed now: the frame keeps exactly its neighbourhoods, and the outlier finds itself.
   std::mt19937_64 rng(31);
   std::vector<double> xyz = clusteredPoints(rng, 20, 100, 990.0, 1010.0, 0.2, 0.1, 10);
   xyz.insert(xyz.end(), {1000.0 - 1e7, 1000.0 - 1e7, 0.0});
@@ -413,13 +412,13 @@ TEST(BallGrid, AFarOutlierBelowTheFrameLeavesTheRestTheirNeighbours) {
   const PointSet all{xyz.data(), nullptr, n};
   const double radius = 0.25;
   const auto check = [&](const std::vector<Found> &found) {
-    for (std::size_t i = 0; i + 1 < n; ++i) {
+    for (std::size_t i = 0; i < n; ++i) {
       ASSERT_EQ(found[i].calls, 1) << "point " << i;
       std::vector<std::uint32_t> got = found[i].points;
       std::sort(got.begin(), got.end());
       ASSERT_EQ(got, bruteForce(all, all.at(i), radius)) << "point " << i;
     }
-    EXPECT_TRUE(found[n - 1].points.empty());
+    EXPECT_EQ(found[n - 1].points, std::vector<std::uint32_t>{static_cast<std::uint32_t>(n - 1)});
   };
   check(viaGrid(all, all, radius, 3));
   double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
@@ -427,6 +426,82 @@ TEST(BallGrid, AFarOutlierBelowTheFrameLeavesTheRestTheirNeighbours) {
     for (int a = 0; a < 3; ++a) lo[a] = std::min(lo[a], all.at(i)[a]), hi[a] = std::max(hi[a], all.at(i)[a]);
   const BallGridPoints sorted(all, radius, lo, hi);
   check(viaSortedAhead(sorted, all, all, 3));
+}
+
+TEST(BallGrid, FarApartClustersKeepEveryNeighbourAndTheOrderOfAnUnboundedGrid) {
+  // Clusters spread over 2 000 km on x, 50 km on y and 3 km on z at a 5 cm radius (4e7, 1e6 and 6e4 cells): x is
+  // squeezed, y and z are not. Beside each cluster, pairs just within one, two and three cell edges along x, and a
+  // chain of points half a radius apart, test the squeezing's adjacency. Foreign queries fall in the gaps, below and
+  // above every point. Neighbourhoods against brute force, and the visiting order the
+  // same whatever the chunks and whether the points are sorted ahead.
+  std::mt19937_64 rng(77);
+  std::normal_distribution<double> g(0.0, 0.03);
+  const double radius = 0.05, edge = radius * (1.0 + 1e-8);
+  std::vector<double> xyz;
+  const double centres[][3] = {{-1.0e6, 2.0e4, -1.0e3}, {-0.3e6, -3.0e4, 2.0e3}, {0.0, 0.0, 0.0}, {1.0e6, 1.0e3, 5.0}};
+  for (const auto &c : centres) {
+    for (int i = 0; i < 600; ++i) xyz.insert(xyz.end(), {c[0] + g(rng), c[1] + g(rng), c[2] + g(rng)});
+    for (int k = 1; k <= 3; ++k)  // a pair k + 1 cells apart along x, just within or beyond the radius
+      xyz.insert(xyz.end(), {c[0] + 1.0, c[1], c[2], c[0] + 1.0 + k * edge - 0.001, c[1], c[2]});
+  }
+  const double x0 = xyz[0];
+  for (int k = 0; k < 6; ++k) xyz.insert(xyz.end(), {x0 + k * 0.5 * radius, 2.0e4, -1.0e3});
+  const std::size_t n = xyz.size() / 3;
+  const PointSet all{xyz.data(), nullptr, n};
+  const auto matches = [&](const std::vector<Found> &found, const PointSet &queries) {
+    for (std::size_t i = 0; i < queries.size; ++i) {
+      EXPECT_EQ(found[i].calls, 1) << "query " << i;
+      std::vector<std::uint32_t> got = found[i].points;
+      std::sort(got.begin(), got.end());
+      ASSERT_EQ(got, bruteForce(all, queries.at(i), radius)) << "query " << i;
+    }
+  };
+  const auto once = viaGrid(all, all, radius, 1), split = viaGrid(all, all, radius, 9);
+  matches(once, all);
+  for (std::size_t i = 0; i < n; ++i) ASSERT_EQ(once[i].points, split[i].points) << "point " << i;
+  std::vector<double> q;
+  for (const auto &c : centres)
+    q.insert(q.end(), {c[0] + g(rng), c[1] + g(rng), c[2] + g(rng), c[0] + 0.5e5, c[1], c[2], c[0] + 1.0 + 2.5 * edge,
+                       c[1], c[2]});
+  q.insert(q.end(), {-5.0e6, 0.0, 0.0, 5.0e6, 0.0, 0.0});
+  const PointSet queries{q.data(), nullptr, q.size() / 3};
+  matches(viaGrid(all, queries, radius, 2), queries);
+  double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+  for (std::size_t i = 0; i < n; ++i)
+    for (int a = 0; a < 3; ++a) lo[a] = std::min(lo[a], all.at(i)[a]), hi[a] = std::max(hi[a], all.at(i)[a]);
+  const BallGridPoints sorted(all, radius, lo, hi);
+  const auto ahead = viaSortedAhead(sorted, all, all, 4);
+  matches(ahead, all);
+  for (std::size_t i = 0; i < n; ++i) ASSERT_EQ(ahead[i].points, once[i].points) << "point " << i;
+  std::size_t pairs = 0;
+  for (std::size_t i = 0; i < n; ++i) pairs += once[i].points.size() > 1 ? 1 : 0;
+  EXPECT_GT(pairs, 2000u);
+}
+
+TEST(BallGrid, AnAxisWithTooManyOccupiedCellsToSqueezeIsAWindowAroundTheMedian) {
+  // 1.1 M points five cells apart along x (2.2 M squeezed cells: more than 2^21) and a cluster at the median,
+  // 2.75 M cells above the lowest point: the axis is a window of 2^21 cells centred there, so the cluster keeps
+  // exactly its neighbourhoods (a window from the low corner would not reach it).
+  const double radius = 0.1;
+  std::vector<double> xyz;
+  const std::size_t line = 1100000;
+  xyz.reserve(3 * (line + 400));
+  for (std::size_t i = 0; i < line; ++i) xyz.insert(xyz.end(), {5.0 * radius * static_cast<double>(i), 0.0, 0.0});
+  std::mt19937_64 rng(5);
+  std::normal_distribution<double> g(0.0, 0.05);
+  const double mid = 5.0 * radius * static_cast<double>(line / 2);
+  for (int i = 0; i < 400; ++i) xyz.insert(xyz.end(), {mid + g(rng), 5.0 + g(rng), g(rng)});
+  const std::size_t n = xyz.size() / 3;
+  const PointSet all{xyz.data(), nullptr, n};
+  std::vector<std::uint32_t> cluster(400);
+  std::iota(cluster.begin(), cluster.end(), static_cast<std::uint32_t>(line));
+  const PointSet queries{xyz.data(), cluster.data(), cluster.size()};
+  const auto found = viaGrid(all, queries, radius, 1);
+  for (std::size_t i = 0; i < cluster.size(); ++i) {
+    std::vector<std::uint32_t> got = found[i].points;
+    std::sort(got.begin(), got.end());
+    ASSERT_EQ(got, bruteForce(all, queries.at(i), radius)) << "query " << i;
+  }
 }
 
 TEST(FrameGridIndex, AFarOutlierBelowTheFrameLeavesTheRestTheirNeighbours) {
@@ -465,13 +540,13 @@ TEST(BallGrid, EmptyDegenerateAndOutOfRangeInputs) {
   const std::vector<double> same = {5.0, 5.0, 5.0, 5.0, 5.0, 5.0, 5.0, 5.0, 5.0};
   const auto found = viaGrid(PointSet{same.data(), nullptr, 3}, PointSet{same.data(), nullptr, 3}, 0.1, 1);
   for (const auto &f : found) EXPECT_EQ(f.points.size(), 3u);
-  // A point 10^9 radii away: beyond 2^21 cells, left out, while the others still find each other; a non-finite
-  // query is never visited.
+  // A point 10^9 radii away (beyond 2^21 cells: x is squeezed) finds itself, and the others each other; a
+  // non-finite query is never visited.
   std::vector<double> far = {0.0, 0.0, 0.0, 0.05, 0.0, 0.0, 1e8, 0.0, 0.0};
   const auto res = viaGrid(PointSet{far.data(), nullptr, 3}, PointSet{far.data(), nullptr, 3}, 0.1, 1);
   EXPECT_EQ(res[0].points.size(), 2u);
   EXPECT_EQ(res[1].points.size(), 2u);
-  EXPECT_TRUE(res[2].points.empty());
+  EXPECT_EQ(res[2].points, std::vector<std::uint32_t>{2u});
   // Spread over more than 2^32 cells (keys beyond 32 bits: the comparison-sort path): pairs still find each other.
   std::vector<double> spread;
   for (int i = 0; i < 50; ++i) {

@@ -195,5 +195,37 @@ TEST(Normals, AccurateOnPlanarSceneAgainstGroundTruth) {
   EXPECT_LT(static_cast<double>(wrong_side), 0.005 * errors.size()) << "normals must face the sensor";
 }
 
+TEST(Normals, AFarClusterInTheSameFrameKeepsItsNormals) {
+  // Two flat 2 x 2 m patches 1 m below the sensor, one of them 1 000 km out on x (a georeferenced cloud, or a far
+  // cluster in one frame): the search grids of the normals span 5e6 cells there. They used to be windows around the
+  // median, which left one patch without neighbours: every normal of it invalid, and nothing said so.
+  std::mt19937_64 rng(3);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  std::normal_distribution<double> noise(0.0, 0.001);
+  for (const Mode mode : {Mode::Scan, Mode::Map}) {
+    for (const double spacing : {0.1, 0.02}) {
+      std::vector<std::array<double, 3>> pts;
+      for (int i = 0; i < 30000; ++i) pts.push_back({u(rng) + (i % 2 ? 1.0e6 : 0.0), u(rng), -1.0 + noise(rng)});
+      HpdsConfig c;
+      c.mode = mode;
+      c.output.spacing = spacing;
+      Pipeline p(c);
+      p.addFrame(test::makeFrame(pts, FieldType::Float64));
+      const std::vector<SampleId> ids = p.outputSamples();
+      const auto normals = p.normals(ids);
+      std::size_t near = 0, far = 0;
+      for (std::size_t i = 0; i < ids.size(); ++i) {
+        const bool is_far = p.hierarchy().position(ids[i])[0] > 5.0e5;
+        (is_far ? far : near) += 1;
+        ASSERT_TRUE(normals[i].valid) << (is_far ? "far" : "near") << " patch, sample " << i << ", spacing " << spacing;
+        // Level with the sensor seen from 1 000 km, the far patch's normal may face either way along z.
+        EXPECT_GT(std::abs(normals[i].normal[2]), std::cos(10.0 * M_PI / 180.0)) << "sample " << i;
+      }
+      EXPECT_GT(near, 100u);
+      EXPECT_GT(far, 100u);
+    }
+  }
+}
+
 }  // namespace
 }  // namespace hpds

@@ -100,16 +100,24 @@ void BallGridPoints::frame(double radius, const double lo[3], const double hi[3]
   // neighbours of a cell are plain key offsets. Keys are linear, x-major and z fastest.
   std::uint64_t dims[3];
   for (int a = 0; a < 3; ++a) {
-    // At most 2^21 cells per axis (63-bit keys). Data wider than that is nearly always one far outlier or a few (a
-    // glitched return 2 000 km out): a window from the low corner would then leave the frame's bulk out, and every
-    // one of its normals invalid. The window is centred on the points' median along that axis instead; what lies
-    // beyond it has no neighbour within the radius anyway.
-    double low = lo[a];
-    if ((hi[a] - lo[a]) * inv_ + 4.0 >= static_cast<double>(kAxisCells))
-      low = medianCoordinate(points.base, points.index, points.size, a, lo[a]) -
-            0.5 * static_cast<double>(kAxisCells) * edge;
-    if (low != lo[a]) windowed_ = true;
-    origin_[a] = low - 2.0 * edge;
+    // At most 2^21 cells per axis (63-bit keys). Data wider than that (a far cluster, a georeferenced cloud tens of
+    // km wide at a fine radius, a glitched return 2 000 km out) is squeezed along that axis: in blocks of 2^10 (or
+    // 2^5) cells, only the blocks that hold points count, each run of empty blocks shortened to one. Every cell
+    // keeps its neighbours and its order, so the grid visits exactly what an unbounded one would. Only where even
+    // the occupied blocks are too many is the axis a window of 2^21 cells centred on the points' median, and what
+    // lies beyond it has no cell.
+    origin_[a] = lo[a] - 2.0 * edge;
+    if ((hi[a] - lo[a]) * inv_ + 4.0 >= static_cast<double>(kAxisCells)) {
+      windowed_ = true;
+      if (squeeze(a, points)) {
+        const SqueezedAxis &sq = squeeze_[a];
+        dims[a] = ((std::uint64_t(sq.squeezed.back()) + 2) << sq.shift) + 1;
+        limit_[a] = static_cast<double>(dims[a] - 1);
+        continue;
+      }
+      origin_[a] = medianCoordinate(points.base, points.index, points.size, a, lo[a]) -
+                   0.5 * static_cast<double>(kAxisCells) * edge - 2.0 * edge;
+    }
     const double top = std::floor((hi[a] - origin_[a]) * inv_) + 2.0;  // largest cell + 2
     if (top > static_cast<double>(kAxisCells)) windowed_ = true;
     dims[a] = static_cast<std::uint64_t>(std::min(top, static_cast<double>(kAxisCells)));
@@ -124,6 +132,132 @@ void BallGridPoints::frame(double radius, const double lo[3], const double hi[3]
       column_offset_[col++] =
           static_cast<std::uint64_t>(dx * std::int64_t(stride_x_) + dy * std::int64_t(stride_y_) - 1);
   framed_ = true;
+}
+
+bool BallGridPoints::wideCell(double v, int axis, std::int64_t &cell) const {
+  // In long double (64-bit mantissa): cell numbers beyond 2^30 would carry more rounding in double than the 1e-8 of
+  // a cell that the edge has to spare. Points and queries are numbered by this same expression.
+  const long double f = (static_cast<long double>(v) - static_cast<long double>(origin_[axis])) *
+                        static_cast<long double>(inv_);
+  if (!(std::fabs(f) < 0x1p62L)) return false;  // not finite, or beyond any coordinate a double resolves per cell
+  cell = static_cast<std::int64_t>(std::floor(f));
+  return true;
+}
+
+namespace {
+std::size_t blockSlot(std::int64_t block) {
+  std::uint64_t h = static_cast<std::uint64_t>(block) * 0x9E3779B97F4A7C15ull;
+  return static_cast<std::size_t>(h ^ (h >> 29));
+}
+/// floor(cell / 2^shift) for negative cells too (an arithmetic shift is implementation-defined before C++20).
+std::int64_t blockOf(std::int64_t cell, int shift) {
+  return cell >= 0 ? cell >> shift : -(((-cell) - 1) >> shift) - 1;
+}
+}  // namespace
+
+bool BallGridPoints::squeeze(int axis, const PointSet &points) {
+  // Blocks of 1 024 cells first: a frame's bulk is a few of them. Many scattered clusters take blocks of 32.
+  for (const int shift : {10, 5})
+    if (squeezeBlocks(axis, points, shift)) {
+      squeezed_ = true;
+      return true;
+    }
+  return false;
+}
+
+bool BallGridPoints::squeezeBlocks(int axis, const PointSet &points, int shift) {
+  SqueezedAxis &sq = squeeze_[axis];
+  sq = SqueezedAxis{};
+  sq.shift = shift;
+  // The key has room for this many blocks of 2^shift cells, with one below and one above all of them and the
+  // margins: stop collecting beyond it, so that the table stays small (and in the cache) whatever the data.
+  const std::size_t max_blocks = (std::size_t(kAxisCells) >> shift) / 2 - 2;
+  std::size_t cap = 64;
+  sq.slot_block.assign(cap, 0);
+  sq.slot_index.assign(cap, 0);
+  sq.mask = cap - 1;
+  for (std::size_t i = 0; i < points.size; ++i) {
+    const double *p = points.at(i);
+    std::int64_t cell;
+    if (!(std::isfinite(p[0]) && std::isfinite(p[1]) && std::isfinite(p[2]) && wideCell(p[axis], axis, cell)))
+      continue;
+    const std::int64_t block = blockOf(cell, shift);
+    std::size_t slot = blockSlot(block) & sq.mask;
+    for (; sq.slot_index[slot] != 0 && sq.slot_block[slot] != block; slot = (slot + 1) & sq.mask) {
+    }
+    if (sq.slot_index[slot] != 0) continue;
+    if (sq.blocks.size() >= max_blocks) {
+      sq = SqueezedAxis{};
+      return false;
+    }
+    sq.blocks.push_back(block);
+    sq.slot_block[slot] = block;
+    sq.slot_index[slot] = static_cast<std::uint32_t>(sq.blocks.size());
+    if (2 * sq.blocks.size() > cap) {  // at most half full: rebuild twice as large
+      cap *= 2;
+      sq.mask = cap - 1;
+      sq.slot_block.assign(cap, 0);
+      sq.slot_index.assign(cap, 0);
+      for (std::size_t b = 0; b < sq.blocks.size(); ++b) {
+        std::size_t s2 = blockSlot(sq.blocks[b]) & sq.mask;
+        while (sq.slot_index[s2] != 0) s2 = (s2 + 1) & sq.mask;
+        sq.slot_block[s2] = sq.blocks[b];
+        sq.slot_index[s2] = static_cast<std::uint32_t>(b + 1);
+      }
+    }
+  }
+  if (sq.blocks.empty()) sq.blocks.push_back(0);  // no finite point: one block, so that the frame is well formed
+  // Ascending blocks, the table pointing at their new places.
+  std::vector<std::int64_t> sorted = sq.blocks;
+  std::sort(sorted.begin(), sorted.end());
+  sq.squeezed.assign(sorted.size(), 0);
+  // Squeezed blocks from 2 (block 1 stands for every cell below the points', block 0 holds the margin cell):
+  // consecutive blocks stay adjacent, a gap of empty blocks becomes one empty block.
+  std::uint32_t next = 2;
+  for (std::size_t b = 0; b < sorted.size(); ++b) {
+    if (b > 0) next += sorted[b] - sorted[b - 1] == 1 ? 1 : 2;
+    sq.squeezed[b] = next;
+  }
+  for (std::size_t slot = 0; slot < sq.slot_index.size(); ++slot)
+    if (sq.slot_index[slot] != 0)
+      sq.slot_index[slot] = static_cast<std::uint32_t>(
+          std::lower_bound(sorted.begin(), sorted.end(), sq.slot_block[slot]) - sorted.begin() + 1);
+  sq.blocks = std::move(sorted);
+  return true;
+}
+
+bool BallGridPoints::squeezedKeyOf(const double *p, std::uint64_t &key) const {
+  std::uint64_t c[3];
+  for (int a = 0; a < 3; ++a) {
+    const SqueezedAxis &sq = squeeze_[a];
+    if (!sq.active()) {
+      const double f = (p[a] - origin_[a]) * inv_;
+      if (!(f >= 1.0 && f < limit_[a])) return false;
+      c[a] = static_cast<std::uint64_t>(f);
+      continue;
+    }
+    std::int64_t cell;
+    if (!wideCell(p[a], a, cell)) return false;
+    const std::int64_t block = blockOf(cell, sq.shift);
+    const std::uint64_t offset = static_cast<std::uint64_t>(cell - block * (std::int64_t(1) << sq.shift));
+    // A block with points has its own place; an empty one lies between two occupied ones (one empty block there),
+    // or below or above all of them, with its cells in their order. A cell of it is then next to cells it is not
+    // next to in space: that only costs distance tests, never a neighbour.
+    std::size_t slot = blockSlot(block) & sq.mask;
+    for (; sq.slot_index[slot] != 0 && sq.slot_block[slot] != block; slot = (slot + 1) & sq.mask) {
+    }
+    std::uint64_t squeezed;
+    if (sq.slot_index[slot] != 0) {
+      squeezed = sq.squeezed[sq.slot_index[slot] - 1];
+    } else {
+      const std::size_t above =
+          static_cast<std::size_t>(std::upper_bound(sq.blocks.begin(), sq.blocks.end(), block) - sq.blocks.begin());
+      squeezed = above == 0 ? sq.squeezed[0] - 1 : sq.squeezed[above - 1] + 1;
+    }
+    c[a] = (squeezed << sq.shift) + offset;
+  }
+  key = c[0] * stride_x_ + c[1] * stride_y_ + c[2];
+  return true;
 }
 
 void BallGridPoints::sortPoints(const PointSet &points) {
@@ -243,8 +377,12 @@ bool BallGridPoints::groupFrom(const BallGridPoints &finer, int doublings) {
 }
 
 std::size_t BallGridPoints::memUsage() const {
+  std::size_t squeeze = 0;
+  for (const SqueezedAxis &sq : squeeze_)
+    squeeze += (sq.blocks.capacity() + sq.slot_block.capacity()) * sizeof(std::int64_t) +
+               (sq.squeezed.capacity() + sq.slot_index.capacity()) * sizeof(std::uint32_t);
   return pos_.capacity() * sizeof(double) + pidx_.capacity() * sizeof(std::uint32_t) +
-         ckey_.capacity() * sizeof(std::uint64_t) + cstart_.capacity() * sizeof(std::uint32_t);
+         ckey_.capacity() * sizeof(std::uint64_t) + cstart_.capacity() * sizeof(std::uint32_t) + squeeze;
 }
 
 BallGrid::BallGrid(const PointSet &points, const PointSet &queries, double radius) {

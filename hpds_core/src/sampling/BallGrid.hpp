@@ -7,10 +7,11 @@
 // - Neighbours are visited in a fixed order (the 27 cells of edge ~R around the query's cell by x, then y, then z;
 //   a cell's points by increasing index, or, in a grid grouped from a finer one, in that grid's order), so anything
 //   computed from them is independent of how the queries are split among threads.
-// - Keys address at most 2^21 cells per axis: from the data's bounding-box corner, or, where the data is wider, a
-//   window centred on the points' median along that axis. Points or queries outside it are left out (no neighbours
-//   / never visited): far outliers, alone within the radius anyway. Const; visit() may run concurrently on disjoint
-//   ranges.
+// - Keys address at most 2^21 cells per axis, counted from the data's bounding-box corner. Where the data is wider
+//   (far clusters, a far outlier), that axis is squeezed: runs of empty cells between the points' cells shrink to
+//   one, which keeps every neighbour and the visiting order. Only with more than ~2^20 distinct occupied cells along
+//   such an axis is it a window of 2^21 cells centred on the points' median instead; points or queries outside it
+//   are left out (no neighbours / never visited). Const; visit() may run concurrently on disjoint ranges.
 // - The point side can be sorted ahead, over a box given instead of the data's bounding box (BallGridPoints), and
 //   then serve query sets that lie in that box.
 //
@@ -78,12 +79,22 @@ class BallGridPoints {
   void frame(double radius, const double lo[3], const double hi[3], const PointSet &points);
   /// The cell key of p, false when p has no cell (outside the frame or not finite).
   bool keyOf(const double *p, std::uint64_t &key) const {
+    if (squeezed_) return squeezedKeyOf(p, key);
     const double fx = (p[0] - origin_[0]) * inv_, fy = (p[1] - origin_[1]) * inv_, fz = (p[2] - origin_[2]) * inv_;
     if (!(fx >= 1.0 && fx < limit_[0] && fy >= 1.0 && fy < limit_[1] && fz >= 1.0 && fz < limit_[2])) return false;
     key = static_cast<std::uint64_t>(fx) * stride_x_ + static_cast<std::uint64_t>(fy) * stride_y_ +
           static_cast<std::uint64_t>(fz);
     return true;
   }
+  /// keyOf where some axis is squeezed (see frame()).
+  bool squeezedKeyOf(const double *p, std::uint64_t &key) const;
+  /// Squeezes `axis` over the points' cells when that fits 2^21 cells; false (nothing changed) otherwise.
+  bool squeeze(int axis, const PointSet &points);
+  /// Squeezes `axis` in blocks of 2^shift cells when the points occupy few enough of them.
+  bool squeezeBlocks(int axis, const PointSet &points, int shift);
+  /// The unbounded cell number of coordinate v on a squeezed axis (origin_ and inv_ in extended precision), false
+  /// when v is not finite or too far out to number.
+  bool wideCell(double v, int axis, std::int64_t &cell) const;
   void sortPoints(const PointSet &points);
 
   /// The cells of this frame from finer's (see the nesting constructor); false when the frames do not nest.
@@ -96,6 +107,19 @@ class BallGridPoints {
   std::uint64_t stride_x_ = 0, stride_y_ = 0;
   int key_bits_ = 0;
   std::uint64_t column_offset_[9] = {};  // key offset of the (dx, dy) columns' dz = -1 cell
+  // A squeezed axis (wide data): blocks of 2^shift cells; the blocks that hold points, ascending, the block each is
+  // in the key, and an open-addressing table of them (slot -> index + 1, 0 = free) for the points' own lookups.
+  struct SqueezedAxis {
+    int shift = 0;
+    std::vector<std::int64_t> blocks;
+    std::vector<std::uint32_t> squeezed;
+    std::vector<std::int64_t> slot_block;
+    std::vector<std::uint32_t> slot_index;
+    std::size_t mask = 0;
+    [[nodiscard]] bool active() const { return !blocks.empty(); }
+  };
+  bool squeezed_ = false;
+  SqueezedAxis squeeze_[3];
   // Points sorted by cell: positions and point index by slot; distinct cells (keys, then 3 sentinels) with
   // the slot of their first point (cells_ + 1 entries).
   std::vector<double> pos_;  // 3 per slot: a candidate's coordinates share a cache line
