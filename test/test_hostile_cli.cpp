@@ -441,6 +441,22 @@ TEST(HostileCli, UnboundedInputsAreRefusedOrBoundedAndShadowedFieldsAreSaid) {
   for (const char *name : {"level", "normal_x"})
     EXPECT_NE(log.find(std::string("hpds: warning: input field '") + name + "'"), std::string::npos) << log;
   EXPECT_NE(log.find("rename the field to keep it"), std::string::npos) << log;
+  // The reason given is the true one: hpds writes its own normals, but `level` and `frame` are reserved names, and
+  // a single-input output has no `frame` of hpds's (the warning used to say it had).
+  EXPECT_NE(log.find("hpds writes its own 'normal_x'"), std::string::npos) << log;
+  EXPECT_NE(log.find("'level' is reserved"), std::string::npos) << log;
+  PointLayout fl;
+  for (const char *a : {"x", "y", "z"}) fl.append(a, FieldType::Float32);
+  fl.append("frame", FieldType::UInt16);
+  PointBuffer framed(fl, 50);
+  for (std::size_t i = 0; i < framed.size(); ++i)
+    for (int a = 0; a < 3; ++a) writeFromDouble(framed.record(i), fl.fields[a], 0.3 * static_cast<double>(i) + a);
+  writePly((tmp / "framed.ply").string(), framed);
+  ASSERT_EQ(hpds("sample " + q(tmp / "framed.ply") + " -o " + q(tmp / "f.ply"), &log), 0) << log;
+  EXPECT_NE(log.find("input field 'frame'"), std::string::npos) << log;
+  EXPECT_NE(log.find("'frame' is reserved for hpds's frame index"), std::string::npos) << log;
+  EXPECT_EQ(log.find("hpds writes its own 'frame'"), std::string::npos) << log;
+  EXPECT_EQ(readPointCloud((tmp / "f.ply").string()).layout().find("frame"), nullptr);
 }
 
 // Found by fuzz_pcd: a uchar `red` without green/blue was sampled and written to the PLY, which the PLY reader then

@@ -20,6 +20,7 @@
 #include "hpds/config/ConfigYaml.hpp"
 #include "hpds/io/AtomicFile.hpp"
 #include "hpds/io/PlyWriter.hpp"
+#include "hpds/pipeline/OutputCloud.hpp"
 #include "hpds_node/FrameProcessor.hpp"
 #include "hpds_node/SequenceGaps.hpp"
 
@@ -262,8 +263,8 @@ int runReplay(const ReplayArgs &a) {
       std::cerr << w << "\n";
   }
   for (const std::string &name : not_carried)
-    std::cerr << "hpds: warning: input field '" << name << "' is not in the output: hpds writes its own '" << name
-              << "'; rename the field to keep it\n";
+    std::cerr << "hpds: warning: input field '" << name << "' is not in the output: " << fieldNotCarriedReason(name)
+              << "; rename the field to keep it\n";
   return 0;
 }
 

@@ -178,8 +178,8 @@ int runSample(const SampleArgs &a) {
   progress.finish();
   for (const auto &[name, input] : not_carried)
     std::cerr << "hpds: warning: input field '" << name << "' (of '" << input
-              << "' and maybe others) is not in the output: hpds writes its own '" << name
-              << "'; rename the field to keep it\n";
+              << "' and maybe others) is not in the output: " << fieldNotCarriedReason(name)
+              << "; rename the field to keep it\n";
   if (scan) {
     for (std::size_t d = 0; d < report.samples_per_level.size(); ++d) report.samples_per_level[d] = totals.accepted_per_level[d];
   } else {

@@ -1,6 +1,7 @@
 #include "hpds_node/CloudConversion.hpp"
 
 #include <cmath>
+#include <vector>
 #include <cstdint>
 #include <cstring>
 #include <set>
@@ -143,14 +144,18 @@ void toRosCloud(const hpds::PointBuffer &cloud, const std_msgs::Header &header, 
   out.row_step = cloud.width() * layout.point_step;
   out.data = cloud.bytes();
 
+  // PCL's meaning: no point has a NaN or Inf in any floating-point field. An invalid normal (NaN) makes the cloud
+  // not dense, so that PCL code which skips its finiteness checks on dense clouds does not read it as a number.
+  std::vector<hpds::PointField> floats;
+  for (const hpds::PointField &f : layout.fields)
+    if (f.type == hpds::FieldType::Float32 || f.type == hpds::FieldType::Float64)
+      for (std::uint32_t e = 0; e < f.count; ++e)
+        floats.push_back(hpds::PointField{f.name, f.offset + e * static_cast<std::uint32_t>(hpds::fieldTypeSize(f.type)),
+                                          f.type, 1});
   bool dense = true;
-  const hpds::PointField *fx = layout.find("x"), *fy = layout.find("y"), *fz = layout.find("z");
-  if (fx && fy && fz) {
-    for (std::size_t i = 0, n = cloud.size(); i < n && dense; ++i) {
-      const std::uint8_t *r = cloud.record(i);
-      dense = std::isfinite(hpds::readAsDouble(r, *fx)) && std::isfinite(hpds::readAsDouble(r, *fy)) &&
-              std::isfinite(hpds::readAsDouble(r, *fz));
-    }
+  for (std::size_t i = 0, n = cloud.size(); i < n && dense; ++i) {
+    const std::uint8_t *r = cloud.record(i);
+    for (const hpds::PointField &f : floats) dense = dense && std::isfinite(hpds::readAsDouble(r, f));
   }
   out.is_dense = dense;
 }

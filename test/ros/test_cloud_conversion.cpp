@@ -103,7 +103,13 @@ TEST(CloudConversion, EveryDatatypeKeepsItsBytes) {
     EXPECT_EQ(back.width, msg.width);
     EXPECT_EQ(back.height, msg.height);
     EXPECT_FALSE(back.is_bigendian);
-    EXPECT_TRUE(back.is_dense);
+    // Dense in PCL's meaning: every floating-point field of every point finite (f7 and f8 hold arbitrary bytes).
+    bool finite = true;
+    for (std::size_t i = 0; i < buf.size(); ++i)
+      for (const hpds::PointField &f : buf.layout().fields)
+        if (f.type == hpds::FieldType::Float32 || f.type == hpds::FieldType::Float64)
+          finite = finite && std::isfinite(hpds::readAsDouble(buf.record(i), f));
+    EXPECT_EQ(back.is_dense, finite);
     EXPECT_EQ(back.data, msg.data);
   }
 }
@@ -138,6 +144,32 @@ TEST(CloudConversion, ValuesOfEveryTypeReadBack) {
     } else {
       EXPECT_EQ(got, expected) << "datatype " << int(t);
     }
+  }
+}
+
+TEST(CloudConversion, ANanInAnyFloatFieldMakesTheCloudNotDense) {
+  // x y z finite everywhere; one point's normal_x NaN (an invalid normal, as hpds outputs it) or the second element
+  // of a float array Inf: not dense, as PCL means it. All finite: dense.
+  hpds::PointLayout l;
+  for (const char *a : {"x", "y", "z", "normal_x"}) l.append(a, hpds::FieldType::Float32);
+  l.append("pair", hpds::FieldType::Float64, 2);
+  l.append("ring", hpds::FieldType::UInt16);
+  for (int bad = -1; bad < 2; ++bad) {
+    hpds::PointBuffer buf(l, 20);
+    for (std::size_t i = 0; i < buf.size(); ++i)
+      for (std::size_t f = 0; f < 4; ++f) hpds::writeFromDouble(buf.record(i), l.fields[f], 0.5 * double(i) + double(f));
+    for (std::size_t i = 0; i < buf.size(); ++i) {
+      const double pair[2] = {1.0, 2.0};
+      std::memcpy(buf.record(i) + l.find("pair")->offset, pair, sizeof pair);
+    }
+    if (bad == 0) hpds::writeFromDouble(buf.record(7), *l.find("normal_x"), std::numeric_limits<double>::quiet_NaN());
+    if (bad == 1) {
+      const double inf = std::numeric_limits<double>::infinity();
+      std::memcpy(buf.record(13) + l.find("pair")->offset + 8, &inf, sizeof inf);
+    }
+    PointCloud2 back;
+    hpds_node::toRosCloud(buf, std_msgs::Header(), back);
+    EXPECT_EQ(back.is_dense, bad < 0) << "case " << bad;
   }
 }
 

@@ -31,6 +31,14 @@ std::vector<std::string> fieldsNotCarried(const PointLayout &input, bool with_no
   return names;
 }
 
+std::string fieldNotCarriedReason(const std::string &name) {
+  if (name == "level") return "'level' is reserved for the level of hpds's samples";
+  if (name == "frame")
+    return "'frame' is reserved for hpds's frame index (hpds verify and the quality tools read it as that), even "
+           "where the output has none";
+  return "hpds writes its own '" + name + "'";
+}
+
 XyzType outputXyzType(const OutputConfig &output) {
   if (output.float64_xyz) return XyzType::Float64;
   return output.float32_xyz ? XyzType::Float32 : XyzType::AsInput;

@@ -312,8 +312,8 @@ void HpdsServer::warnFieldNotCarriedOnce(const std::string &name) {
     std::lock_guard<std::mutex> lock(input_mutex_);
     if (!fields_not_carried_.insert(name).second) return;
   }
-  ROS_WARN_STREAM_NAMED("hpds", "hpds: input field '" << name << "' is not in the outputs: hpds writes its own '"
-                                                      << name << "'; rename the field in the input to keep it");
+  ROS_WARN_STREAM_NAMED("hpds", "hpds: input field '" << name << "' is not in the outputs: " << hpds::fieldNotCarriedReason(name)
+                                                      << "; rename the field in the input to keep it");
 }
 
 OutputRequest HpdsServer::subscribedOutputs() const {

@@ -25,6 +25,10 @@ namespace hpds {
 /// included when the output has none. Rename such a field to keep it.
 [[nodiscard]] std::vector<std::string> fieldsNotCarried(const PointLayout &input, bool with_normals,
                                                         bool with_covariances);
+/// Why an output does not carry the input field `name` (one fieldsNotCarried returned), for the warning: "hpds writes
+/// its own 'curvature'", or for level and frame, which are reserved even where the output has no such field, that
+/// they are.
+[[nodiscard]] std::string fieldNotCarriedReason(const std::string &name);
 
 /// The type of the output's x y z: AsInput is float64 when the input's x, y and z are all float64, else float32; the
 /// others force one (a float32 keeps about 7 digits: 0.5 m at 5e6 m, so georeferenced coordinates need float64;
