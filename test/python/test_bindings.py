@@ -139,6 +139,42 @@ class Arguments(support.ScratchCase):
         np.testing.assert_array_equal(a["index"], b["index"])
         np.testing.assert_array_equal(a["level"], b["level"])
 
+    def test_georeferenced_float64_keeps_the_guarantees(self):
+        # A UTM-like cloud (easting 5e5, northing 4e6): float32 rounds it by up to 0.25 m, more than the 0.1 m
+        # radius. The points go to a local origin first: every two samples are at least r apart and every point is
+        # within 2 r of one, on the float64 positions; with an offset of whole level-0 cells the samples are those
+        # of the cloud at the origin; normals are those of the cloud at the origin too.
+        rng = np.random.default_rng(12)
+        n = 6000
+        local = np.stack([rng.uniform(-6, 6, n), rng.uniform(-6, 6, n), 0.01 * rng.standard_normal(n) - 1.5], axis=1)
+        config = {"output": {"spacing": 0.1}}
+        cell = hpds.load_config(config)["hierarchy"]["cell_size"]
+        if cell == 0:  # derived from the spacing: 2 S / sqrt(3) * 2^5 for S = 0.1 (config/hpds.yaml)
+            cell = 2 * 0.1 / np.sqrt(3) * 32
+        offset = np.round(np.array([5.0e5, 4.0e6, 30.0]) / cell) * cell
+        geo = local + offset
+        s = hpds.downsample(geo, config)
+        pts = geo[s["index"]]
+        d2 = ((pts[:, None, :] - pts[None, :, :]) ** 2).sum(axis=2)
+        np.fill_diagonal(d2, np.inf)
+        self.assertGreaterEqual(np.sqrt(d2.min()), 0.1 * (1 - 1e-6))
+        cover = ((geo[:, None, :] - pts[None, :, :]) ** 2).sum(axis=2).min(axis=1)
+        self.assertLessEqual(np.sqrt(cover.max()), 0.2 * (1 + 1e-6))
+        at_origin = hpds.downsample(local, config, viewpoint=(0.0, 0.0, 0.0))
+        shifted_view = hpds.downsample(geo, config, viewpoint=tuple(offset))
+        np.testing.assert_array_equal(shifted_view["index"], at_origin["index"])
+        valid = np.isfinite(at_origin["normal"][:, 0])
+        self.assertGreater(valid.mean(), 0.95)
+        np.testing.assert_allclose(shifted_view["normal"][valid], at_origin["normal"][valid], atol=1e-4)
+        # With range limits the points cannot move (ranges are measured from the origin): a warning says so.
+        with self.assertWarnsRegex(UserWarning, "min_range/max_range"):
+            hpds.downsample(geo, {"output": {"spacing": 0.1}, "input": {"max_range": 1.0e7}})
+        # float32 input, or float64 near the origin, is taken as before: no warning, no move.
+        import warnings
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            hpds.downsample(local, {"output": {"spacing": 0.1}, "input": {"max_range": 1.0e7}})
+
     def test_skipped_points_never_appear(self):
         pts = self.points.copy()
         pts[::5] = np.nan
