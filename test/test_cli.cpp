@@ -8,6 +8,9 @@
 #include <map>
 #include <random>
 #include <set>
+#include <string>
+#include <utility>
+#include <vector>
 
 #include "TestData.hpp"
 #include "hpds/io/KittiBin.hpp"
@@ -409,6 +412,17 @@ TEST(Cli, NormalsAndNoNormalsTogetherAreRefused) {
     std::string log;
     EXPECT_EQ(runHpds(run + flags, &log), 2) << flags << "\n" << log;
     EXPECT_NE(log.find("--normals and --no-normals contradict each other"), std::string::npos) << flags << "\n" << log;
+  }
+  // So are the other contradictions, each said as "hpds: error: ..." like any error (CLI11's own messages were
+  // printed without it, and --covariances --no-normals exited 1).
+  for (const auto &[flags, message] : std::vector<std::pair<std::string, std::string>>{
+           {" --covariances --no-normals", "hpds: error: --covariances needs normals"},
+           {" --level 3 --spacing 0.1", "hpds: error: --level excludes --spacing"},
+           {" --float64-xyz --float32-xyz", "hpds: error: --float64-xyz and --float32-xyz contradict each other"},
+           {" --normals --no-normals", "hpds: error: --normals and --no-normals contradict each other"}}) {
+    std::string log;
+    EXPECT_EQ(runHpds(run + flags, &log), 2) << flags << "\n" << log;
+    EXPECT_NE(log.find(message), std::string::npos) << flags << "\n" << log;
   }
   EXPECT_FALSE(std::filesystem::exists(tmp / "out.ply"));
   std::string log;

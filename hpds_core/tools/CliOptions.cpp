@@ -123,7 +123,7 @@ HpdsConfig resolveConfig(const SamplingOptions &o) {
   }
   if (normals) c.normals.enabled = *normals;
   if (o.covariances && normals && !*normals)
-    throw std::invalid_argument("--covariances needs normals: it cannot go with --no-normals");
+    throw CLI::ValidationError("--covariances needs normals: it cannot go with --no-normals");
   // Flags override the config: --no-normals asks for no normals, and a covariance is built from one, so the config's
   // covariances go too rather than the run failing on a key the user did not touch on this command line.
   if (normals && !*normals && c.normals.covariances && !o.covariances) {

@@ -11,6 +11,10 @@
 int main(int argc, char **argv) {
   CLI::App app{"hpds: hierarchical additive Poisson-disk sampling of lidar point clouds"};
   app.require_subcommand(1);
+  // A bad command line is said like every other error (README: "hpds: error: ..."), with exit code 2.
+  app.failure_message([](const CLI::App *, const CLI::Error &e) {
+    return std::string("hpds: error: ") + e.what() + "\nRun with --help for more information.\n";
+  });
   hpds::cli::addSampleCommand(app);
   hpds::cli::addVerifyCommand(app);
 #ifdef HPDS_WITH_ROS
