@@ -380,6 +380,20 @@ TEST(BadInput, PlyProblems) {
   check("ascii_int_as_float.ply", ascii_head + "1 2 3 4\n1 2 3 4.0\n", {"'4.0'", "ring"});
   check("ascii_out_of_range.ply", ascii_head + "1 2 3 256\n1 2 3 4\n", {"'256'"});
   check("ascii_cut.ply", ascii_head + "1 2 3 4\n1 2", {"truncated"});
+  // One value too many on one line and one too few on the next (the same total): named by vertex and line, where
+  // only PCL's "error -1" came before.
+  check("ascii_shifted.ply", ascii_head + "1 2 3 4 5\n1 2 3\n",
+        {"ascii vertex 0", "more values than the header's 4 properties", "'5' is one too many", "'1 2 3 4 5'"});
+  check("ascii_short_line.ply", ascii_head + "1 2 3 4\n1 2 3\n",
+        {"ascii vertex 1", "its line holds only 3 values for the header's 4 properties", "'1 2 3'"});
+  check("ascii_values_over_lines.ply", ascii_head + "1 2\n3 4\n1 2 3 4\n", {"ascii vertex 0", "only 2 values"});
+  // A blank line is an element without values (PCL refuses it too); CRLF line ends are fine.
+  check("ascii_blank_line.ply", ascii_head + "1 2 3 4\n\n1 2 3 4\n", {"ascii vertex 1", "only 0 values"});
+  writeBytes(dir / "crlf.ply", ascii_head + "1 2 3 4\r\n5 6 7 8\r\n");
+  const PointBuffer crlf = readPointCloud((dir / "crlf.ply").string());
+  ASSERT_EQ(crlf.size(), 2u);
+  EXPECT_EQ(readAsDouble(crlf.record(1), *crlf.layout().find("x")), 5.0);
+  EXPECT_EQ(readAsDouble(crlf.record(1), *crlf.layout().find("ring")), 8.0);
 
   // Complete colour sets are fine: PCL packs them into "rgb".
   writeBytes(dir / "rgb.ply", "ply\nformat ascii 1.0\nelement vertex 1\n" + xyz_props +

@@ -6,6 +6,7 @@
 #include <cstdlib>
 #include <cstring>
 #include <fstream>
+#include <sstream>
 #include <limits>
 #include <locale.h>
 #include <type_traits>
@@ -322,34 +323,59 @@ void checkPlyAscii(const std::string &path, const FileBytes &file, const PlyHead
   std::uint64_t min_values = 0;
   for (const auto &e : h.elements) min_values += e.count * e.properties.size();
   if (min_values > data_bytes / 2 + 1)
-    fail(path, "truncated: header declares " + std::to_string(min_values) + " values but ascii data holds only " +
-                   std::to_string(data_bytes) + " bytes");
+    fail(path, "truncated: the header declares " + std::to_string(min_values) + " values, at least " +
+                   std::to_string(2 * min_values - 1) + " bytes of ascii data, but the file holds only " +
+                   std::to_string(data_bytes) + " bytes after its header");
 
   std::ifstream in(path, std::ios::binary);
   if (!in) fail(path, std::string("cannot open: ") + std::strerror(errno));
   in.seekg(static_cast<std::streamoff>(h.data_offset));
-  std::string token;
-  auto nextToken = [&](const PlyElement &e, std::uint64_t index) {
-    if (!(in >> token))
+  // One element per line, as the format has it and PCL reads it: a line with a value too many or too few is named
+  // here (PCL only said "error -1"), a last line cut short is a truncated file.
+  std::string line, token;
+  std::istringstream values;
+  auto nextLine = [&](const PlyElement &e, std::uint64_t index) {
+    if (!std::getline(in, line))
       fail(path,
            "truncated: ascii data ends in " + e.name + " " + std::to_string(index) + " of " + std::to_string(e.count));
+    values.clear();
+    values.str(line);
+  };
+  auto declared = [](const PlyElement &e) {
+    std::string d = std::to_string(e.properties.size()) + " propert" + (e.properties.size() == 1 ? "y" : "ies");
+    for (const auto &p : e.properties)
+      if (p.is_list) return d + " (with lists)";
+    return d;
+  };
+  auto nextToken = [&](const PlyElement &e, std::uint64_t index, std::size_t taken) {
+    if (values >> token) return;
+    if (in.eof())
+      fail(path,
+           "truncated: ascii data ends in " + e.name + " " + std::to_string(index) + " of " + std::to_string(e.count));
+    fail(path, "ascii " + e.name + " " + std::to_string(index) + ": its line holds only " + std::to_string(taken) +
+                   " value" + (taken == 1 ? "" : "s") + " for the header's " + declared(e) + ": " + quote(line));
   };
   // Only elements up to the vertex matter: PCL's result comes from the vertices, and what follows them is merely
   // parsed (their counts were bounded above).
   for (const auto &e : h.elements) {
     const bool is_vertex = e.name == "vertex";
     for (std::uint64_t i = 0; i < e.count; ++i) {
+      nextLine(e, i);
+      std::size_t taken = 0;
       for (const auto &p : e.properties) {
-        nextToken(e, i);
+        nextToken(e, i, taken++);
         if (p.is_list) {
           const auto n = parseInteger<std::uint32_t>(token);
           if (!n) fail(path, "ascii " + e.name + " " + std::to_string(i) + ": list size " + quote(token) + " invalid");
-          for (std::uint32_t k = 0; k < *n; ++k) nextToken(e, i);
+          for (std::uint32_t k = 0; k < *n; ++k) nextToken(e, i, taken++);
         } else if (is_vertex && !parsePlyAsciiValue(token, p.type, nullptr)) {
           fail(path, "ascii vertex " + std::to_string(i) + ": " + quote(token) + " is not a valid " +
                          fieldTypeName(p.type) + " value for property '" + p.name + "'");
         }
       }
+      if (values >> token)
+        fail(path, "ascii " + e.name + " " + std::to_string(i) + ": its line holds more values than the header's " +
+                       declared(e) + " (" + quote(token) + " is one too many): " + quote(line));
     }
     if (is_vertex) break;
   }
