@@ -66,6 +66,8 @@ def tile_ply_name(key):
 
 def check_paths(inputs, outdir):
     """Refuses a build that would overwrite an input or an earlier build's output (hpds never destroys data)."""
+    if os.path.exists(outdir) and not os.path.isdir(outdir):
+        raise BuildError("output folder '%s' is a file: choose a folder (it is made when missing)" % outdir)
     out = os.path.realpath(outdir)
     work = os.path.join(out, WORK_DIR)
     for p in inputs:
@@ -177,6 +179,7 @@ def build(inputs, poses_path, outdir, tile_size, config_yaml, runner, chunk_fram
                          % (poses_path, len(poses), len(inputs)))
     read = inputs + [os.fspath(poses_path)] + [os.fspath(p) for p in other_inputs]
     check_paths(read, outdir)  # before the folder is made, so that a refused build leaves nothing behind
+    made = not os.path.exists(outdir)
     os.makedirs(outdir, exist_ok=True)
     outdir = os.path.abspath(outdir)
     lock = _lock(outdir)
@@ -190,6 +193,13 @@ def build(inputs, poses_path, outdir, tile_size, config_yaml, runner, chunk_fram
         except BaseException:
             # Failed, interrupted (Ctrl-C) or stopped (SIGTERM as SystemExit): the scratch goes, complete tiles stay.
             remove_scratch(outdir)
+            # A folder this build made and left with nothing but its lock goes too.
+            if made and os.listdir(outdir) == [LOCK]:
+                try:
+                    os.remove(os.path.join(outdir, LOCK))
+                    os.rmdir(outdir)
+                except OSError:
+                    pass
             raise
     finally:
         lock.close()

@@ -299,6 +299,23 @@ class MapBuild(unittest.TestCase):
         self.assertIn("other_fields.bin", str(e.exception))
         self.assertEqual(tile_files(self.out("mixed")), [])
         self.assertFalse(os.path.exists(os.path.join(self.out("mixed"), ".hpds_work")))
+        # The build made the folder and wrote no tile: the folder goes with its lock file. A folder that was there
+        # stays, with whatever it held.
+        self.assertFalse(os.path.exists(self.out("mixed")))
+        os.makedirs(self.out("kept"))
+        with self.assertRaises(BuildError):
+            build([self.frames[0], kitti], self.two_poses("poses_mixed.txt"), self.out("kept"), TILE,
+                  self.config_yaml, SerialRunner(), chunk_frames=1, log=lambda m: None)
+        self.assertTrue(os.path.isdir(self.out("kept")))
+        # An output path that is a file is said as such (it was a bare '[Errno 17] File exists').
+        with open(self.out("a_file"), "w") as f:
+            f.write("x")
+        with self.assertRaises(BuildError) as e:
+            build([self.frames[0], kitti], self.two_poses("poses_mixed.txt"), self.out("a_file"), TILE,
+                  self.config_yaml, SerialRunner(), chunk_frames=1, log=lambda m: None)
+        self.assertIn("is a file", str(e.exception))
+        with open(self.out("a_file")) as f:
+            self.assertEqual(f.read(), "x")
 
     def test_a_pcd_viewpoint_is_refused_not_dropped(self):
         # `hpds sample` turns normals toward a PCD's VIEWPOINT; bucket files keep only the pose, so a tiled build
