@@ -43,3 +43,18 @@ if(HPDS_BUILD_NODE)
   install(DIRECTORY launch config DESTINATION ${CATKIN_PACKAGE_SHARE_DESTINATION})
   install(FILES LICENSE DESTINATION ${CATKIN_PACKAGE_SHARE_DESTINATION})
 endif()
+
+if(HPDS_BUILD_NODE)
+  # catkin_package() writes lib/pkgconfig/hpds.pc with the prefix of configure time, so `cmake --install --prefix
+  # P` left `prefix=/usr/local` in it, and its Cflags carry a stray backslash (`-I\${prefix}/include`), which
+  # pkg-config passes on literally. Rewritten once installed, with the prefix of this install.
+  install(CODE [[
+    set(_hpds_pc "$ENV{DESTDIR}${CMAKE_INSTALL_PREFIX}/lib/pkgconfig/hpds.pc")
+    if(EXISTS "${_hpds_pc}")
+      file(READ "${_hpds_pc}" _hpds_text)
+      string(REGEX REPLACE "^prefix=[^\n]*" "prefix=${CMAKE_INSTALL_PREFIX}" _hpds_text "${_hpds_text}")
+      string(REPLACE "\\\${prefix}" "\${prefix}" _hpds_text "${_hpds_text}")
+      file(WRITE "${_hpds_pc}" "${_hpds_text}")
+    endif()
+  ]])
+endif()

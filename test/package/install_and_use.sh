@@ -57,6 +57,15 @@ if [ "$node" = ON ]; then
   ) || exit 1
 fi
 
+# pkg-config users of the ROS package's hpds.pc (written by catkin_package) get this prefix, not the configure-time
+# one, and flags without a stray backslash.
+if [ "$node" = ON ] && command -v pkg-config > /dev/null; then
+  pc_flags=$(PKG_CONFIG_PATH=$prefix/lib/pkgconfig pkg-config --cflags --libs hpds) || fail "pkg-config hpds fails"
+  case " $pc_flags " in *" -I$prefix/include "*) ;; *) fail "pkg-config hpds gives $pc_flags";; esac
+  case " $pc_flags " in *" -L$prefix/lib "*) ;; *) fail "pkg-config hpds gives $pc_flags";; esac
+  case "$pc_flags" in *'\'*) fail "pkg-config hpds gives a backslash: $pc_flags";; esac
+fi
+
 # A separate project against the prefix.
 example_flags=()
 if [ "$sanitized" = ON ]; then
