@@ -9,6 +9,7 @@
 
 #include "Bindings.hpp"
 #include "hpds/hpds.hpp"
+#include "hpds/pipeline/OutputCloud.hpp"
 
 namespace py = pybind11;
 
@@ -63,7 +64,7 @@ ApiPoints pointsFrom(const py::handle &object, const HpdsConfig &config) {
     }
     const OutputResolution res = resolveOutput(config);
     const double rounding = std::ldexp(largest, -24);
-    if (rounding > 0.01 * res.radius) {
+    if (roundingMatters(rounding, res.radius)) {
       if (config.input.min_range > 0.0 || config.input.max_range > 0.0) {
         const std::string text = "hpds.downsample: float32 rounds these float64 points by up to " +
                                  std::to_string(rounding) + " m, more than 1 % of the output radius " +

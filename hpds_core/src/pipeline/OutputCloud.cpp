@@ -157,10 +157,12 @@ double positionRounding(const PointBuffer &cloud) {
   return std::ldexp(largest, -24);
 }
 
+bool roundingMatters(double rounding, double output_radius) { return rounding > 0.01 * output_radius; }
+
 std::string positionRoundingWarning(double rounding, double output_radius, const std::string &key,
                                     double input_rounding) {
   std::ostringstream out;
-  if (input_rounding > 0.01 * output_radius) {
+  if (roundingMatters(input_rounding, output_radius)) {
     // The samples are the input's positions as written, so the sampling itself holds; what is lost is the digits
     // the input never had, which advising float64 output would send the user after in vain.
     out << "the input's own float32 x y z round positions by up to " << input_rounding << " m (coordinates up to "
@@ -170,7 +172,7 @@ std::string positionRoundingWarning(double rounding, double output_radius, const
            "has the digits";
     return out.str();
   }
-  if (!(rounding > 0.01 * output_radius)) return {};
+  if (!roundingMatters(rounding, output_radius)) return {};
   out << "the output's float32 x y z round positions by up to " << rounding << " m (coordinates up to "
       << std::ldexp(rounding, 24) << " m), more than 1 % of the output radius " << output_radius
       << " m: samples may come out closer than it; set " << key << " (or work in a local frame)";

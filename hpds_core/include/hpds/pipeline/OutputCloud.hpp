@@ -54,6 +54,11 @@ enum class XyzType { AsInput, Float32, Float64 };
 /// compare it with the output radius and say when it is not small against it.
 [[nodiscard]] double positionRounding(const PointBuffer &cloud);
 
+/// Whether float32 positions that round by up to `rounding` metres (positionRounding) can break the sampling at
+/// output radius `output_radius`: more than 1 % of it. The one threshold of every rounding warning, and of the
+/// Python binding's move to a local origin.
+[[nodiscard]] bool roundingMatters(double rounding, double output_radius);
+
 /// The sentence the CLI, the node and the tiled build print when float32 x y z round positions (`rounding`,
 /// positionRounding) by more than 1 % of the output radius: samples may then come out closer than it. Empty below
 /// that. `key` is what the reader sets there to get float64 x y z ("output.float64_xyz: true", a flag, a
