@@ -116,6 +116,22 @@ void expectIdentical(const Hierarchy &a, const Hierarchy &b) {
   EXPECT_EQ(a.freeSlots(), b.freeSlots());
 }
 
+/// A hierarchy (4 m cells, depth 3) whose records carry `count` elements of `type` after x y z, holding `n` level-0
+/// samples of frame 1 in a row along x, 4 m apart: the maps whose free slots cost far more memory than their file.
+Hierarchy rowWithLargeRecords(FieldType type, std::uint32_t count, int n) {
+  Hierarchy h(4.0, 3);
+  PointLayout layout;
+  for (const char *name : {"x", "y", "z"}) layout.append(name, FieldType::Float32);
+  layout.append("blob", type, count);
+  h.setRecordLayout(layout);
+  const float view[3] = {0, 0, 1};
+  for (int i = 0; i < n; ++i) {
+    const double p[3] = {0.5 + 4.0 * i, 0.5, 0.5};
+    h.restoreSample(p, 0, 1, view, nullptr);
+  }
+  return h;
+}
+
 class MapFile : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
@@ -338,16 +354,7 @@ TEST_F(MapFile, LoadedMapWithFreeSlotsContinuesInTheSameOrder) {
 // body plus 64 MiB (here 1 100 free slots of 64 KiB records beside 2 samples) loads compacted instead.
 TEST(MapFileFreeSlots, FreeSlotsThatWouldTakeFarMoreMemoryThanTheFileLoadCompacted) {
   const auto dir = test::scratchDir("map_compacted");
-  Hierarchy h(4.0, 3);
-  PointLayout big;
-  for (const char *n : {"x", "y", "z"}) big.append(n, FieldType::Float32);
-  big.append("blob", FieldType::UInt8, 65536);
-  h.setRecordLayout(big);
-  const float v[3] = {0, 0, 1};
-  for (int i = 0; i < 1102; ++i) {
-    const double p[3] = {0.5 + 4.0 * i, 0.5, 0.5};
-    h.restoreSample(p, 0, 1, v, nullptr);
-  }
+  Hierarchy h = rowWithLargeRecords(FieldType::UInt8, 65536, 1102);
   const double origin[3] = {0.0, 0.0, 0.0};
   EXPECT_EQ(h.evictOutside(origin, 6.0), 1100u);
   saveHierarchy((dir / "holes.hpdsmap").string(), h, 3);
@@ -358,6 +365,7 @@ TEST(MapFileFreeSlots, FreeSlotsThatWouldTakeFarMoreMemoryThanTheFileLoadCompact
   EXPECT_EQ(loaded.hierarchy.idBound(), 2u);
   EXPECT_TRUE(loaded.hierarchy.freeSlots().empty());
   // Most of them reused: the ids are kept.
+  const float v[3] = {0, 0, 1};
   for (int i = 0; i < 1000; ++i) {
     const double p[3] = {0.5, 4.5 + 4.0 * i, 0.5};
     h.restoreSample(p, 0, 2, v, nullptr);
@@ -374,16 +382,7 @@ TEST(MapFileFreeSlots, FreeSlotsThatWouldTakeFarMoreMemoryThanTheFileLoadCompact
 // capped at 64 MiB of records.
 TEST(MapFileFreeSlots, FreeSlotsOfHugeRecordsReserveBoundedMemory) {
   const auto dir = test::scratchDir("map_huge_free");
-  Hierarchy h(4.0, 3);
-  PointLayout huge;
-  for (const char *n : {"x", "y", "z"}) huge.append(n, FieldType::Float32);
-  huge.append("blob", FieldType::UInt32, 1u << 20);  // 4 MiB
-  h.setRecordLayout(huge);
-  const float v[3] = {0, 0, 1};
-  for (int i = 0; i < 3; ++i) {
-    const double p[3] = {0.5 + 4.0 * i, 0.5, 0.5};
-    h.restoreSample(p, 0, 1, v, nullptr);
-  }
+  Hierarchy h = rowWithLargeRecords(FieldType::UInt32, 1u << 20, 3);  // 4 MiB records
   EXPECT_LE(h.memUsage(), std::size_t(256) << 20);
   const double far_away[3] = {1000.0, 0.0, 0.0};
   ASSERT_EQ(h.evictOutside(far_away, 1.0), 3u);

@@ -334,10 +334,12 @@ void checkPlyAscii(const std::string &path, const FileBytes &file, const PlyHead
   // here (PCL only said "error -1"), a last line cut short is a truncated file.
   std::string line, token;
   std::istringstream values;
+  auto truncated = [&](const PlyElement &e, std::uint64_t index) {
+    fail(path,
+         "truncated: ascii data ends in " + e.name + " " + std::to_string(index) + " of " + std::to_string(e.count));
+  };
   auto nextLine = [&](const PlyElement &e, std::uint64_t index) {
-    if (!std::getline(in, line))
-      fail(path,
-           "truncated: ascii data ends in " + e.name + " " + std::to_string(index) + " of " + std::to_string(e.count));
+    if (!std::getline(in, line)) truncated(e, index);
     values.clear();
     values.str(line);
   };
@@ -349,9 +351,7 @@ void checkPlyAscii(const std::string &path, const FileBytes &file, const PlyHead
   };
   auto nextToken = [&](const PlyElement &e, std::uint64_t index, std::size_t taken) {
     if (values >> token) return;
-    if (in.eof())
-      fail(path,
-           "truncated: ascii data ends in " + e.name + " " + std::to_string(index) + " of " + std::to_string(e.count));
+    if (in.eof()) truncated(e, index);
     fail(path, "ascii " + e.name + " " + std::to_string(index) + ": its line holds only " + std::to_string(taken) +
                    " value" + (taken == 1 ? "" : "s") + " for the header's " + declared(e) + ": " + quote(line));
   };

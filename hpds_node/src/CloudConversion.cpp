@@ -1,10 +1,10 @@
 #include "hpds_node/CloudConversion.hpp"
 
 #include <cmath>
-#include <vector>
 #include <cstdint>
 #include <cstring>
 #include <set>
+#include <vector>
 
 namespace hpds_node {
 

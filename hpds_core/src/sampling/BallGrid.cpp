@@ -144,11 +144,14 @@ bool BallGridPoints::wideCell(double v, int axis, std::int64_t &cell) const {
   return true;
 }
 
-namespace {
-std::size_t blockSlot(std::int64_t block) {
-  std::uint64_t h = static_cast<std::uint64_t>(block) * 0x9E3779B97F4A7C15ull;
-  return static_cast<std::size_t>(h ^ (h >> 29));
+std::size_t BallGridPoints::SqueezedAxis::slotOf(std::int64_t block) const {
+  const std::uint64_t h = static_cast<std::uint64_t>(block) * 0x9E3779B97F4A7C15ull;
+  std::size_t slot = static_cast<std::size_t>(h ^ (h >> 29)) & mask;
+  while (slot_index[slot] != 0 && slot_block[slot] != block) slot = (slot + 1) & mask;
+  return slot;
 }
+
+namespace {
 /// floor(cell / 2^shift) for negative cells too (an arithmetic shift is implementation-defined before C++20).
 std::int64_t blockOf(std::int64_t cell, int shift) {
   return cell >= 0 ? cell >> shift : -(((-cell) - 1) >> shift) - 1;
@@ -182,9 +185,7 @@ bool BallGridPoints::squeezeBlocks(int axis, const PointSet &points, int shift) 
     if (!(std::isfinite(p[0]) && std::isfinite(p[1]) && std::isfinite(p[2]) && wideCell(p[axis], axis, cell)))
       continue;
     const std::int64_t block = blockOf(cell, shift);
-    std::size_t slot = blockSlot(block) & sq.mask;
-    for (; sq.slot_index[slot] != 0 && sq.slot_block[slot] != block; slot = (slot + 1) & sq.mask) {
-    }
+    const std::size_t slot = sq.slotOf(block);
     if (sq.slot_index[slot] != 0) continue;
     if (sq.blocks.size() >= max_blocks) {
       sq = SqueezedAxis{};
@@ -199,8 +200,7 @@ bool BallGridPoints::squeezeBlocks(int axis, const PointSet &points, int shift) 
       sq.slot_block.assign(cap, 0);
       sq.slot_index.assign(cap, 0);
       for (std::size_t b = 0; b < sq.blocks.size(); ++b) {
-        std::size_t s2 = blockSlot(sq.blocks[b]) & sq.mask;
-        while (sq.slot_index[s2] != 0) s2 = (s2 + 1) & sq.mask;
+        const std::size_t s2 = sq.slotOf(sq.blocks[b]);
         sq.slot_block[s2] = sq.blocks[b];
         sq.slot_index[s2] = static_cast<std::uint32_t>(b + 1);
       }
@@ -243,9 +243,7 @@ bool BallGridPoints::squeezedKeyOf(const double *p, std::uint64_t &key) const {
     // A block with points has its own place; an empty one lies between two occupied ones (one empty block there),
     // or below or above all of them, with its cells in their order. A cell of it is then next to cells it is not
     // next to in space: that only costs distance tests, never a neighbour.
-    std::size_t slot = blockSlot(block) & sq.mask;
-    for (; sq.slot_index[slot] != 0 && sq.slot_block[slot] != block; slot = (slot + 1) & sq.mask) {
-    }
+    const std::size_t slot = sq.slotOf(block);
     std::uint64_t squeezed;
     if (sq.slot_index[slot] != 0) {
       squeezed = sq.squeezed[sq.slot_index[slot] - 1];

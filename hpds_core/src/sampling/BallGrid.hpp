@@ -117,6 +117,8 @@ class BallGridPoints {
     std::vector<std::uint32_t> slot_index;
     std::size_t mask = 0;
     [[nodiscard]] bool active() const { return !blocks.empty(); }
+    /// The table slot holding `block`, or the free slot where it would go.
+    [[nodiscard]] std::size_t slotOf(std::int64_t block) const;
   };
   bool squeezed_ = false;
   SqueezedAxis squeeze_[3];
