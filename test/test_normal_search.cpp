@@ -614,11 +614,11 @@ TEST(SolveNormal, PrincipalAxisAndMeanAgreeWithTheIterativeSolver) {
   // where l0 = l1 = 0 and the PCA is no plane), strips and planes, far from the origin.
   std::mt19937_64 rng(11);
   std::uniform_real_distribution<double> u(-1.0, 1.0);
-  std::normal_distribution<double> g(0.0, 1.0);
+  std::normal_distribution<double> gauss(0.0, 1.0);
   int compared = 0;
   for (double across : {0.0, 1e-3, 0.05, 0.5})
     for (int t = 0; t < 300; ++t) {
-      Eigen::Vector3d d(g(rng), g(rng), g(rng));
+      Eigen::Vector3d d(gauss(rng), gauss(rng), gauss(rng));
       d.normalize();
       const Eigen::Vector3d e1 = d.unitOrthogonal(), e2 = d.cross(e1);
       const Eigen::Vector3d origin(3000.0 * u(rng), 3000.0 * u(rng), 50.0 * u(rng));

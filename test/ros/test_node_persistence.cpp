@@ -434,6 +434,25 @@ TEST(NodeParameters, SeedsBeyondXmlRpcIntegersArriveExactly) {
   ros::param::del(ns);
 }
 
+TEST(NodeParameters, AStringForANumberIsCalledAStringParameter) {
+  // `_output/spacing:=abc` or `:="'0.2'"` arrive as string parameters; the loader's YAML wording ("the quoted
+  // string") meant nothing to a ROS user.
+  const std::string ns = "/hpds_string_param";
+  for (const std::string text : {"abc", "0.2"}) {
+    ros::param::set(ns + "/output/spacing", text);
+    try {
+      (void)hpds_node::loadNodeConfigFromParams(ros::NodeHandle(ns));
+      ADD_FAILURE() << "a string for output/spacing was taken: " << text;
+    } catch (const std::invalid_argument &e) {
+      const std::string what = e.what();
+      EXPECT_NE(what.find("parameter " + ns + "/output/spacing"), std::string::npos) << what;
+      EXPECT_NE(what.find("the string parameter '" + text + "'"), std::string::npos) << what;
+      EXPECT_EQ(what.find("quoted"), std::string::npos) << what;
+    }
+  }
+  ros::param::del(ns);
+}
+
 // ros/load_map_on_start + ros/save_map_on_shutdown: three lives of one node (HpdsServers created here, on the
 // private namespace `ns`), each continuing the previous one's map exactly.
 TEST(NodePersistenceRestart, ARestartLosesNothing) {

@@ -79,8 +79,12 @@ NodeConfig loadNodeConfigFromParams(const ros::NodeHandle &private_nh) {
     try {
       applyNodeConfigYaml(out.c_str(), config, "");
     } catch (const std::invalid_argument &e) {
-      // The loader names the dotted key ("hierarchy.max_depth: ..."); say which parameter that is.
-      const std::string what = e.what();
+      // The loader names the dotted key ("hierarchy.max_depth: ..."); say which parameter that is. Its "the quoted
+      // string" speaks of YAML text; here the value was a string parameter (`_output/spacing:=abc`).
+      std::string what = e.what();
+      const std::string yaml_words = "the quoted string '";
+      if (const std::size_t at = what.find(yaml_words); at != std::string::npos)
+        what.replace(at, yaml_words.size(), "the string parameter '");
       const std::size_t colon = what.find(": ");
       const std::string key = what.substr(0, colon);
       if (colon == std::string::npos || key.empty() || key.find_first_of(" ()'") != std::string::npos)
