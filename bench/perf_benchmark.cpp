@@ -35,6 +35,7 @@
 #include "hpds/eval/SyntheticLidar.hpp"
 #include "hpds/pcl/PclCloud.hpp"
 #include "hpds/pcl/PointCloudFile.hpp"
+#include "hpds/util/FrameMemory.hpp"
 
 namespace {
 
@@ -367,6 +368,9 @@ int main(int argc, char **argv) {
     execv("/proc/self/exe", argv);
     std::fprintf(stderr, "perf_benchmark: could not re-run with OMP_WAIT_POLICY=PASSIVE; the 2-thread rows may read slow\n");
   }
+  // As the node and the CLI run: a frame's freed memory kept for the next (hpds/util/FrameMemory.hpp). Process-wide,
+  // so the peers' rows run with it too.
+  hpds::keepFreedFrameMemory();
   Options o;
   const auto usage = [] {
     std::cerr << "usage: perf_benchmark [--data DIR] [--json FILE] [--repeats N>=1] [--level D, 0..21] "

@@ -4,11 +4,14 @@
 #include <iostream>
 
 #include "Commands.hpp"
+#include "hpds/util/FrameMemory.hpp"
 #ifdef HPDS_WITH_ROS
 #include "ReplayCommand.hpp"
 #endif
 
 int main(int argc, char **argv) {
+  // Streams of dense frames (`sample` with several inputs, `replay`) reuse each frame's freed memory.
+  hpds::keepFreedFrameMemory();
   CLI::App app{"hpds: hierarchical additive Poisson-disk sampling of lidar point clouds"};
   app.require_subcommand(1);
   // A bad command line is said like every other error (README: "hpds: error: ..."), with exit code 2.

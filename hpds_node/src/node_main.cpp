@@ -9,6 +9,7 @@
 #include <csignal>
 #include <stdexcept>
 
+#include "hpds/util/FrameMemory.hpp"
 #include "hpds_node/HpdsServer.hpp"
 
 namespace {
@@ -25,6 +26,9 @@ void onShutdownRequest(XmlRpc::XmlRpcValue &, XmlRpc::XmlRpcValue &result) {
 }  // namespace
 
 int main(int argc, char **argv) {
+  // Every frame's scratch is freed and allocated again: keep it in the process (a dense frame otherwise spent a
+  // tenth of its time in page faults). The nodelet lives in a manager's process, whose policy is not its to set.
+  hpds::keepFreedFrameMemory();
   ros::init(argc, argv, "hpds", ros::init_options::NoSigintHandler);
   std::signal(SIGINT, onSignal);
   std::signal(SIGTERM, onSignal);
