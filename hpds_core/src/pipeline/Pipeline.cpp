@@ -55,27 +55,38 @@ FrameCounters &FrameCounters::operator+=(const FrameCounters &o) {
 }
 
 namespace {
-/// "x y z intensity as float32 float32 float32 float32, 16 bytes": what tells two layouts apart in an error.
-std::string fieldNames(const PointLayout &l, bool with_offsets = false) {
+/// "x y z intensity as float32 float32 float32 float32, 16 bytes": what tells two layouts apart in an error (two
+/// layouts that read the same here hold the same fields, which the map takes in either layout).
+std::string fieldNames(const PointLayout &l) {
   std::string names, types;
   for (const PointField &f : l.fields) {
     names += (names.empty() ? "" : " ") + f.name;
     types += std::string(types.empty() ? "" : " ") + fieldTypeName(f.type) +
              (f.count > 1 ? "[" + std::to_string(f.count) + "]" : "");
   }
-  std::string offsets;
-  if (with_offsets)
-    for (const PointField &f : l.fields) offsets += (offsets.empty() ? " at offsets " : " ") + std::to_string(f.offset);
-  return (names.empty() ? "none" : names) + " as " + (types.empty() ? "-" : types) + offsets + ", " +
+  return (names.empty() ? "none" : names) + " as " + (types.empty() ? "-" : types) + ", " +
          std::to_string(l.point_step) + " bytes";
 }
 
-/// fieldNames of two layouts that differ, with the offsets when names and types alone read the same (padding).
-std::pair<std::string, std::string> fieldDifference(const PointLayout &a, const PointLayout &b) {
-  // Names and types without the record size: the size alone does not say where the padding is.
-  const auto withoutSize = [](const std::string &text) { return text.substr(0, text.rfind(", ")); };
-  const bool same_text = withoutSize(fieldNames(a)) == withoutSize(fieldNames(b));
-  return {fieldNames(a, same_text), fieldNames(b, same_text)};
+/// True when `a` and `b` hold the same fields (name, type, count), whatever their order, offsets and padding.
+bool sameFields(const PointLayout &a, const PointLayout &b) {
+  if (a.fields.size() != b.fields.size()) return false;
+  for (const PointField &f : a.fields) {
+    const PointField *g = b.find(f.name);
+    if (!g || g->type != f.type || g->count != f.count) return false;
+  }
+  return true;
+}
+
+/// The records of `pts` laid out as `to` (sameFields as pts' layout), field by field; padding bytes zero.
+PointBuffer repacked(const PointBuffer &pts, const PointLayout &to) {
+  PointBuffer out(to, pts.size());
+  for (const PointField &f : to.fields) {
+    const std::uint32_t from = pts.layout().find(f.name)->offset;
+    const std::size_t bytes = f.byteSize();
+    for (std::size_t i = 0; i < pts.size(); ++i) std::memcpy(out.record(i) + f.offset, pts.record(i) + from, bytes);
+  }
+  return out;
 }
 
 /// The deepest level read: the output levels and the levels a map keeps. No level is built for the normals: they
@@ -124,12 +135,24 @@ FrameResult Pipeline::addFrame(const Frame &frame) {
     throw std::invalid_argument("frame.sensor_to_fixed: " + why);
   if (!frame.viewpoint.allFinite()) throw std::invalid_argument("frame.viewpoint is not finite");
   const bool map_mode = config_.mode == Mode::Map;
-  // The map's layout is the first frame's, even when that frame gave no sample (empty, or NaN only), or the loaded
-  // map's.
-  if (map_mode && map_layout_fixed_ && layout != hierarchy_.recordLayout()) {
-    const auto [frame_fields, map_fields] = fieldDifference(layout, hierarchy_.recordLayout());
-    throw std::invalid_argument("frame's point fields (" + frame_fields + ") differ from the map's (" + map_fields +
-                                "; the first frame's or the loaded map's)");
+  // Map mode: the samples' records keep the fields of the first frame that had points, or the loaded map's.
+  // - A frame without points has no record to keep: it neither fixes the fields nor has to match them (drivers and
+  //   filters publish empty clouds of other fields, e.g. before the first scan).
+  // - The same fields in another order, at other offsets or with other padding are copied into the map's layout.
+  // - Other fields are refused while the map holds samples (or free slots); a map without any takes the frame's.
+  const PointBuffer *records = &pts;
+  PointBuffer records_in_map_layout;
+  bool keep_layout = !map_mode || !pts.empty();
+  if (map_mode && map_layout_fixed_ && keep_layout && layout != hierarchy_.recordLayout()) {
+    if (sameFields(layout, hierarchy_.recordLayout())) {
+      records_in_map_layout = repacked(pts, hierarchy_.recordLayout());
+      records = &records_in_map_layout;
+      keep_layout = false;
+    } else if (hierarchy_.idBound() > 0) {
+      throw std::invalid_argument("frame's point fields (" + fieldNames(layout) + ") differ from the map's (" +
+                                  fieldNames(hierarchy_.recordLayout()) +
+                                  "; those of the first frame with points or of the loaded map)");
+    }
   }
 
   hit_cache_valid_ = false;
@@ -137,8 +160,10 @@ FrameResult Pipeline::addFrame(const Frame &frame) {
 
   // 1. Scan mode starts every frame on an empty hierarchy.
   if (!map_mode) hierarchy_.clear();
-  hierarchy_.setRecordLayout(layout);
-  if (map_mode) map_layout_fixed_ = true;
+  if (keep_layout) {
+    hierarchy_.setRecordLayout(layout);
+    if (map_mode) map_layout_fixed_ = true;
+  }
   // Capacity kept from a frame far larger than any recent one (the peak decays by 10% per frame) is released
   // instead of being held for the life of the pipeline.
   recent_points_ = std::max(static_cast<double>(pts.size()), 0.9 * recent_points_);
@@ -285,8 +310,9 @@ FrameResult Pipeline::addFrame(const Frame &frame) {
   batch.size = n;
   batch.order = order.data();
   batch.order_size = order.size();
-  batch.records = pts.bytes().data();
-  batch.record_step = layout.point_step;
+  // A frame without points kept no layout (above): it has no record either.
+  batch.records = records->empty() ? nullptr : records->bytes().data();
+  batch.record_step = records->layout().point_step;
   for (int a = 0; a < 3; ++a) batch.viewpoint[a] = viewpoint[a];
   batch.frame_index = frames_;
   batch.max_level = buildDepth();
@@ -370,10 +396,10 @@ void Pipeline::replaceMap(Hierarchy &&map, std::uint32_t next_frame) {
   if (map.cellSize() != config_.hierarchy.cell_size || map.maxDepth() != config_.hierarchy.max_depth)
     throw std::invalid_argument("hierarchy: the map's cell_size/max_depth differ from the configuration's");
   // Frames already taken fixed the fields: a map of other fields would have every later frame refused.
-  if (map_layout_fixed_ && !map.recordLayout().fields.empty() && map.recordLayout() != hierarchy_.recordLayout()) {
-    const auto [map_fields, frame_fields] = fieldDifference(map.recordLayout(), hierarchy_.recordLayout());
-    throw std::invalid_argument("the map's point fields (" + map_fields + ") differ from those of the frames so far (" +
-                                frame_fields + "): later frames would all be refused");
+  if (map_layout_fixed_ && map.idBound() > 0 && !sameFields(map.recordLayout(), hierarchy_.recordLayout())) {
+    throw std::invalid_argument("the map's point fields (" + fieldNames(map.recordLayout()) +
+                                ") differ from those of the frames so far (" + fieldNames(hierarchy_.recordLayout()) +
+                                "): later frames would all be refused");
   }
   hierarchy_ = std::move(map);
   frames_ = next_frame;

@@ -26,10 +26,12 @@
 // - Points are transformed by frame.sensor_to_fixed (identity = sensor frame). NaN/Inf coordinates, exact (0,0,0)
 //   no-returns (input.skip_zero_points) and points outside input.min_range/max_range (measured from
 //   frame.viewpoint) are skipped and counted. Normals face, and eviction measures from, sensor_to_fixed * viewpoint.
-// - A frame without x/y/z fields, with a pose that is not rigid (rigidPoseProblem, io/PoseFile.hpp), a viewpoint
-//   that is not finite, or (map mode)
-//   whose field layout differs from the first frame's (or the loaded map's), throws std::invalid_argument before
-//   anything changes.
+// - A frame without x/y/z fields, with a pose that is not rigid (rigidPoseProblem, io/PoseFile.hpp), or a viewpoint
+//   that is not finite throws std::invalid_argument before anything changes.
+// - Map mode keeps every sample's record in one layout: the first frame's with points, or the loaded map's. A frame
+//   of the same fields (name, type, count) in another order or at other offsets is copied into it; a frame without
+//   points neither sets it nor has to match it; a frame of other fields throws std::invalid_argument before anything
+//   changes, unless the map has never held a sample (then its fields become the map's).
 // - Same config (seed) and same frames give identical samples, whatever `threads` is.
 // - normals() and makeCloud() take ids of live samples (outputSamples(), FrameResult::new_samples of the last frame, ...);
 //   any other id (evicted, from an earlier scan-mode frame, never issued) throws std::invalid_argument.
