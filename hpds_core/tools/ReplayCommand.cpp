@@ -6,6 +6,7 @@
 #include <tf2_msgs/TFMessage.h>
 
 #include <chrono>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <iostream>
@@ -78,6 +79,27 @@ void appendCloud(PointBuffer &all, const PointBuffer &part) {
   }
   all.bytes().insert(all.bytes().end(), part.bytes().begin(), part.bytes().end());
   all.setOrganization(static_cast<std::uint32_t>(all.size()), 1);
+}
+
+/// `part` (one frame's output, as the node publishes it) with the `frame` field `hpds sample` writes for several
+/// scan-mode frames, so that one PLY still tells its frames apart (`hpds verify`, --frame): the layout
+/// makeCloud(ids, true) gives, every other field copied by name.
+PointBuffer withFrameIndex(const PointBuffer &part, std::uint32_t frame, const hpds::NormalConfig &normals) {
+  const bool with_normals = normals.enabled, with_covariances = normals.enabled && normals.covariances;
+  PointBuffer out(hpds::outputLayout(part.layout(), with_normals, /*with_frame=*/true, with_covariances), part.size());
+  const PointLayout &l = out.layout();
+  const PointField *frame_field = l.find("frame");
+  for (const PointField &f : l.fields) {
+    if (&f == frame_field) continue;
+    const PointField *from = part.layout().find(f.name);
+    if (!from || from->type != f.type || from->count != f.count)
+      throw std::logic_error("replay: output field '" + f.name + "' has no counterpart in the frame's output");
+    for (std::size_t i = 0; i < part.size(); ++i)
+      std::memcpy(out.record(i) + f.offset, part.record(i) + from->offset, f.byteSize());
+  }
+  for (std::size_t i = 0; i < part.size(); ++i)
+    std::memcpy(out.record(i) + frame_field->offset, &frame, sizeof frame);
+  return out;
 }
 
 std::string messagesJson(const hpds_node::ProcessorStats &s, std::uint64_t wrong_type) {
@@ -201,7 +223,8 @@ int runReplay(const ReplayArgs &a) {
       PointBuffer part;
       if (hpds_node::fromRosCloud(frame.output, part) != hpds_node::CloudError::None)
         throw std::logic_error("replay: an output cloud does not convert back");
-      appendCloud(ply, part);
+      // The pipeline numbers its frames from 0; this one is the last it took.
+      appendCloud(ply, withFrameIndex(part, processor.pipeline().framesProcessed() - 1, config.hpds.normals));
     }
     report.seconds.write += since(t_write);
   }

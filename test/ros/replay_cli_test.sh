@@ -25,6 +25,13 @@ cmp "$work/map1.ply" "$work/map2.ply" || { echo "replay is not deterministic"; e
 # Scan mode looks no transform up: its summary names no target frame.
 grep -q "^messages: .* 6 processed" "$work/scan.log" || { cat "$work/scan.log"; exit 1; }
 grep -q "without transform" "$work/scan.log" && { echo "scan-mode summary names a transform"; cat "$work/scan.log"; exit 1; }
+# Its frames stay apart in the one PLY (the field `frame`, as `hpds sample` writes for several frames): each verifies
+# on its own at the config's cell (4 m); without the field the frames read as one sampling, full of violations.
+head -c 2000 "$work/scan.ply" | grep -aq "^property uint frame$" || { echo "scan-mode PLY without a frame field"; exit 1; }
+"$hpds" verify "$work/scan.ply" --cell-size 4 --max-depth 7 > "$work/verify.log" ||
+  { echo "scan-mode PLY does not verify frame by frame"; cat "$work/verify.log"; exit 1; }
+"$hpds" verify "$work/scan.ply" --cell-size 4 --max-depth 7 --frame 5 > /dev/null ||
+  { echo "the last frame of the scan-mode PLY cannot be checked alone"; exit 1; }
 cp "$work/cli.bag" "$work/prev.bag"
 for out in prev.bag scan.ply; do
   before=$(md5sum < "$work/$out")
