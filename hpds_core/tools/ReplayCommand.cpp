@@ -183,6 +183,7 @@ int runReplay(const ReplayArgs &a) {
   std::uint64_t wrong_type = 0;
   hpds_node::SequenceGaps gaps;
   std::set<std::string> not_carried;
+  double input_rounding = 0.0;  // the clouds' own float32 rounding, where the outputs' matters (ProcessedFrame)
   Progress progress(clouds.size());
   std::size_t index = 0;
   const auto t_run = std::chrono::steady_clock::now();
@@ -206,6 +207,7 @@ int runReplay(const ReplayArgs &a) {
     hpds_node::ProcessedFrame frame = processor.process(*msg, pose, hpds_node::OutputRequest::all());
     if (!frame.processed) continue;
     report.seconds.normals += frame.seconds_normals;
+    input_rounding = std::max(input_rounding, frame.input_rounding);
     not_carried.insert(frame.fields_not_carried.begin(), frame.fields_not_carried.end());
     if (scan)
       for (std::size_t d = 0; d < report.samples_per_level.size(); ++d)
@@ -277,7 +279,7 @@ int runReplay(const ReplayArgs &a) {
   std::cout << "messages: " << messageSummary(clouds.size(), a.topic, s, wrong_type, target) << "\n";
   std::cout << "wrote " << a.output << "\n";
   if (!to_bag) {
-    if (const std::string w = roundingWarning(ply, report.output_radius, config.hpds.output); !w.empty())
+    if (const std::string w = roundingWarning(ply, report.output_radius, config.hpds.output, input_rounding); !w.empty())
       std::cerr << w << "\n";
     // A bag holds what the node publishes; the PLY is meant as the final map, which eviction may have cut short.
     if (const std::string w = evictionWarning(config.hpds, report.totals.evicted, pipeline.hierarchy().sampleCount(),

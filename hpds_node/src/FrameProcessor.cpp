@@ -229,6 +229,11 @@ ProcessedFrame FrameProcessor::process(const sensor_msgs::PointCloud2 &msg, cons
     }
   }
 
+  // Only where the outputs' rounding would be warned about: a pass over the frame's points otherwise spent for
+  // nothing.
+  if (hpds::roundingMatters(r.position_rounding, pipeline_.outputResolution().radius))
+    r.input_rounding = hpds::positionRounding(frame.points);
+
   r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   ++stats_.processed;
   // Empty: none of its points could be inserted (zero-size, or every point NaN/Inf, a no-return, outside the range

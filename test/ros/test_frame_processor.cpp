@@ -18,6 +18,7 @@
 
 #include "RosTestUtil.hpp"
 #include "hpds/eval/SyntheticLidar.hpp"
+#include "hpds/pipeline/OutputCloud.hpp"
 #include "hpds_node/FrameProcessor.hpp"
 
 namespace {
@@ -210,6 +211,49 @@ TEST(FrameProcessor, Float64AndOrganizedNanInput) {
   EXPECT_EQ(tag->type, hpds::FieldType::UInt16);
   EXPECT_GT(r.output.width, 0u);
   EXPECT_TRUE(r.output.is_dense);
+}
+
+// float32 x y z far from the origin: in scan mode the samples are the input's own float32 positions, so the warning
+// must not send the user to float64 output, which cannot restore digits the input never had (it did). In map mode
+// the sensor-frame input is small and the poses move it far out: there float64 output is the cure.
+TEST(FrameProcessor, FarFloat32InputIsToldApartFromRoundingByTheOutput) {
+  hpds::PointLayout layout;
+  for (const char *axis : {"x", "y", "z"}) layout.append(axis, hpds::FieldType::Float32);
+  auto patch = [&](double offset) {
+    hpds::PointBuffer cloud(layout, 40 * 40);
+    for (std::size_t i = 0; i < cloud.size(); ++i) {
+      const float p[3] = {static_cast<float>(offset + double(i % 40) * 0.05),
+                          static_cast<float>(offset + double(i / 40) * 0.05), 1.0f};
+      std::memcpy(cloud.record(i), p, 12);
+    }
+    return cloud;
+  };
+  NodeConfig scan;
+  scan.hpds.normals.enabled = false;
+  FrameProcessor scan_processor(scan);
+  const auto far = scan_processor.process(toMsg(patch(5.0e6), 1.0), Eigen::Isometry3d::Identity(),
+                                          OutputRequest::all());
+  ASSERT_TRUE(far.processed);
+  const double radius = scan_processor.pipeline().outputResolution().radius;
+  ASSERT_TRUE(hpds::roundingMatters(far.position_rounding, radius));
+  EXPECT_TRUE(hpds::roundingMatters(far.input_rounding, radius));
+  const std::string w = hpds::positionRoundingWarning(far.position_rounding, radius, "float64", far.input_rounding);
+  EXPECT_NE(w.find("the input's own float32"), std::string::npos) << w;
+  EXPECT_EQ(w.find("set float64"), std::string::npos) << w;
+
+  NodeConfig map = persistedMapConfig();
+  map.hpds.normals.enabled = false;
+  FrameProcessor map_processor(map);
+  Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
+  pose.translation() = Eigen::Vector3d(5.0e6, 5.0e6, 0.0);
+  const auto moved = map_processor.process(toMsg(patch(0.0), 1.0), pose, OutputRequest::all());
+  ASSERT_TRUE(moved.processed);
+  const double map_radius = map_processor.pipeline().outputResolution().radius;
+  ASSERT_TRUE(hpds::roundingMatters(moved.position_rounding, map_radius));
+  EXPECT_FALSE(hpds::roundingMatters(moved.input_rounding, map_radius));
+  EXPECT_NE(hpds::positionRoundingWarning(moved.position_rounding, map_radius, "float64", moved.input_rounding)
+                .find("set float64"),
+            std::string::npos);
 }
 
 // Input fields named like hpds's own are not in the output; the processor says which, so the node can warn.

@@ -78,6 +78,9 @@ struct ProcessedFrame {
   double seconds_normals = 0.0;  ///< of `seconds`: the outputs' normals (and covariances), and those a map keeps
   /// [m] How far the outputs' float32 x y z may round positions (hpds::positionRounding; 0: float64).
   double position_rounding = 0.0;
+  /// [m] The input's own positionRounding (its float32 x y z as received), measured only when position_rounding
+  /// matters (hpds::roundingMatters), else 0: where it matters too, float64 output cannot restore the positions.
+  double input_rounding = 0.0;
 };
 
 /// Running totals for diagnostics and --stats.

@@ -394,7 +394,8 @@ void HpdsServer::handle(const sensor_msgs::PointCloud2::ConstPtr &msg, std::size
         const std::string rounding = hpds::positionRoundingWarning(
             frame.position_rounding, radius,
             config_.hpds.output.float32_xyz ? "the parameter output/float64_xyz true instead of output/float32_xyz true"
-                                            : "the parameter output/float64_xyz true");
+                                            : "the parameter output/float64_xyz true",
+            frame.input_rounding);
         if (!rounding.empty()) ROS_WARN_STREAM_ONCE_NAMED("hpds", "hpds: " << rounding);
         turns.waitToPublish();
         publish(frame);
