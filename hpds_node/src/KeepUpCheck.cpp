@@ -60,13 +60,20 @@ void KeepUpCheck::arrived(double wall_seconds) {
 
 std::string KeepUpCheck::processed(double seconds, double waited) {
   if (waited > 0.0) keep(waits_, waited);
-  if (!(seconds > 0.0)) return "";  // dropped after its wait: nothing processed
+  // A drop came before anything was measured: said with the first measurement (a wait, or a cost after the first).
+  auto pendingDrop = [this]() -> std::string {
+    if (!drop_pending_ || warned_ || (costs_.empty() && waits_.empty())) return "";
+    warned_ = true;
+    return warning(true);
+  };
+  if (!(seconds > 0.0)) return pendingDrop();  // dropped after its wait: nothing processed
   if (!first_skipped_) {
     first_skipped_ = true;
-    return "";
+    return pendingDrop();
   }
   keep(costs_, seconds);
   ++costs_seen_;
+  if (std::string w = pendingDrop(); !w.empty()) return w;
   if (judged_ || costs_seen_ < judge_after_ || gaps_.empty()) return "";
   judged_ = true;
   if (warned_ || !(median(costs_) > double(workers_) * median(gaps_))) return "";
@@ -76,6 +83,12 @@ std::string KeepUpCheck::processed(double seconds, double waited) {
 
 std::string KeepUpCheck::dropped() {
   if (warned_) return "";
+  // Nothing measured yet (the first frame still running, or waiting for its transform): a warning now could name
+  // neither the cost nor the wait, and it is said once. processed() says it with the first measurement.
+  if (costs_.empty() && waits_.empty()) {
+    drop_pending_ = true;
+    return "";
+  }
   warned_ = true;
   return warning(true);
 }
@@ -99,8 +112,11 @@ std::string KeepUpCheck::warning(bool on_drop) const {
     if (on_drop && keeps_up)
       text += ", which keeps up: frames came faster than that (a burst) or one took longer. A larger ros/queue_size "
               "absorbs bursts";
+  } else if (!gaps_.empty()) {
+    text += "frames arrive every " + format("%.0f ms (%.1f Hz)", 1e3 * median(gaps_), 1.0 / median(gaps_)) +
+            " and none has been processed yet (" + workers + ")";
   } else {
-    text += "no processing time measured yet (" + workers + ")";
+    text += "no frame has been processed yet (" + workers + ")";
   }
   // A worker waiting for a transform takes no next frame: when that is most of the period (a transform that never
   // comes costs ros/tf_timeout per frame), no sampling setting helps.
@@ -110,15 +126,19 @@ std::string KeepUpCheck::warning(bool on_drop) const {
       text += ". Frames also wait " + format("%.0f ms", 1e3 * wait) +
               " each for their transforms (up to ros/tf_timeout, now " + format("%.3g s", tf_timeout_) +
               "): check that tf has the sensor's frame in the fixed frame at the frames' stamps (frames without one "
-              "are counted as no_transform), or lower ros/tf_timeout";
+              "are counted as no_transform), or lower ros/tf_timeout; no sampling setting shortens that wait";
   }
   const hpds::OutputResolution out = hpds::resolveOutput(config_);
   text += ". Dropped frames are counted in /diagnostics. To keep up, lower the cost of a frame: a larger output.spacing (now " +
           format("%.3g m", out.radius) + ")";
   if (config_.normals.enabled)
     text += ", normals.neighborhood_level_offset 0 (now " + std::to_string(config_.normals.neighborhood_level_offset) +
-            (config_.mode == hpds::Mode::Map ? ": levels built below the output for the normals)"
-                                             : ": finer detail the normals average)") +
+            // Map mode builds those levels only where it keeps them (map.keep_depth); else, as scan mode, it
+            // averages the frame's points per finer cell.
+            (config_.mode == hpds::Mode::Map &&
+                     config_.map.keep_depth >= out.level + config_.normals.neighborhood_level_offset
+                 ? ": levels built below the output for the normals)"
+                 : ": finer detail the normals average)") +
             " or normals.enabled false";
   if (!(config_.input.max_range > 0.0)) text += ", an input.max_range (now 0: every point)";
   text += config_.mode == hpds::Mode::Scan

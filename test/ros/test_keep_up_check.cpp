@@ -136,12 +136,39 @@ TEST(KeepUpCheck, TheFirstOverloadDropIsReportedOnceWithWhatWasMeasured) {
   }
   EXPECT_TRUE(check.judged());
 
-  // A drop before anything was measured still says so, and what to set.
+  // A drop before anything was measured (20 Hz frames of 150 ms: the queue overflows while the first, slower one
+  // runs) is said with the first cost measured after it, once: said at once it could only read "no processing time
+  // measured yet", and never gave the numbers.
   KeepUpCheck early(hpds::HpdsConfig{}, 1, 8);
-  const std::string e = early.dropped();
+  early.arrived(0.0);
+  early.arrived(0.05);
+  early.arrived(0.10);
+  EXPECT_EQ(early.dropped(), "");
+  EXPECT_EQ(early.processed(2.0), "") << "the first frame pays for allocations: no measure of the cost";
+  early.arrived(0.15);
+  const std::string e = early.processed(0.15);
   EXPECT_TRUE(contains(e, "cannot keep up")) << e;
-  EXPECT_TRUE(contains(e, "no processing time measured yet")) << e;
+  EXPECT_TRUE(contains(e, "a frame was dropped")) << e;
+  EXPECT_TRUE(contains(e, "every 50 ms (20.0 Hz) and take 150 ms each")) << e;
   EXPECT_TRUE(contains(e, "output.spacing (now 0.1 m)")) << e;
+  EXPECT_EQ(early.dropped(), "") << "said twice";
+  early.arrived(0.20);
+  EXPECT_EQ(early.processed(0.15), "") << "said twice";
+
+  // The first frame waits for a transform that never comes while the queue overflows: said when that wait ends,
+  // naming it, not as sampling advice alone.
+  hpds::HpdsConfig map;
+  map.mode = hpds::Mode::Map;
+  KeepUpCheck no_tf(map, 1, 8, 0.5);
+  for (int i = 0; i < 4; ++i) no_tf.arrived(0.1 * i);
+  EXPECT_EQ(no_tf.dropped(), "");
+  const std::string t = no_tf.processed(0.0, 0.5);
+  EXPECT_TRUE(contains(t, "every 100 ms (10.0 Hz) and none has been processed yet")) << t;
+  EXPECT_TRUE(contains(t, "wait 500 ms each for their transforms")) << t;
+  EXPECT_TRUE(contains(t, "no sampling setting shortens that wait")) << t;
+  EXPECT_FALSE(contains(t, "no processing time measured")) << t;
+  // Map mode at the defaults builds no level for the normals: it averages the frame's points, as scan mode.
+  EXPECT_TRUE(contains(t, "(now 2: finer detail the normals average)")) << t;
 
   // After a failed verdict, drops add nothing.
   KeepUpCheck slow(hpds::HpdsConfig{}, 1, 8);

@@ -15,7 +15,8 @@
 //   out), the cost is the median processing time. When cost > workers * period the queue must drop frames:
 //   processed() returns the warning. The verdict is taken once.
 // - dropped() returns the warning at the first overload drop, whatever the verdict (a load spike, a frame larger
-//   than the first ones), with the current period and the costs measured so far.
+//   than the first ones), with the current period and the costs measured so far. A drop before anything is
+//   measured (no cost after the first frame's, no transform wait) is said by processed() with the first measurement.
 // - Each returns a non-empty text at most once over both: the warning names the measured period and cost, the share
 //   of frames lost and the settings that lower the cost, with their current values; when frames wait for their
 //   transforms for more than half the input period, it says that too (a missing or late transform, ros/tf_timeout).
@@ -56,7 +57,7 @@ class KeepUpCheck {
   std::size_t judge_after_;
   std::size_t rate_change_gaps_;
   double tf_timeout_;
-  bool judged_ = false, warned_ = false, first_skipped_ = false;
+  bool judged_ = false, warned_ = false, first_skipped_ = false, drop_pending_ = false;
   std::size_t costs_seen_ = 0;
   double last_arrival_ = -1.0;
   std::deque<double> gaps_, costs_, waits_;
