@@ -184,6 +184,7 @@ int runReplay(const ReplayArgs &a) {
   hpds_node::SequenceGaps gaps;
   std::set<std::string> not_carried;
   double input_rounding = 0.0;  // the clouds' own float32 rounding, where the outputs' matters (ProcessedFrame)
+  bool sensor_at_origin = false;  // a cloud in the fixed frame without ros.sensor_frame (sensorAtMapOrigin)
   Progress progress(clouds.size());
   std::size_t index = 0;
   const auto t_run = std::chrono::steady_clock::now();
@@ -199,12 +200,16 @@ int runReplay(const ReplayArgs &a) {
     if (lost > 0) processor.countDrop(hpds_node::DropReason::LostUpstream, lost);
     if (processor.check(*msg) != hpds_node::CloudError::None) continue;
     Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
-    if (!target.empty() &&
-        !hpds_node::lookupSensorPose(tf_buffer, target, msg->header.frame_id, msg->header.stamp, pose)) {
+    Eigen::Vector3d viewpoint = Eigen::Vector3d::Zero();
+    if ((!target.empty() &&
+         !hpds_node::lookupSensorPose(tf_buffer, target, msg->header.frame_id, msg->header.stamp, pose)) ||
+        !hpds_node::lookupViewpoint(tf_buffer, msg->header.frame_id, config.ros.sensor_frame, msg->header.stamp,
+                                    viewpoint)) {
       processor.countDrop(hpds_node::DropReason::NoTransform);
       continue;
     }
-    hpds_node::ProcessedFrame frame = processor.process(*msg, pose, hpds_node::OutputRequest::all());
+    sensor_at_origin |= hpds_node::sensorAtMapOrigin(config, msg->header.frame_id);
+    hpds_node::ProcessedFrame frame = processor.process(*msg, pose, hpds_node::OutputRequest::all(), viewpoint);
     if (!frame.processed) continue;
     report.seconds.normals += frame.seconds_normals;
     input_rounding = std::max(input_rounding, frame.input_rounding);
@@ -287,6 +292,11 @@ int runReplay(const ReplayArgs &a) {
         !w.empty())
       std::cerr << w << "\n";
   }
+  if (sensor_at_origin)
+    std::cerr << "hpds: warning: clouds arrive in the fixed frame '" << config.ros.fixed_frame
+              << "' itself and ros.sensor_frame is not set, so each frame's sensor was taken at that frame's origin: "
+                 "normals face it, and map.evict_distance and the input ranges measure from it; set "
+                 "ros.sensor_frame (--config) to the sensor's tf frame\n";
   for (const std::string &name : not_carried)
     std::cerr << "hpds: warning: input field '" << name << "' is not in the output: " << fieldNotCarriedReason(name)
               << "; rename the field to keep it\n";

@@ -147,8 +147,24 @@ std::string FrameProcessor::loadMap(const std::string &path) {
   return warning;
 }
 
+bool lookupViewpoint(const tf2::BufferCore &buffer, const std::string &cloud_frame, const std::string &sensor_frame,
+                     const ros::Time &stamp, Eigen::Vector3d &viewpoint, std::string *why) {
+  viewpoint = Eigen::Vector3d::Zero();
+  const std::string cloud = tfFrameId(cloud_frame);
+  if (sensor_frame.empty() || sensor_frame == cloud) return true;
+  Eigen::Isometry3d pose;
+  if (!lookupSensorPose(buffer, cloud, sensor_frame, stamp, pose, why)) return false;
+  viewpoint = pose.translation();
+  return true;
+}
+
+bool sensorAtMapOrigin(const NodeConfig &config, const std::string &cloud_frame) {
+  return config.hpds.mode == hpds::Mode::Map && config.ros.sensor_frame.empty() &&
+         tfFrameId(cloud_frame) == config.ros.fixed_frame;
+}
+
 ProcessedFrame FrameProcessor::process(const sensor_msgs::PointCloud2 &msg, const Eigen::Isometry3d &sensor_to_target,
-                                       const OutputRequest &wants) {
+                                       const OutputRequest &wants, const Eigen::Vector3d &viewpoint) {
   const auto t0 = std::chrono::steady_clock::now();
   ProcessedFrame r;
   const std::string target = targetFrame();
@@ -166,6 +182,7 @@ ProcessedFrame FrameProcessor::process(const sensor_msgs::PointCloud2 &msg, cons
       hpds::fieldsNotCarried(frame.points.layout(), normals.enabled, normals.enabled && normals.covariances);
   frame.stamp = msg.header.stamp.toSec();
   if (!target.empty()) frame.sensor_to_fixed = sensor_to_target;
+  frame.viewpoint = viewpoint;
 
   // 2. Insert. The pipeline refuses (before changing anything) a frame whose fields differ from the map's.
   hpds::FrameResult inserted;
@@ -217,7 +234,7 @@ ProcessedFrame FrameProcessor::process(const sensor_msgs::PointCloud2 &msg, cons
     const bool due = !local_map_sent_ || frame.stamp < last_local_map_stamp_ ||
                      frame.stamp - last_local_map_stamp_ >= 1.0 / config_.ros.local_map_rate - 1e-9;
     if (due && wants.local_map) {
-      const Eigen::Vector3d c = frame.sensor_to_fixed.translation();
+      const Eigen::Vector3d c = frame.sensor_to_fixed * frame.viewpoint;  // the sensor, in the map
       const double center[3] = {c.x(), c.y(), c.z()};
       toMsg(pipeline_.outputSamplesNear(center, config_.ros.local_map_radius), header, r.local_map,
             &r.position_rounding, &r.seconds_normals);

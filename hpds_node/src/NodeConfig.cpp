@@ -79,6 +79,8 @@ void applyRosSection(const YAML::Node &section, RosConfig &ros) {
       ros.fixed_frame = parseFrameId(v, key);
     } else if (leaf == "output_frame") {
       ros.output_frame = parseFrameId(v, key);
+    } else if (leaf == "sensor_frame") {
+      ros.sensor_frame = parseFrameId(v, key);
     } else if (leaf == "tf_timeout") {
       ros.tf_timeout = parseNumber(v, key);
     } else if (leaf == "local_map_radius") {
@@ -109,8 +111,8 @@ void applyRosSection(const YAML::Node &section, RosConfig &ros) {
       for (std::size_t i = 0; i < list.size(); ++i) ros.publish_levels.push_back(parseInt(list[i], key));
     } else {
       fail(key,
-           "unknown key (ros keys: fixed_frame, output_frame, tf_timeout, local_map_radius, local_map_rate, "
-           "publish_levels, queue_size, map_file, load_map_on_start, save_map_on_shutdown)");
+           "unknown key (ros keys: fixed_frame, output_frame, sensor_frame, tf_timeout, local_map_radius, "
+           "local_map_rate, publish_levels, queue_size, map_file, load_map_on_start, save_map_on_shutdown)");
     }
   }
 }
@@ -208,7 +210,8 @@ void applyNodeConfigYaml(const std::string &yaml_text, NodeConfig &config, const
     try {
       for (const auto &entry : root) {
         const std::string name = entry.first.IsScalar() ? entry.first.Scalar() : std::string();
-        static const char *const kRosLeaves[] = {"fixed_frame", "output_frame", "tf_timeout", "local_map_radius",
+        static const char *const kRosLeaves[] = {"fixed_frame", "output_frame", "sensor_frame", "tf_timeout",
+                                                 "local_map_radius",
                                                  "local_map_rate", "publish_levels", "queue_size", "map_file",
                                                  "load_map_on_start", "save_map_on_shutdown"};
         if (name == "ros") {
@@ -250,6 +253,7 @@ std::string dumpRosConfigYaml(const RosConfig &ros) {
   s << "ros:\n";
   s << "  fixed_frame: " << quoted(ros.fixed_frame) << "\n";
   s << "  output_frame: " << quoted(ros.output_frame) << "\n";
+  s << "  sensor_frame: " << quoted(ros.sensor_frame) << "\n";
   s << "  tf_timeout: " << formatDouble(ros.tf_timeout) << "\n";
   s << "  local_map_radius: " << formatDouble(ros.local_map_radius) << "\n";
   s << "  local_map_rate: " << formatDouble(ros.local_map_rate) << "\n";

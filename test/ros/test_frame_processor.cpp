@@ -448,6 +448,72 @@ TEST(FrameProcessor, LookupSensorPoseFromABufferCore) {
   EXPECT_FALSE(why.empty());
 }
 
+// ros/sensor_frame: the sensor's origin in the cloud's frame, from tf at the stamp; nothing to look up without it.
+TEST(FrameProcessor, TheViewpointIsTheSensorFramesOriginInTheCloudsFrame) {
+  tf2::BufferCore buffer;
+  geometry_msgs::TransformStamped t;
+  t.header.frame_id = "odom";
+  t.child_frame_id = "velodyne";
+  t.header.stamp = ros::Time(5, 0);
+  t.transform.translation.x = 1000.0;
+  t.transform.translation.z = 1.75;
+  t.transform.rotation.w = 1.0;
+  ASSERT_TRUE(buffer.setTransform(t, "test"));
+  Eigen::Vector3d v;
+  std::string why;
+  ASSERT_TRUE(hpds_node::lookupViewpoint(buffer, "/odom", "velodyne", ros::Time(5, 0), v, &why)) << why;
+  EXPECT_EQ(v, Eigen::Vector3d(1000.0, 0.0, 1.75));
+  ASSERT_TRUE(hpds_node::lookupViewpoint(buffer, "odom", "", ros::Time(5, 0), v));
+  EXPECT_EQ(v, Eigen::Vector3d::Zero()) << "no sensor frame: the cloud's own origin";
+  ASSERT_TRUE(hpds_node::lookupViewpoint(buffer, "/velodyne", "velodyne", ros::Time(5, 0), v));
+  EXPECT_EQ(v, Eigen::Vector3d::Zero()) << "the cloud is in the sensor's frame";
+  EXPECT_FALSE(hpds_node::lookupViewpoint(buffer, "odom", "nowhere", ros::Time(5, 0), v, &why));
+  EXPECT_FALSE(why.empty());
+
+  NodeConfig map = persistedMapConfig();
+  EXPECT_TRUE(hpds_node::sensorAtMapOrigin(map, "/odom"));
+  EXPECT_FALSE(hpds_node::sensorAtMapOrigin(map, "velodyne"));
+  map.ros.sensor_frame = "velodyne";
+  EXPECT_FALSE(hpds_node::sensorAtMapOrigin(map, "odom"));
+  EXPECT_FALSE(hpds_node::sensorAtMapOrigin(NodeConfig{}, "map")) << "scan mode keeps no map";
+}
+
+// Clouds registered into the fixed frame, 1 km out: with the sensor's position given, a frame 10 m on keeps the
+// last one's samples; taken at the origin, every frame evicted the last (map/evict_distance 100 m).
+TEST(FrameProcessor, CloudsInTheFixedFrameEvictAroundTheGivenViewpoint) {
+  auto patchAt = [](double x0) {
+    hpds::PointLayout layout;
+    for (const char *axis : {"x", "y", "z"}) layout.append(axis, hpds::FieldType::Float32);
+    hpds::PointBuffer cloud(layout, 30 * 30);
+    for (std::size_t i = 0; i < cloud.size(); ++i) {
+      const float p[3] = {static_cast<float>(x0 + double(i % 30) * 0.1), static_cast<float>(double(i / 30) * 0.1),
+                          -1.75f};
+      std::memcpy(cloud.record(i), p, 12);
+    }
+    return cloud;
+  };
+  NodeConfig config = persistedMapConfig();
+  config.hpds.map.evict_distance = 100.0;
+  for (const bool given : {true, false}) {
+    SCOPED_TRACE(given ? "viewpoint given" : "sensor at the origin");
+    FrameProcessor processor(config);
+    const auto at = [&](double x) { return given ? Eigen::Vector3d(x, 1.5, 0.0) : Eigen::Vector3d::Zero(); };
+    const auto a = processor.process(toMsg(patchAt(1000.0), 1.0, "odom"), Eigen::Isometry3d::Identity(),
+                                     OutputRequest::all(), at(1000.0));
+    ASSERT_TRUE(a.processed);
+    const std::size_t after_a = processor.pipeline().hierarchy().sampleCount();
+    const auto b = processor.process(toMsg(patchAt(1010.0), 1.1, "odom"), Eigen::Isometry3d::Identity(),
+                                     OutputRequest::all(), at(1010.0));
+    ASSERT_TRUE(b.processed);
+    if (given) {
+      EXPECT_EQ(b.counters.evicted, 0u);
+      EXPECT_GT(processor.pipeline().hierarchy().sampleCount(), after_a);
+    } else {
+      EXPECT_EQ(b.counters.evicted, after_a);
+    }
+  }
+}
+
 }  // namespace
 
 namespace {

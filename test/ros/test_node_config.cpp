@@ -39,6 +39,7 @@ normals:
 ros:
   fixed_frame: /odom
   output_frame: ""
+  sensor_frame: /velodyne
   tf_timeout: 0.25
   local_map_radius: 30
   local_map_rate: 2.5
@@ -54,6 +55,7 @@ config_file: ignored.yaml
   EXPECT_TRUE(c.hpds.normals.enabled);
   EXPECT_EQ(c.ros.fixed_frame, "odom") << "leading slash dropped for tf2";
   EXPECT_EQ(c.ros.tf_timeout, 0.25);
+  EXPECT_EQ(c.ros.sensor_frame, "velodyne") << "tf2 refuses the leading slash";
   EXPECT_EQ(c.ros.local_map_radius, 30.0);
   EXPECT_EQ(c.ros.local_map_rate, 2.5);
   EXPECT_EQ(c.ros.publish_levels, (std::vector<int>{1, 3}));
@@ -182,6 +184,7 @@ TEST(NodeConfig, RosDumpLoadsBack) {
   NodeConfig c;
   c.ros.fixed_frame = "odom";
   c.ros.output_frame = "base_link";
+  c.ros.sensor_frame = "velodyne";
   c.ros.tf_timeout = 0.3;
   c.ros.publish_levels = {0, 5};
   c.ros.queue_size = 4;
@@ -193,6 +196,7 @@ TEST(NodeConfig, RosDumpLoadsBack) {
   hpds_node::applyNodeConfigYaml(hpds::dumpConfigYaml(c.hpds) + hpds_node::dumpRosConfigYaml(c.ros), d, "dump");
   EXPECT_EQ(d.ros.fixed_frame, c.ros.fixed_frame);
   EXPECT_EQ(d.ros.output_frame, c.ros.output_frame);
+  EXPECT_EQ(d.ros.sensor_frame, c.ros.sensor_frame);
   EXPECT_EQ(d.ros.tf_timeout, c.ros.tf_timeout);
   EXPECT_EQ(d.ros.publish_levels, c.ros.publish_levels);
   EXPECT_EQ(d.ros.queue_size, c.ros.queue_size);

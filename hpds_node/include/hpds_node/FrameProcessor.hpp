@@ -113,8 +113,9 @@ class FrameProcessor {
   [[nodiscard]] CloudError check(const sensor_msgs::PointCloud2 &msg, std::string *why = nullptr);
 
   /// See the contract. `msg` must have passed check(). sensor_to_target is ignored when targetFrame() is empty.
+  /// `viewpoint`: the sensor's origin in the message's frame (lookupViewpoint; ros/sensor_frame).
   ProcessedFrame process(const sensor_msgs::PointCloud2 &msg, const Eigen::Isometry3d &sensor_to_target,
-                         const OutputRequest &wants);
+                         const OutputRequest &wants, const Eigen::Vector3d &viewpoint = Eigen::Vector3d::Zero());
 
   /// Counts a frame dropped before or instead of process() (no transform, overload, nobody listening, an internal
   /// error, lost upstream).
@@ -165,5 +166,15 @@ class FrameProcessor {
 /// buffer already holds later transforms, which changes the last bits of tf2's result.
 bool lookupSensorPose(const tf2::BufferCore &buffer, const std::string &target, const std::string &source,
                       const ros::Time &stamp, Eigen::Isometry3d &pose, std::string *why = nullptr);
+
+/// The viewpoint of a cloud in `cloud_frame` taken by the sensor in `sensor_frame` (ros/sensor_frame): that frame's
+/// origin in the cloud's frame at `stamp` (lookupSensorPose's rounding), or (0,0,0) when `sensor_frame` is empty or
+/// the cloud's own. False with `why` set when the buffer cannot answer.
+bool lookupViewpoint(const tf2::BufferCore &buffer, const std::string &cloud_frame, const std::string &sensor_frame,
+                     const ros::Time &stamp, Eigen::Vector3d &viewpoint, std::string *why = nullptr);
+
+/// Whether a cloud in `cloud_frame` has no known sensor position in map mode: it arrives in the fixed frame itself and
+/// no ros/sensor_frame says where the sensor was, so the viewpoint is the map's origin.
+[[nodiscard]] bool sensorAtMapOrigin(const NodeConfig &config, const std::string &cloud_frame);
 
 }  // namespace hpds_node

@@ -77,8 +77,10 @@ class HpdsServer {
   void onCloud(const ros::MessageEvent<const sensor_msgs::PointCloud2> &event);
   void handle(const sensor_msgs::PointCloud2::ConstPtr &msg, std::size_t worker, OrderedWorkerPool::Turns &turns);
   void onInternalError(std::size_t worker, const std::string &what);
+  /// The cloud's pose in `target` (when not empty) and its viewpoint (lookupViewpoint, ros/sensor_frame), waiting
+  /// up to ros/tf_timeout for both; false with `why` when one cannot be had.
   bool waitForPose(const std::string &target, const std_msgs::Header &header, Eigen::Isometry3d &pose,
-                   std::string *why);
+                   Eigen::Vector3d &viewpoint, std::string *why);
   [[nodiscard]] OutputRequest subscribedOutputs() const;
   void warnFieldNotCarriedOnce(const std::string &name);
   void publish(ProcessedFrame &frame);

@@ -22,6 +22,10 @@ namespace hpds_node {
 struct RosConfig {
   std::string fixed_frame = "map";  ///< map mode: frame of the persistent hierarchy and of every output
   std::string output_frame;         ///< scan mode: publish in this frame (tf at the stamp); empty = input frame
+  /// The sensor's frame when clouds arrive in another one (registered clouds in the fixed frame, clouds in
+  /// base_link): its origin at the stamp is the viewpoint (normals face it, input ranges and map eviction measure
+  /// from it). Empty = the cloud's own frame.
+  std::string sensor_frame;
   double tf_timeout = 0.1;          ///< [s] wall time to wait for a transform before dropping the frame, >= 0
   double local_map_radius = 50.0;   ///< [m] map mode: ~local_map holds output-level samples within this of the sensor
   double local_map_rate = 1.0;      ///< [Hz] map mode: ~local_map at most this often (frame stamps); 0 = never

@@ -56,7 +56,8 @@ HpdsServer::HpdsServer(ros::NodeHandle nh, ros::NodeHandle private_nh, const std
   // does not appear at all.
   if (config_.ros.load_map_on_start) loadMapOnStart();
   if (config_.ros.save_map_on_shutdown && map_mode) requireMapFolder();
-  if (!target_frame_.empty()) tf_listener_ = std::make_unique<tf2_ros::TransformListener>(tf_buffer_, nh_);
+  if (!target_frame_.empty() || !config_.ros.sensor_frame.empty())
+    tf_listener_ = std::make_unique<tf2_ros::TransformListener>(tf_buffer_, nh_);
 
   pub_output_ = pnh_.advertise<sensor_msgs::PointCloud2>("output", 4);
   if (map_mode) {
@@ -326,17 +327,26 @@ OutputRequest HpdsServer::subscribedOutputs() const {
 }
 
 bool HpdsServer::waitForPose(const std::string &target, const std_msgs::Header &header, Eigen::Isometry3d &pose,
-                             std::string *why) {
+                             Eigen::Vector3d &viewpoint, std::string *why) {
   // Polled against wall time rather than tf2_ros::Buffer::canTransform(timeout): under use_sim_time that timeout
-  // runs on the bag clock and never expires once the bag stops, which would wedge the worker.
+  // runs on the bag clock and never expires once the bag stops, which would wedge the worker. One deadline for
+  // both transforms (the cloud's into the target frame, the sensor's into the cloud's).
   const ros::WallTime deadline = ros::WallTime::now() + ros::WallDuration(config_.ros.tf_timeout);
+  const std::string cloud = tfFrameId(header.frame_id), &sensor = config_.ros.sensor_frame;
+  const bool needs_pose = !target.empty(), needs_sensor = !sensor.empty() && sensor != cloud;
   for (;;) {
-    if (tf_buffer_.canTransform(target, tfFrameId(header.frame_id), header.stamp))
-      return lookupSensorPose(tf_buffer_, target, header.frame_id, header.stamp, pose, why);
+    if ((!needs_pose || tf_buffer_.canTransform(target, cloud, header.stamp)) &&
+        (!needs_sensor || tf_buffer_.canTransform(cloud, sensor, header.stamp)))
+      break;
     if (ros::WallTime::now() >= deadline || !ros::ok() || pool_->stopping()) break;
     ros::WallDuration(0.002).sleep();
   }
-  return lookupSensorPose(tf_buffer_, target, header.frame_id, header.stamp, pose, why);
+  if (needs_pose && !lookupSensorPose(tf_buffer_, target, header.frame_id, header.stamp, pose, why)) return false;
+  if (!lookupViewpoint(tf_buffer_, header.frame_id, sensor, header.stamp, viewpoint, why)) {
+    if (why) *why = "the sensor's frame (ros/sensor_frame) '" + sensor + "' in '" + cloud + "': " + *why;
+    return false;
+  }
+  return true;
 }
 
 void HpdsServer::handle(const sensor_msgs::PointCloud2::ConstPtr &msg, std::size_t worker,
@@ -359,22 +369,34 @@ void HpdsServer::handle(const sensor_msgs::PointCloud2::ConstPtr &msg, std::size
   } else {
     // 3. Sensor pose in the target frame at the message stamp.
     Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
+    Eigen::Vector3d viewpoint = Eigen::Vector3d::Zero();
     const ros::WallTime wait_start = ros::WallTime::now();
-    const bool posed = target_frame_.empty() || waitForPose(target_frame_, msg->header, pose, &why);
+    const bool posed = (target_frame_.empty() && config_.ros.sensor_frame.empty()) ||
+                       waitForPose(target_frame_, msg->header, pose, viewpoint, &why);
     waited = (ros::WallTime::now() - wait_start).toSec();
     if (!posed) {
       processor.countDrop(DropReason::NoTransform);
       if (logAllowed("no_transform"))
-        ROS_WARN_STREAM_NAMED("hpds", "hpds: dropped frame at " << msg->header.stamp << ": no transform '"
-                                                                << msg->header.frame_id << "' -> '" << target_frame_
-                                                                << "' (" << count(DropReason::NoTransform)
-                                                                << " so far, counted as no_transform): " << why);
+        ROS_WARN_STREAM_NAMED("hpds", "hpds: dropped frame at "
+                                          << msg->header.stamp << ": no transform"
+                                          << (target_frame_.empty() ? std::string()
+                                                                    : " '" + msg->header.frame_id + "' -> '" +
+                                                                          target_frame_ + "'")
+                                          << " (" << count(DropReason::NoTransform)
+                                          << " so far, counted as no_transform): " << why);
     } else {
       // 4. Shared per-frame processing, then publish what was built, in arrival order. With one worker its
       //    pipeline counts the frames itself; several take the index of their frame in the stream.
       const std::uint32_t index = turns.takeIndex();
       if (processors_.size() > 1) processor.setNextFrameIndex(index);
-      ProcessedFrame frame = processor.process(*msg, pose, wants);
+      if (sensorAtMapOrigin(config_, msg->header.frame_id))
+        ROS_WARN_STREAM_ONCE_NAMED(
+            "hpds", "hpds: clouds arrive in the fixed frame '"
+                        << config_.ros.fixed_frame
+                        << "' itself, so where the sensor was is unknown: it is taken as that frame's origin, which "
+                           "normals face and map/evict_distance and input ranges measure from (far from it, each "
+                           "frame evicts the last). Set ros/sensor_frame to the sensor's tf frame");
+      ProcessedFrame frame = processor.process(*msg, pose, wants, viewpoint);
       if (!frame.processed) {
         if (logAllowed(std::string("dropped ") + toString(frame.drop)))
           ROS_ERROR_STREAM_NAMED("hpds", "hpds: dropped frame (" << toString(frame.drop) << ", " << count(frame.drop)
