@@ -357,6 +357,20 @@ FrameResult Pipeline::addFrame(const Frame &frame) {
   c.accepted = inserted.accepted.size();
   c.accepted_per_level = inserted.accepted_per_level;
   result.new_samples = std::move(inserted.accepted);
+  // 8. Map mode: back to map.max_samples, farthest from the sensor first, the frame's own samples too: the cap holds
+  //    between frames, not only before each (it was exceeded by up to a frame's samples). The evicted ones leave the
+  //    frame's new samples and the hit cache.
+  if (map_mode && config_.map.max_samples > 0 && hierarchy_.sampleCount() > config_.map.max_samples) {
+    const std::size_t evicted = hierarchy_.evictToCap(viewpoint, static_cast<std::size_t>(config_.map.max_samples));
+    c.evicted += evicted;
+    if (evicted > 0) {
+      std::vector<SampleId> &fresh = result.new_samples;
+      fresh.erase(std::remove_if(fresh.begin(), fresh.end(), [&](SampleId id) { return !hierarchy_.isLive(id); }),
+                  fresh.end());
+      hit_cache_valid_ = false;
+      hit_cache_.clear();
+    }
+  }
   totals_ += c;
   ++frames_;
   return result;

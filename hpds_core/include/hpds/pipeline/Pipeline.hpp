@@ -16,8 +16,9 @@
 // - Scan mode: every frame is sampled on its own (the hierarchy is cleared first); normals() estimates from the last
 //   frame's centroids. Map mode: one persistent hierarchy in the fixed frame; earlier samples never move or change
 //   level; samples farther than map.evict_distance from the latest sensor position are evicted before the frame is
-//   inserted, and the store is cut back to map.max_samples (farthest first), so memory is bounded by the cap plus one
-//   frame. With normals that average finer detail, each frame estimates the normals of the output samples it hits
+//   inserted, and the store is cut back to map.max_samples (farthest first) before and after it: between frames the
+//   map holds at most the cap (FrameResult::new_samples lists only the frame's samples still in it), and memory is
+//   bounded by the cap plus one frame. With normals that average finer detail, each frame estimates the normals of the output samples it hits
 //   (within 2 r_L of its points) from its centroids, and every sample keeps the one of the frame that saw it from
 //   closest (FrameResult::seconds_normals); normals() returns the kept ones, and for samples with none (a loaded map
 //   not hit since, levels below the output) estimates from the map's own levels. A map that keeps the finer levels
