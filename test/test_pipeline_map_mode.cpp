@@ -426,6 +426,13 @@ Frame patchIn(const PointLayout &l, double x0, double value) {
   return f;
 }
 
+// patchIn with every point's `axis` NaN: a frame with points but no sample.
+Frame nanPatchIn(const PointLayout &l, const char *axis) {
+  Frame f = patchIn(l, 0.0, 0.0);
+  for (std::size_t i = 0; i < f.points.size(); ++i) writeFromDouble(f.points.record(i), *l.find(axis), NAN);
+  return f;
+}
+
 HpdsConfig layoutTestConfig() {
   HpdsConfig c;
   c.mode = Mode::Map;
@@ -490,10 +497,7 @@ TEST(PipelineLayout, ALoadedMapWithoutSamplesTakesTheFramesFields) {
   const std::string path = (test::scratchDir("layout_empty_map") / "empty.hpdsmap").string();
   {
     Pipeline first(layoutTestConfig());
-    Frame nan_only = patchIn(xyz, 0.0, 0.0);
-    for (std::size_t i = 0; i < nan_only.points.size(); ++i)
-      writeFromDouble(nan_only.points.record(i), *xyz.find("z"), NAN);
-    (void)first.addFrame(nan_only);
+    (void)first.addFrame(nanPatchIn(xyz, "z"));
     ASSERT_EQ(first.hierarchy().sampleCount(), 0u);
     saveMap(path, first);
   }
@@ -512,10 +516,7 @@ TEST(PipelineLayout, OtherFieldsAreRefusedOnlyWhileTheMapHoldsSamples) {
   const PointLayout with_intensity = fieldsAt({{"x", 0}, {"y", 4}, {"z", 8}, {"intensity", 12}}, 16);
   Pipeline p(layoutTestConfig());
   // Points, but none a sample (all NaN): the map has held no sample, so the next frame's fields are taken.
-  Frame nan_only = patchIn(xyz, 0.0, 0.0);
-  for (std::size_t i = 0; i < nan_only.points.size(); ++i)
-    writeFromDouble(nan_only.points.record(i), *xyz.find("x"), NAN);
-  (void)p.addFrame(nan_only);
+  (void)p.addFrame(nanPatchIn(xyz, "x"));
   ASSERT_EQ(p.hierarchy().sampleCount(), 0u);
   ASSERT_NO_THROW((void)p.addFrame(patchIn(with_intensity, 0.0, 7.0)));
   ASSERT_GT(p.hierarchy().sampleCount(), 0u);

@@ -431,15 +431,21 @@ TEST(FrameProcessor, DropsAreCountedByReason) {
   EXPECT_EQ(processor.stats().processed, 1u);
 }
 
-TEST(FrameProcessor, LookupSensorPoseFromABufferCore) {
-  tf2::BufferCore buffer;
+// A static-looking transform parent -> child at 5 s: a translation, no rotation.
+void addTranslation(tf2::BufferCore &buffer, const std::string &parent, const std::string &child, double x, double z) {
   geometry_msgs::TransformStamped t;
-  t.header.frame_id = "odom";
-  t.child_frame_id = "lidar";
+  t.header.frame_id = parent;
+  t.child_frame_id = child;
   t.header.stamp = ros::Time(5, 0);
-  t.transform.translation.x = 2.0;
+  t.transform.translation.x = x;
+  t.transform.translation.z = z;
   t.transform.rotation.w = 1.0;
   ASSERT_TRUE(buffer.setTransform(t, "test"));
+}
+
+TEST(FrameProcessor, LookupSensorPoseFromABufferCore) {
+  tf2::BufferCore buffer;
+  addTranslation(buffer, "odom", "lidar", 2.0, 0.0);
   Eigen::Isometry3d pose;
   std::string why;
   ASSERT_TRUE(hpds_node::lookupSensorPose(buffer, "odom", "lidar", ros::Time(5, 0), pose, &why)) << why;
@@ -451,14 +457,7 @@ TEST(FrameProcessor, LookupSensorPoseFromABufferCore) {
 // ros/sensor_frame: the sensor's origin in the cloud's frame, from tf at the stamp; nothing to look up without it.
 TEST(FrameProcessor, TheViewpointIsTheSensorFramesOriginInTheCloudsFrame) {
   tf2::BufferCore buffer;
-  geometry_msgs::TransformStamped t;
-  t.header.frame_id = "odom";
-  t.child_frame_id = "velodyne";
-  t.header.stamp = ros::Time(5, 0);
-  t.transform.translation.x = 1000.0;
-  t.transform.translation.z = 1.75;
-  t.transform.rotation.w = 1.0;
-  ASSERT_TRUE(buffer.setTransform(t, "test"));
+  addTranslation(buffer, "odom", "velodyne", 1000.0, 1.75);
   Eigen::Vector3d v;
   std::string why;
   ASSERT_TRUE(hpds_node::lookupViewpoint(buffer, "/odom", "velodyne", ros::Time(5, 0), v, &why)) << why;
