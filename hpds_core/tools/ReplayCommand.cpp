@@ -35,7 +35,7 @@ struct ReplayArgs {
   std::string output;
   std::string stats;
   std::string ns = "/hpds";
-  std::optional<std::string> fixed_frame, output_frame;
+  std::optional<std::string> fixed_frame, output_frame, sensor_frame;
   std::optional<double> local_map_radius, local_map_rate;
   std::optional<std::vector<int>> publish_levels;
   SamplingOptions sampling;
@@ -60,11 +60,12 @@ hpds_node::NodeConfig resolveNodeConfig(const ReplayArgs &a) {
   config.hpds = resolveConfig(a.sampling);
   if (a.fixed_frame) config.ros.fixed_frame = *a.fixed_frame;
   if (a.output_frame) config.ros.output_frame = *a.output_frame;
+  if (a.sensor_frame) config.ros.sensor_frame = *a.sensor_frame;
   if (a.local_map_radius) config.ros.local_map_radius = *a.local_map_radius;
   if (a.local_map_rate) config.ros.local_map_rate = *a.local_map_rate;
   if (a.publish_levels) config.ros.publish_levels = *a.publish_levels;
   // The flags bypass the YAML parser, which is where leading slashes are dropped.
-  for (std::string *id : {&config.ros.fixed_frame, &config.ros.output_frame})
+  for (std::string *id : {&config.ros.fixed_frame, &config.ros.output_frame, &config.ros.sensor_frame})
     while (!id->empty() && id->front() == '/') id->erase(id->begin());
   hpds_node::validateRosConfig(config.ros, config.hpds);
   return config;
@@ -296,7 +297,7 @@ int runReplay(const ReplayArgs &a) {
     std::cerr << "hpds: warning: clouds arrive in the fixed frame '" << config.ros.fixed_frame
               << "' itself and ros.sensor_frame is not set, so each frame's sensor was taken at that frame's origin: "
                  "normals face it, and map.evict_distance and the input ranges measure from it; set "
-                 "ros.sensor_frame (--config) to the sensor's tf frame\n";
+                 "--sensor-frame (ros.sensor_frame) to the sensor's tf frame\n";
   for (const std::string &name : not_carried)
     std::cerr << "hpds: warning: input field '" << name << "' is not in the output: " << fieldNotCarriedReason(name)
               << "; rename the field to keep it\n";
@@ -318,6 +319,8 @@ void addReplayCommand(CLI::App &app) {
   cmd->add_option("--stats", args->stats, "write run statistics (incl. dropped messages) as JSON");
   cmd->add_option("--fixed-frame", args->fixed_frame, "map mode: frame of the map (ros.fixed_frame)");
   cmd->add_option("--output-frame", args->output_frame, "scan mode: output frame via tf (ros.output_frame)");
+  cmd->add_option("--sensor-frame", args->sensor_frame,
+                  "the sensor's tf frame, for clouds in another frame (ros.sensor_frame): the viewpoint");
   cmd->add_option("--local-map-radius", args->local_map_radius, "[m] ros.local_map_radius");
   cmd->add_option("--local-map-rate", args->local_map_rate, "[Hz] ros.local_map_rate (bag time), 0 = off");
   cmd->add_option("--publish-levels", args->publish_levels, "levels D written as <ns>/level_D (ros.publish_levels)");

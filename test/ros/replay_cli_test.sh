@@ -19,6 +19,17 @@ PY
 "$hpds" replay "$work/input.bag" "${common[@]}" -o "$work/map1.ply" > /dev/null
 "$hpds" replay "$work/input.bag" "${common[@]}" -o "$work/map2.ply" --threads 2 > /dev/null
 cmp "$work/map1.ply" "$work/map2.ply" || { echo "replay is not deterministic"; exit 1; }
+# --sensor-frame (ros.sensor_frame): the clouds are in the sensor's own frame here, so naming it changes nothing; a
+# frame tf does not have drops every frame; clouds in the fixed frame itself without it are said to have the sensor
+# at that frame's origin.
+"$hpds" replay "$work/input.bag" "${common[@]}" --sensor-frame /velodyne -o "$work/map3.ply" > /dev/null
+cmp "$work/map1.ply" "$work/map3.ply" || { echo "--sensor-frame of the clouds' own frame changed the map"; exit 1; }
+if "$hpds" replay "$work/input.bag" "${common[@]}" --sensor-frame nowhere -o "$work/map4.ply" > "$work/sf.log" 2>&1; then
+  echo "a sensor frame tf does not have must drop every frame"; exit 1
+fi
+grep -q "6 without transform" "$work/sf.log" || { cat "$work/sf.log"; exit 1; }
+"$hpds" replay "$work/input.bag" "${common[@]}" --fixed-frame velodyne -o "$work/map5.ply" > /dev/null 2> "$work/fixed.log"
+grep -q "clouds arrive in the fixed frame 'velodyne' itself" "$work/fixed.log" || { cat "$work/fixed.log"; exit 1; }
 # Scan mode into one PLY, and a fixed frame that the bag does not have: every frame dropped, exit status 1 with an
 # error line, and the existing outputs of an earlier run (bag and PLY) left as they were.
 "$hpds" replay "$work/input.bag" "${common[@]}" --mode scan -o "$work/scan.ply" > "$work/scan.log"
