@@ -15,6 +15,38 @@
 namespace hpds {
 namespace {
 
+// withLayout: the fields by name into another layout (other order, offsets, padding), the organisation kept,
+// fields the source lacks zero, and a field of another type refused.
+TEST(WithLayout, CopiesFieldsByNameIntoAnotherLayout) {
+  PointLayout from;
+  from.fields = {PointField{"x", 0}, PointField{"y", 4}, PointField{"z", 8}, PointField{"ring", 16, FieldType::UInt16}};
+  from.point_step = 20;
+  PointBuffer a(from, 6);
+  a.setOrganization(3, 2);
+  for (std::size_t i = 0; i < a.size(); ++i) {
+    writeFromDouble(a.record(i), *from.find("x"), 1.0 + double(i));
+    writeFromDouble(a.record(i), *from.find("z"), -2.0 * double(i));
+    writeFromDouble(a.record(i), *from.find("ring"), 7.0 + double(i));
+  }
+  PointLayout to;
+  to.fields = {PointField{"ring", 0, FieldType::UInt16}, PointField{"x", 4}, PointField{"y", 8}, PointField{"z", 12},
+               PointField{"t", 16}};
+  to.point_step = 20;
+  const PointBuffer b = withLayout(a, to);
+  ASSERT_EQ(b.size(), a.size());
+  EXPECT_EQ(b.width(), 3u);
+  EXPECT_EQ(b.height(), 2u);
+  for (std::size_t i = 0; i < b.size(); ++i) {
+    EXPECT_EQ(readAsDouble(b.record(i), *to.find("x")), 1.0 + double(i));
+    EXPECT_EQ(readAsDouble(b.record(i), *to.find("z")), -2.0 * double(i));
+    EXPECT_EQ(readAsDouble(b.record(i), *to.find("ring")), 7.0 + double(i));
+    EXPECT_EQ(readAsDouble(b.record(i), *to.find("t")), 0.0) << "a field the source lacks";
+  }
+  PointLayout other = to;
+  other.fields[0].type = FieldType::UInt8;
+  EXPECT_THROW((void)withLayout(a, other), std::invalid_argument);
+}
+
 constexpr FieldType kTypes[] = {FieldType::Int8,   FieldType::UInt8,  FieldType::Int16,   FieldType::UInt16,
                                 FieldType::Int32,  FieldType::UInt32, FieldType::Float32, FieldType::Float64};
 

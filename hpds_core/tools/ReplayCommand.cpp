@@ -87,19 +87,13 @@ void appendCloud(PointBuffer &all, const PointBuffer &part) {
 /// makeCloud(ids, true) gives, every other field copied by name.
 PointBuffer withFrameIndex(const PointBuffer &part, std::uint32_t frame, const hpds::NormalConfig &normals) {
   const bool with_normals = normals.enabled, with_covariances = normals.enabled && normals.covariances;
-  PointBuffer out(hpds::outputLayout(part.layout(), with_normals, /*with_frame=*/true, with_covariances), part.size());
-  const PointLayout &l = out.layout();
-  const PointField *frame_field = l.find("frame");
-  for (const PointField &f : l.fields) {
-    if (&f == frame_field) continue;
-    const PointField *from = part.layout().find(f.name);
-    if (!from || from->type != f.type || from->count != f.count)
+  PointBuffer out =
+      withLayout(part, hpds::outputLayout(part.layout(), with_normals, /*with_frame=*/true, with_covariances));
+  const PointField *frame_field = out.layout().find("frame");
+  for (const PointField &f : out.layout().fields)
+    if (&f != frame_field && !part.layout().find(f.name))
       throw std::logic_error("replay: output field '" + f.name + "' has no counterpart in the frame's output");
-    for (std::size_t i = 0; i < part.size(); ++i)
-      std::memcpy(out.record(i) + f.offset, part.record(i) + from->offset, f.byteSize());
-  }
-  for (std::size_t i = 0; i < part.size(); ++i)
-    std::memcpy(out.record(i) + frame_field->offset, &frame, sizeof frame);
+  for (std::size_t i = 0; i < out.size(); ++i) std::memcpy(out.record(i) + frame_field->offset, &frame, sizeof frame);
   return out;
 }
 
@@ -285,8 +279,8 @@ int runReplay(const ReplayArgs &a) {
   std::cout << "messages: " << messageSummary(clouds.size(), a.topic, s, wrong_type, target) << "\n";
   std::cout << "wrote " << a.output << "\n";
   if (!to_bag) {
-    if (const std::string w = roundingWarning(ply, report.output_radius, config.hpds.output, input_rounding); !w.empty())
-      std::cerr << w << "\n";
+    const std::string rounding = roundingWarning(ply, report.output_radius, config.hpds.output, input_rounding);
+    if (!rounding.empty()) std::cerr << rounding << "\n";
     // A bag holds what the node publishes; the PLY is meant as the final map, which eviction may have cut short.
     if (const std::string w = evictionWarning(config.hpds, report.totals.evicted, pipeline.hierarchy().sampleCount(),
                                               false);

@@ -78,17 +78,6 @@ bool sameFields(const PointLayout &a, const PointLayout &b) {
   return true;
 }
 
-/// The records of `pts` laid out as `to` (sameFields as pts' layout), field by field; padding bytes zero.
-PointBuffer repacked(const PointBuffer &pts, const PointLayout &to) {
-  PointBuffer out(to, pts.size());
-  for (const PointField &f : to.fields) {
-    const std::uint32_t from = pts.layout().find(f.name)->offset;
-    const std::size_t bytes = f.byteSize();
-    for (std::size_t i = 0; i < pts.size(); ++i) std::memcpy(out.record(i) + f.offset, pts.record(i) + from, bytes);
-  }
-  return out;
-}
-
 /// The deepest level read: the output levels and the levels a map keeps. No level is built for the normals: they
 /// average the frame's own points per cell of a finer level instead (fineLevelFor).
 int buildDepthFor(const HpdsConfig &config, int output_level) {
@@ -145,7 +134,7 @@ FrameResult Pipeline::addFrame(const Frame &frame) {
   bool keep_layout = !map_mode || !pts.empty();
   if (map_mode && map_layout_fixed_ && keep_layout && layout != hierarchy_.recordLayout()) {
     if (sameFields(layout, hierarchy_.recordLayout())) {
-      records_in_map_layout = repacked(pts, hierarchy_.recordLayout());
+      records_in_map_layout = withLayout(pts, hierarchy_.recordLayout());
       records = &records_in_map_layout;
       keep_layout = false;
     } else if (hierarchy_.idBound() > 0) {

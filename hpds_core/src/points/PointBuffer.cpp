@@ -198,4 +198,17 @@ void writeFromDouble(std::uint8_t *record, const PointField &field, double value
   }
 }
 
+PointBuffer withLayout(const PointBuffer &from, const PointLayout &to) {
+  PointBuffer out(to, from.size());
+  out.setOrganization(from.width(), from.height());
+  for (const PointField &f : to.fields) {
+    const PointField *src = from.layout().find(f.name);
+    if (!src) continue;
+    if (src->type != f.type || src->count != f.count)
+      throw std::invalid_argument("withLayout: field '" + f.name + "' differs in type or count");
+    for (std::size_t i = 0; i < from.size(); ++i) copyFieldBytes(out.record(i), f, from.record(i), *src);
+  }
+  return out;
+}
+
 }  // namespace hpds

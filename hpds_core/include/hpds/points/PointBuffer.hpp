@@ -140,4 +140,8 @@ inline void copyFieldBytes(std::uint8_t *dst_record, const PointField &dst_field
   std::memcpy(dst_record + dst_field.offset, src_record + src_field.offset, src_field.byteSize());
 }
 
+/// `from`'s records in layout `to`, same organisation: every field of `to` that `from` has (by name) copied byte for
+/// byte, the others and the padding zero. Throws std::invalid_argument when such a pair differs in type or count.
+[[nodiscard]] PointBuffer withLayout(const PointBuffer &from, const PointLayout &to);
+
 }  // namespace hpds
