@@ -334,32 +334,27 @@ FrameResult Pipeline::addFrame(const Frame &frame) {
       if (hierarchy_.level(id) <= output_level_ && k < early_done_) early_slot_[id] = static_cast<std::uint32_t>(k++);
   }
 
-  // 7. Map mode: the normals the map keeps, for the output samples this frame hit.
+  c.out_of_range = inserted.out_of_range;
+  c.dropped_depth = inserted.dropped_depth;
+  c.accepted = inserted.accepted.size();
+  c.accepted_per_level = inserted.accepted_per_level;
+
+  // 7. Map mode: back to map.max_samples, farthest from the sensor first, the frame's own samples too, so that the cap
+  //    holds between frames, not only before each (it was exceeded by up to a frame's samples); then the normals the
+  //    map keeps, for the output samples this frame hit, none of them evicted.
+  if (map_mode && config_.map.max_samples > 0 && hierarchy_.sampleCount() > config_.map.max_samples) {
+    c.evicted += hierarchy_.evictToCap(viewpoint, static_cast<std::size_t>(config_.map.max_samples));
+    std::vector<SampleId> &fresh = inserted.accepted;
+    fresh.erase(std::remove_if(fresh.begin(), fresh.end(), [&](SampleId id) { return !hierarchy_.isLive(id); }),
+                fresh.end());
+  }
   if (map_normals_) {
     const auto t_normals = std::chrono::steady_clock::now();
     updateMapNormals(inserted.accepted, viewpoint, normal_params);
     result.seconds_normals = secondsSince(t_normals);
   }
 
-  c.out_of_range = inserted.out_of_range;
-  c.dropped_depth = inserted.dropped_depth;
-  c.accepted = inserted.accepted.size();
-  c.accepted_per_level = inserted.accepted_per_level;
   result.new_samples = std::move(inserted.accepted);
-  // 8. Map mode: back to map.max_samples, farthest from the sensor first, the frame's own samples too: the cap holds
-  //    between frames, not only before each (it was exceeded by up to a frame's samples). The evicted ones leave the
-  //    frame's new samples and the hit cache.
-  if (map_mode && config_.map.max_samples > 0 && hierarchy_.sampleCount() > config_.map.max_samples) {
-    const std::size_t evicted = hierarchy_.evictToCap(viewpoint, static_cast<std::size_t>(config_.map.max_samples));
-    c.evicted += evicted;
-    if (evicted > 0) {
-      std::vector<SampleId> &fresh = result.new_samples;
-      fresh.erase(std::remove_if(fresh.begin(), fresh.end(), [&](SampleId id) { return !hierarchy_.isLive(id); }),
-                  fresh.end());
-      hit_cache_valid_ = false;
-      hit_cache_.clear();
-    }
-  }
   totals_ += c;
   ++frames_;
   return result;

@@ -18,12 +18,12 @@
 //   level; samples farther than map.evict_distance from the latest sensor position are evicted before the frame is
 //   inserted, and the store is cut back to map.max_samples (farthest first) before and after it: between frames the
 //   map holds at most the cap (FrameResult::new_samples lists only the frame's samples still in it), and memory is
-//   bounded by the cap plus one frame. With normals that average finer detail, each frame estimates the normals of the output samples it hits
-//   (within 2 r_L of its points) from its centroids, and every sample keeps the one of the frame that saw it from
-//   closest (FrameResult::seconds_normals); normals() returns the kept ones, and for samples with none (a loaded map
-//   not hit since, levels below the output) estimates from the map's own levels. A map that keeps the finer levels
-//   anyway (map.keep_depth >= L + offset) keeps no normals: normals() reads those levels, which hold every frame's
-//   points (more accurate than one frame's, at the cost of building them).
+//   bounded by the cap plus one frame. With normals that average finer detail, each frame estimates the normals of
+//   the output samples it hits (within 2 r_L of its points) from its centroids, and every sample keeps the one of
+//   the frame that saw it from closest (FrameResult::seconds_normals); normals() returns the kept ones, and for
+//   samples with none (a loaded map not hit since, levels below the output) estimates from the map's own levels. A
+//   map that keeps the finer levels anyway (map.keep_depth >= L + offset) keeps no normals: normals() reads those
+//   levels, which hold every frame's points (more accurate than one frame's, at the cost of building them).
 // - Points are transformed by frame.sensor_to_fixed (identity = sensor frame). NaN/Inf coordinates, exact (0,0,0)
 //   no-returns (input.skip_zero_points) and points outside input.min_range/max_range (measured from
 //   frame.viewpoint) are skipped and counted. Normals face, and eviction measures from, sensor_to_fixed * viewpoint.
