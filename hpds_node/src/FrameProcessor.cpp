@@ -147,13 +147,16 @@ std::string FrameProcessor::loadMap(const std::string &path) {
   return warning;
 }
 
+bool viewpointNeedsLookup(const std::string &cloud_frame, const std::string &sensor_frame) {
+  return !sensor_frame.empty() && sensor_frame != tfFrameId(cloud_frame);
+}
+
 bool lookupViewpoint(const tf2::BufferCore &buffer, const std::string &cloud_frame, const std::string &sensor_frame,
                      const ros::Time &stamp, Eigen::Vector3d &viewpoint, std::string *why) {
   viewpoint = Eigen::Vector3d::Zero();
-  const std::string cloud = tfFrameId(cloud_frame);
-  if (sensor_frame.empty() || sensor_frame == cloud) return true;
+  if (!viewpointNeedsLookup(cloud_frame, sensor_frame)) return true;
   Eigen::Isometry3d pose;
-  if (!lookupSensorPose(buffer, cloud, sensor_frame, stamp, pose, why)) return false;
+  if (!lookupSensorPose(buffer, tfFrameId(cloud_frame), sensor_frame, stamp, pose, why)) return false;
   viewpoint = pose.translation();
   return true;
 }

@@ -210,9 +210,9 @@ void applyNodeConfigYaml(const std::string &yaml_text, NodeConfig &config, const
     try {
       for (const auto &entry : root) {
         const std::string name = entry.first.IsScalar() ? entry.first.Scalar() : std::string();
-        static const char *const kRosLeaves[] = {"fixed_frame", "output_frame", "sensor_frame", "tf_timeout",
-                                                 "local_map_radius",
-                                                 "local_map_rate", "publish_levels", "queue_size", "map_file",
+        static const char *const kRosLeaves[] = {"fixed_frame",      "output_frame",   "sensor_frame",
+                                                 "tf_timeout",       "local_map_radius", "local_map_rate",
+                                                 "publish_levels",   "queue_size",     "map_file",
                                                  "load_map_on_start", "save_map_on_shutdown"};
         if (name == "ros") {
           applyRosSection(entry.second, result.ros);

@@ -167,9 +167,13 @@ class FrameProcessor {
 bool lookupSensorPose(const tf2::BufferCore &buffer, const std::string &target, const std::string &source,
                       const ros::Time &stamp, Eigen::Isometry3d &pose, std::string *why = nullptr);
 
+/// Whether the viewpoint of a cloud in `cloud_frame` needs `sensor_frame` (ros/sensor_frame) looked up in tf: it is
+/// set and not the cloud's own frame.
+[[nodiscard]] bool viewpointNeedsLookup(const std::string &cloud_frame, const std::string &sensor_frame);
+
 /// The viewpoint of a cloud in `cloud_frame` taken by the sensor in `sensor_frame` (ros/sensor_frame): that frame's
-/// origin in the cloud's frame at `stamp` (lookupSensorPose's rounding), or (0,0,0) when `sensor_frame` is empty or
-/// the cloud's own. False with `why` set when the buffer cannot answer.
+/// origin in the cloud's frame at `stamp` (lookupSensorPose's rounding), or (0,0,0) when no lookup is needed
+/// (viewpointNeedsLookup). False with `why` set when the buffer cannot answer.
 bool lookupViewpoint(const tf2::BufferCore &buffer, const std::string &cloud_frame, const std::string &sensor_frame,
                      const ros::Time &stamp, Eigen::Vector3d &viewpoint, std::string *why = nullptr);
 

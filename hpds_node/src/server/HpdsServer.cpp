@@ -333,7 +333,7 @@ bool HpdsServer::waitForPose(const std::string &target, const std_msgs::Header &
   // both transforms (the cloud's into the target frame, the sensor's into the cloud's).
   const ros::WallTime deadline = ros::WallTime::now() + ros::WallDuration(config_.ros.tf_timeout);
   const std::string cloud = tfFrameId(header.frame_id), &sensor = config_.ros.sensor_frame;
-  const bool needs_pose = !target.empty(), needs_sensor = !sensor.empty() && sensor != cloud;
+  const bool needs_pose = !target.empty(), needs_sensor = viewpointNeedsLookup(header.frame_id, sensor);
   for (;;) {
     if ((!needs_pose || tf_buffer_.canTransform(target, cloud, header.stamp)) &&
         (!needs_sensor || tf_buffer_.canTransform(cloud, sensor, header.stamp)))
