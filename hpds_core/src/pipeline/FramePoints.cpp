@@ -24,9 +24,9 @@ void poseFramePoints(const Frame &frame, const InputConfig &input, std::vector<d
   // Drivers almost always send float32 x/y/z: read those directly instead of through the per-type switch.
   const bool f32 = fx->type == FieldType::Float32 && fy->type == FieldType::Float32 && fz->type == FieldType::Float32;
   const auto loadF32 = [](const std::uint8_t *p) {
-    float v;
-    std::memcpy(&v, p, sizeof v);
-    return static_cast<double>(v);
+    float value;
+    std::memcpy(&value, p, sizeof value);
+    return static_cast<double>(value);
   };
   // The skip rules, in the points' own frame: true, and counted, for a point left out.
   const auto skip = [&](double x, double y, double z) {
