@@ -172,6 +172,48 @@ TEST(Cli, SyntheticStreamScanModeTagsFramesAndSeedsAreDeterministic) {
   EXPECT_EQ(runHpds("verify " + shellQuote(tmp / "m.ply") + " --spacing 0.1", &log), 0) << log;
 }
 
+// A recorded drive with an empty frame (a driver's first message, often with x y z only): scan mode writes the
+// fields of the frames with samples, as map mode does, on one thread and on several.
+TEST(Cli, ScanModeTakesAnEmptyFrameWithFewerFields) {
+  const auto tmp = test::scratchDir("cli_empty_frame");
+  std::string log;
+  ASSERT_EQ(runHpds("synth -o " + shellQuote(tmp / "s") + " --frames 2 --beams 8 --azimuth-steps 600", &log), 0) << log;
+  {
+    std::ofstream e(tmp / "empty.pcd");
+    e << "# .PCD v0.7\nVERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 0\nHEIGHT 1\n"
+         "VIEWPOINT 0 0 0 1 0 0 0\nPOINTS 0\nDATA ascii\n";
+  }
+  const std::string f0 = shellQuote(tmp / "s" / "frame_000000.pcd"), f1 = shellQuote(tmp / "s" / "frame_000001.pcd"),
+                    empty = shellQuote(tmp / "empty.pcd");
+  // The empty frame keeps its place in the stream (its index), so each case has its own frame numbers.
+  const std::vector<std::pair<std::string, std::set<double>>> cases = {
+      {empty + " " + f0 + " " + f1, {1.0, 2.0}}, {f0 + " " + empty + " " + f1, {0.0, 2.0}}, {f0 + " " + f1 + " " + empty, {0.0, 1.0}}};
+  for (const auto &[inputs, frames] : cases) {
+    std::string bytes[2];
+    for (int t = 0; t < 2; ++t) {
+      const std::string args = inputs + " --no-normals --threads " + std::to_string(t + 1);
+      ASSERT_EQ(runHpds("sample " + args + " -o " + shellQuote(tmp / "out.ply"), &log), 0) << args << "\n" << log;
+      bytes[t] = readText(tmp / "out.ply");
+      const PointBuffer out = readPointCloud((tmp / "out.ply").string());
+      for (const char *name : {"intensity", "ring", "time"}) EXPECT_NE(out.layout().find(name), nullptr) << args;
+      const PointField *frame = out.layout().find("frame");
+      ASSERT_NE(frame, nullptr) << args;
+      std::set<double> seen;
+      for (std::size_t i = 0; i < out.size(); ++i) seen.insert(readAsDouble(out.record(i), *frame));
+      EXPECT_EQ(seen, frames) << args;
+    }
+    EXPECT_EQ(bytes[0], bytes[1]) << inputs;
+  }
+  // Frames with samples and other fields are still refused, naming the frame.
+  PointLayout l;
+  for (const char *axis : {"x", "y", "z"}) l.append(axis, FieldType::Float32);
+  PointBuffer xyz(l, 1);
+  for (int a = 0; a < 3; ++a) writeFromDouble(xyz.record(0), l.fields[a], 1.0 + a);
+  writePcd((tmp / "xyz.pcd").string(), xyz);
+  EXPECT_EQ(runHpds("sample " + f0 + " " + shellQuote(tmp / "xyz.pcd") + " -o " + shellQuote(tmp / "bad.ply"), &log), 1);
+  EXPECT_NE(log.find("xyz.pcd' has other point fields than the frames with samples before it"), std::string::npos) << log;
+}
+
 TEST(Cli, CovariancesAreWrittenAsSixPlyPropertiesAfterTheNormals) {
   const auto tmp = test::scratchDir("cli_cov");
   std::string log;

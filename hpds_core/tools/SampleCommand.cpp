@@ -49,12 +49,16 @@ std::uint64_t countInvalidNormals(const PointBuffer &cloud) {
   return n;
 }
 
+// The file takes the fields of the first frame with samples, as map mode's layout rule does: a recorded drive often
+// holds an empty frame (a driver's first message, a blocked sensor) with fewer fields, which has nothing to write.
 void appendCloud(PointBuffer &all, const PointBuffer &part, const std::string &input) {
-  if (all.layout().point_step == 0) {
+  if (all.layout().point_step == 0 || (all.size() == 0 && part.size() > 0)) {
     all = PointBuffer(part.layout());
+  } else if (part.size() == 0) {
+    return;
   } else if (all.layout() != part.layout()) {
     throw std::invalid_argument("scan mode writes all frames into one file, but '" + input +
-                                "' has other point fields than the first input");
+                                "' has other point fields than the frames with samples before it");
   }
   all.bytes().insert(all.bytes().end(), part.bytes().begin(), part.bytes().end());
   all.setOrganization(static_cast<std::uint32_t>(all.size()), 1);
