@@ -206,6 +206,54 @@ TEST_F(OutputSafety, SigkillDuringTheWriteLeavesThePreviousOutput) {
   EXPECT_EQ(test::readText(out), complete);
 }
 
+// A run that writes a folder of files (synth, render, analyze) into a folder that exists replaces all of its files or
+// none: killed while its third frame is written, the folder holds the previous run's frames and poses, never some
+// new frames beside old poses; the next run into it removes the killed run's staging folder.
+TEST_F(OutputSafety, AKilledSynthLeavesAnExistingFolderAsItWas) {
+  const fs::path out = dir_ / "s";
+  fs::create_directory(out);
+  const std::vector<std::string> names = {"frame_000000.pcd", "frame_000001.pcd", "frame_000002.pcd", "poses.txt"};
+  for (const std::string &name : names) writeText(out / name, "previous " + name + "\n");
+  auto stagingIn = [](const fs::path &dir) {
+    std::vector<fs::path> found;
+    for (const auto &e : fs::directory_iterator(dir))
+      if (e.path().filename().string().rfind(".hpds-staging.", 0) == 0) found.push_back(e.path());
+    return found;
+  };
+  const pid_t pid = spawnHpds({"synth", "-o", out.string(), "--frames", "50"}, dir_ / "log.txt");
+  // Polled: the third frame's temporary appears (in the run's staging folder; a run writing straight into the
+  // folder would show it there) once the first two frames are written.
+  auto isThirdsTemporary = [](const fs::path &p) {
+    const std::string name = p.filename().string();
+    return name.rfind("frame_000002.pcd", 0) == 0 && name != "frame_000002.pcd";
+  };
+  bool third = false;
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+  while (!third && std::chrono::steady_clock::now() < deadline) {
+    for (const auto &e : fs::directory_iterator(out)) third = third || isThirdsTemporary(e.path());
+    for (const fs::path &staging : stagingIn(out)) {
+      std::error_code ec;
+      for (fs::directory_iterator it(staging, ec), end; !ec && it != end; it.increment(ec))
+        third = third || isThirdsTemporary(it->path());
+    }
+    if (!third) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  }
+  ::kill(pid, SIGKILL);
+  const int status = waitStatus(pid);
+  ASSERT_TRUE(third) << test::readText(dir_ / "log.txt");
+  ASSERT_TRUE(WIFSIGNALED(status) && WTERMSIG(status) == SIGKILL) << test::readText(dir_ / "log.txt");
+  for (const std::string &name : names)
+    EXPECT_TRUE(test::readText(out / name) == "previous " + name + "\n") << name << " was replaced by a killed run";
+  EXPECT_FALSE(fs::exists(out / "frame_000003.pcd"));
+  ASSERT_EQ(stagingIn(out).size(), 1u) << "the killed run's staging folder should be there";
+
+  std::string log;
+  ASSERT_EQ(test::runHpds("synth -o " + shellQuote(out) + " --frames 3 --beams 4 --azimuth-steps 100", &log), 0) << log;
+  EXPECT_TRUE(stagingIn(out).empty()) << "the killed run's staging folder was not removed";
+  for (const std::string &name : names) EXPECT_NE(test::readText(out / name), "previous " + name + "\n") << name;
+  EXPECT_EQ(readPointCloud((out / "frame_000002.pcd").string()).size(), 400u);
+}
+
 // ---------------------------------------------------------------- AtomicFile
 
 TEST_F(OutputSafety, AtomicFileReplacesOnlyOnCommit) {

@@ -246,9 +246,9 @@ void runAnalyze(const AnalyzeArgs &a) {
             << " m, plane normal (" << patch.plane.normal.transpose() << "), rms " << patch.plane.rms << " m"
             << (patch.automatic ? " (found automatically)" : "") << "\n";
 
-  TextFile levels_csv((out / "levels.csv").string());
-  TextFile rdf_csv((out / "rdf.csv").string());
-  TextFile spec_csv((out / "spectrum.csv").string());
+  TextFile levels_csv(folder.file("levels.csv"));
+  TextFile rdf_csv(folder.file("rdf.csv"));
+  TextFile spec_csv(folder.file("spectrum.csv"));
   levels_csv << "level,r,count,union_count,min_nn_over_r,mean_nn_over_r,patch_points\n";
   rdf_csv << "method,level,r_over_rD,r,g\n";
   spec_csv << "method,level,f_times_rD,f,power\n";
@@ -359,7 +359,7 @@ void runAnalyze(const AnalyzeArgs &a) {
                      "--poses)?\n";
       if (s.method != "hpds" && s.analysed) {
         writeSetCsvRows(rdf_csv, spec_csv, s);
-        writePeriodogramPng((out / ("periodogram_" + setName(s) + ".png")).string(), s.spectrum);
+        writePeriodogramPng(folder.file("periodogram_" + setName(s) + ".png"), s.spectrum);
       }
       std::printf("%-15s %6zu %9.4f %9.3f %10.3f %9.3f %6.1f\n", s.method.c_str(), s.count, s.cell, s.min_nn_over_r,
                   s.mean_nn_over_r, s.power_low, s.power_max);
@@ -367,20 +367,20 @@ void runAnalyze(const AnalyzeArgs &a) {
     // Point pictures of the baselines (hpds's was written with its level).
     for (const auto &g : grids) {
       const auto it = std::find_if(compare.begin(), compare.end(), [&](const SetResult &s) { return s.method == g.first; });
-      writePointsPng((out / ("points_" + setName(*it) + ".png")).string(), inWindow(g.second(it->cell), patch, a.plane_band),
+      writePointsPng(folder.file("points_" + setName(*it) + ".png"), inWindow(g.second(it->cell), patch, a.plane_band),
                      patch.window, r);
     }
-    writePointsPng((out / ("points_random_L" + std::to_string(cmp_level) + ".png")).string(), random_pick, patch.window, r);
+    writePointsPng(folder.file("points_random_L" + std::to_string(cmp_level) + ".png"), random_pick, patch.window, r);
   }
 
   for (const auto &[index, pts] : level_pictures) {
     const SetResult &s = level_sets[index];
-    writePeriodogramPng((out / ("periodogram_" + setName(s) + ".png")).string(), s.spectrum);
-    writePointsPng((out / ("points_" + setName(s) + ".png")).string(), pts, patch.window, s.r);
+    writePeriodogramPng(folder.file("periodogram_" + setName(s) + ".png"), s.spectrum);
+    writePointsPng(folder.file("points_" + setName(s) + ".png"), pts, patch.window, s.r);
   }
 
   {
-    TextFile json((out / "analysis.json").string());
+    TextFile json(folder.file("analysis.json"));
     json << "{\n  \"sampling\": " << jsonQuoted(a.sampling) << ",\n  \"cell_size\": " << num(cell_size)
          << ",\n  \"frame\": " << (frame ? std::to_string(*frame) : "null") << ",\n  \"patch\": {\"center\": ["
          << num(patch.center_xy.x()) << ", " << num(patch.center_xy.y()) << "], \"size\": " << num(patch.size)

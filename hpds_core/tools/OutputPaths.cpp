@@ -3,11 +3,15 @@
 #include "hpds/io/AtomicFile.hpp"
 #include "hpds/io/HierarchyFile.hpp"
 
+#include <fcntl.h>
+#include <sys/file.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
 #include <algorithm>
 #include <cctype>
+#include <cerrno>
+#include <cstring>
 #include <filesystem>
 #include <optional>
 #include <stdexcept>
@@ -152,19 +156,71 @@ void checkPaths(const std::vector<InputPath> &inputs, const std::vector<OutputPa
   }
 }
 
+namespace {
+constexpr const char *kStagingPrefix = ".hpds-staging.";
+
+// Removes the staging folders in `folder` whose run is gone: nobody holds the flock on their lock file.
+void removeStaleStaging(const fs::path &folder) {
+  std::error_code ec;
+  for (fs::directory_iterator it(folder, ec), end; !ec && it != end; it.increment(ec)) {
+    const std::string name = it->path().filename().string();
+    if (name.rfind(kStagingPrefix, 0) != 0 || !it->is_directory(ec)) continue;
+    const int fd = ::open((it->path() / ".lock").c_str(), O_RDONLY | O_CLOEXEC);
+    const bool gone = fd < 0 || ::flock(fd, LOCK_EX | LOCK_NB) == 0;
+    if (fd >= 0) ::close(fd);
+    std::error_code ignored;
+    if (gone) fs::remove_all(it->path(), ignored);
+  }
+}
+}  // namespace
+
 RunFolder::RunFolder(const std::string &path) {
   // Normalised first, so that the folders created are exactly those walked here ("a/../b" creates b alone).
-  const fs::path target = fs::weakly_canonical(fs::absolute(path));
+  target_ = fs::weakly_canonical(fs::absolute(path));
   fs::path missing;
-  for (fs::path p = target; !p.empty() && !fs::exists(p) && p != p.parent_path(); p = p.parent_path()) missing = p;
-  fs::create_directories(target);
+  for (fs::path p = target_; !p.empty() && !fs::exists(p) && p != p.parent_path(); p = p.parent_path()) missing = p;
+  fs::create_directories(target_);
   created_ = missing;
+  if (!created_.empty()) return;
+  removeStaleStaging(target_);
+  static unsigned counter = 0;
+  staging_ = target_ / (kStagingPrefix + std::to_string(::getpid()) + "." + std::to_string(counter++));
+  fs::create_directory(staging_);
+  lock_fd_ = ::open((staging_ / ".lock").c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0600);
+  if (lock_fd_ < 0 || ::flock(lock_fd_, LOCK_EX) != 0)
+    throw std::runtime_error(staging_.string() + ": cannot lock the run's staging folder");
+}
+
+std::string RunFolder::file(const std::string &name) {
+  if (staging_.empty()) return (target_ / name).string();
+  staged_.push_back(name);
+  return (staging_ / name).string();
+}
+
+void RunFolder::keep() {
+  for (const std::string &name : staged_) {
+    const fs::path from = staging_ / name;
+    if (!fs::exists(from)) continue;  // asked for but not written
+    const std::string to = followLinks((target_ / name).string());
+    if (::rename(from.c_str(), to.c_str()) != 0)
+      throw std::runtime_error(to + ": cannot rename the run's file into place: " + std::strerror(errno));
+  }
+  if (!staging_.empty()) {
+    // The renames reach the disk with the folder's entry.
+    const int dir = ::open(target_.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+    if (dir >= 0) {
+      ::fsync(dir);
+      ::close(dir);
+    }
+  }
+  created_.clear();
 }
 
 RunFolder::~RunFolder() {
-  if (created_.empty()) return;
   std::error_code ignored;  // a destructor during unwinding must not throw; the run's own error is what counts
-  fs::remove_all(created_, ignored);
+  if (!staging_.empty()) fs::remove_all(staging_, ignored);
+  if (lock_fd_ >= 0) ::close(lock_fd_);
+  if (!created_.empty()) fs::remove_all(created_, ignored);
 }
 
 }  // namespace hpds::cli

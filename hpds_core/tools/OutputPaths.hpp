@@ -49,21 +49,31 @@ struct OutputFolder {
 void checkPaths(const std::vector<InputPath> &inputs, const std::vector<OutputPath> &outputs,
                 const std::vector<OutputFolder> &folders = {});
 
-/// The output folder of one run (render, analyze, synth -o DIR), created with its missing parents. Destroyed before
-/// keep() (the run threw), it removes the topmost folder it created, with whatever the run put there, so that a
-/// failed run leaves no half output; a folder that existed before is left as it is (its files are replaced
-/// atomically, one by one).
+/// The output folder of one run (render, analyze, synth -o DIR), created with its missing parents. Every file of the
+/// run is written where file(name) says and put in place together by keep(), so that a failed run changes nothing:
+/// - a folder the run created is removed, with whatever the run put there, if the run throws before keep();
+/// - in a folder that existed, the files are written into a staging folder inside it (".hpds-staging.<pid>.<n>",
+///   held under a flock) and renamed into place by keep(), each over the file a symbolic link of that name leads
+///   to, as AtomicFile does. A run that throws, or is killed, before keep() leaves every file of the folder as it
+///   was (a killed run's staging folder is removed by the next RunFolder there). Not thread-safe.
 class RunFolder {
  public:
   explicit RunFolder(const std::string &path);
   RunFolder(const RunFolder &) = delete;
   RunFolder &operator=(const RunFolder &) = delete;
   ~RunFolder();
-  /// The run succeeded: the folder stays.
-  void keep() { created_.clear(); }
+  /// Where the run writes its file `name` (a plain file name).
+  [[nodiscard]] std::string file(const std::string &name);
+  /// The run succeeded: its files go in place and the folder stays. Throws std::runtime_error naming the file that
+  /// could not be renamed into place (the files renamed before it stay).
+  void keep();
 
  private:
+  std::filesystem::path target_;
   std::filesystem::path created_;  // topmost folder this run created; empty when it created none
+  std::filesystem::path staging_;  // empty when the folder was created by this run (nothing there to keep)
+  int lock_fd_ = -1;
+  std::vector<std::string> staged_;
 };
 
 }  // namespace hpds::cli

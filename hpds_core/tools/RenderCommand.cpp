@@ -129,6 +129,7 @@ void runRender(const RenderArgs &a) {
                                           "infinite coordinate are not drawn)");
   const double spacing = medianSpacing(kept.xyz);
   RunFolder folder(a.out_dir);
+  std::vector<std::string> written;
 
   RenderOptions o;
   o.max_width = a.width;
@@ -177,12 +178,13 @@ void runRender(const RenderArgs &a) {
       const std::string &view = a.views[v];
       o.view = parseView(view);
       o.splat_radius = splat[v];
-      const std::string path = (fs::path(a.out_dir) / (a.prefix + "_" + colour + "_" + view + ".png")).string();
-      writePng(path, renderPoints(kept.xyz, rgb, o, priority.empty() ? nullptr : &priority));
-      std::cout << "wrote " << path << "\n";
+      const std::string name = a.prefix + "_" + colour + "_" + view + ".png";
+      writePng(folder.file(name), renderPoints(kept.xyz, rgb, o, priority.empty() ? nullptr : &priority));
+      written.push_back((fs::path(a.out_dir) / name).string());
     }
   }
   folder.keep();
+  for (const std::string &path : written) std::cout << "wrote " << path << "\n";
 }
 
 }  // namespace

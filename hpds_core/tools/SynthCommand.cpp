@@ -77,18 +77,17 @@ void runSynth(SynthArgs a, SynthBagOpener open_bag) {
   std::size_t points = 0;
   for (int i = 0; i < a.lidar.frames; ++i) {
     const SyntheticFrame f = lidar.frame(i);
-    writePointCloud((std::filesystem::path(a.out_dir) / frameName(i, a.format)).string(), f.frame.points);
+    writePointCloud(folder.file(frameName(i, a.format)), f.frame.points);
     poses.push_back(f.frame.sensor_to_fixed);
     if (bag) bag->write(f.frame);
     points += f.frame.points.size();
   }
-  const std::string pose_path = (std::filesystem::path(a.out_dir) / "poses.txt").string();
-  writeKittiPoses(pose_path, poses);
-  if (bag) {
-    bag->finish();
-    bag->commit();
-  }
+  writeKittiPoses(folder.file("poses.txt"), poses);
+  // The folder's files and the bag go in place together, after everything is written.
+  if (bag) bag->finish();
   folder.keep();
+  if (bag) bag->commit();
+  const std::string pose_path = (std::filesystem::path(a.out_dir) / "poses.txt").string();
   std::cout << "wrote " << a.lidar.frames << " frames (" << points << " points, scene " << toString(a.lidar.scene)
             << ") and " << pose_path << "\n";
   if (bag)
