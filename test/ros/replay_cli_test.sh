@@ -16,6 +16,17 @@ import json, sys
 s = json.load(open(sys.argv[1]))["seconds"]
 assert s["normals"] > 0.0 and s["insert"] > 0.0, "seconds: %s" % s
 PY
+# The input's tf goes into the output bag with its connection headers: /tf_static stays latched (rosbag play then
+# latches it, so a tf listener started after playback began still gets the static transforms).
+/usr/bin/python3 - "$work/input.bag" "$work/cli.bag" <<'PY' || exit 1
+import sys, rosbag
+def latching(path):
+    with rosbag.Bag(path) as b:
+        return sorted({bytes(c.header.get("latching", b"0")).decode() for c in b._get_connections(["/tf_static"])})
+inp, out = latching(sys.argv[1]), latching(sys.argv[2])
+assert inp == ["1"], "input /tf_static latching: %s" % inp
+assert out == inp, "output /tf_static latching %s, input %s" % (out, inp)
+PY
 "$hpds" replay "$work/input.bag" "${common[@]}" -o "$work/map1.ply" > /dev/null
 "$hpds" replay "$work/input.bag" "${common[@]}" -o "$work/map2.ply" --threads 2 > /dev/null
 cmp "$work/map1.ply" "$work/map2.ply" || { echo "replay is not deterministic"; exit 1; }

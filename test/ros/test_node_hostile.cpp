@@ -18,6 +18,7 @@
 namespace {
 
 using hpds_test::Collector;
+using hpds_test::LogCollector;
 using sensor_msgs::PointCloud2;
 using sensor_msgs::PointCloud2Ptr;
 using sensor_msgs::PointField;
@@ -224,47 +225,6 @@ TEST_F(HostileTest, OverloadDropsTheOldestAndCountsIt) {
   EXPECT_GT(diag.value("dropped overload"), 0.0);
   EXPECT_LT(diag.value("frames processed"), double(n));
 }
-
-// Every message one node logs, from /rosout (every node publishes its log there; rostest runs no rosout node, so
-// there is no /rosout_agg).
-class LogCollector {
- public:
-  LogCollector(ros::NodeHandle &nh, const std::string &node) : node_(node) {
-    sub_ = nh.subscribe<rosgraph_msgs::Log>("/rosout", 1000, [this](const rosgraph_msgs::Log::ConstPtr &m) {
-      if (m->name != node_) return;
-      std::lock_guard<std::mutex> lock(mutex_);
-      lines_.push_back(*m);
-    });
-  }
-  // The subscription goes before lines_: its shutdown waits for a callback in progress on the spinner's thread.
-  ~LogCollector() { sub_.shutdown(); }
-  LogCollector(const LogCollector &) = delete;
-  LogCollector &operator=(const LogCollector &) = delete;
-  /// True when a line of `level` holding every one of `parts` has arrived.
-  bool has(std::uint8_t level, const std::vector<std::string> &parts) const {
-    std::lock_guard<std::mutex> lock(mutex_);
-    for (const rosgraph_msgs::Log &l : lines_) {
-      if (l.level != level) continue;
-      bool all = true;
-      for (const std::string &p : parts) all = all && l.msg.find(p) != std::string::npos;
-      if (all) return true;
-    }
-    return false;
-  }
-  std::string dump() const {
-    std::lock_guard<std::mutex> lock(mutex_);
-    std::string s;
-    for (const rosgraph_msgs::Log &l : lines_) s += "[" + std::to_string(l.level) + "] " + l.msg + "\n";
-    return s;
-  }
-  bool connected() const { return sub_.getNumPublishers() > 0; }
-
- private:
-  std::string node_;
-  ros::Subscriber sub_;
-  mutable std::mutex mutex_;
-  std::vector<rosgraph_msgs::Log> lines_;
-};
 
 // The message as a ShapeShifter, whose header.seq roscpp passes on as it is (rosbag play works the same way): the
 // only way to publish a numbering with gaps.

@@ -128,13 +128,14 @@ class NodeShutdown : public testing::Test {
     }, nodelet);
   }
 
-  // The log says "saved N samples ... to '<file>'" and the file holds N samples.
-  void expectSaved(const std::string &log, const std::string &file) {
-    const std::size_t at = log.find("hpds: shutdown: saved ");
+  // The log says "hpds /<name>: shutdown: saved N samples ... to '<file>'" and the file holds N samples.
+  void expectSaved(const std::string &log, const std::string &file, const std::string &name) {
+    const std::string said = "hpds /" + name + ": shutdown: saved ";
+    const std::size_t at = log.find(said);
     ASSERT_NE(at, std::string::npos) << "the shutdown save was not logged:\n" << log;
     EXPECT_TRUE(contains(log.substr(at), "to '" + file + "'")) << log;
     std::size_t samples = 0;
-    ASSERT_EQ(std::sscanf(log.c_str() + at, "hpds: shutdown: saved %zu samples", &samples), 1) << log;
+    ASSERT_EQ(std::sscanf(log.c_str() + at + said.size(), "%zu samples", &samples), 1) << log;
     EXPECT_GT(samples, 0u);
     const hpds::LoadedHierarchy loaded = hpds::loadHierarchy(file);
     EXPECT_EQ(loaded.hierarchy.sampleCount(), samples);
@@ -149,14 +150,14 @@ TEST_F(NodeShutdown, CtrlCSavesTheMapAndSaysSo) {
   const std::string file = (dir_ / "sigint.hpdsmap").string();
   const auto [status, log] = runAndStop("hpds_shutdown_sigint", file, [](pid_t pid) { ::kill(pid, SIGINT); });
   EXPECT_EQ(status, 0) << log;
-  expectSaved(log, file);
+  expectSaved(log, file, "hpds_shutdown_sigint");
 }
 
 TEST_F(NodeShutdown, SigtermSavesTheMapAndSaysSo) {
   const std::string file = (dir_ / "sigterm.hpdsmap").string();
   const auto [status, log] = runAndStop("hpds_shutdown_sigterm", file, [](pid_t pid) { ::kill(pid, SIGTERM); });
   EXPECT_EQ(status, 0) << log;
-  expectSaved(log, file);
+  expectSaved(log, file, "hpds_shutdown_sigterm");
 }
 
 TEST_F(NodeShutdown, RosnodeKillSavesTheMapAndSaysSo) {
@@ -165,14 +166,14 @@ TEST_F(NodeShutdown, RosnodeKillSavesTheMapAndSaysSo) {
     EXPECT_EQ(std::system("rosnode kill /hpds_shutdown_rosnode > /dev/null 2>&1"), 0);
   });
   EXPECT_EQ(status, 0) << log;
-  expectSaved(log, file);
+  expectSaved(log, file, "hpds_shutdown_rosnode");
 }
 
 TEST_F(NodeShutdown, AFailedSaveIsAnErrorLineAndExitStatusOne) {
   std::string file;
   const auto [status, log] = runWithVanishingFolder("hpds_shutdown_fail", false, file);
   EXPECT_EQ(status, 1) << log;
-  EXPECT_TRUE(contains(log, "[ERROR]") && contains(log, "hpds: shutdown: the map was not saved: saving the map failed: " +
+  EXPECT_TRUE(contains(log, "[ERROR]") && contains(log, "hpds /hpds_shutdown_fail: shutdown: the map was not saved: saving the map failed: " +
                                                             file + ": cannot create a temporary file beside it"))
       << log;
 }
@@ -184,11 +185,11 @@ TEST_F(NodeShutdown, ANodeletSaysWhatBecameOfTheMap) {
   const auto [status, log] =
       runAndStop("hpds_shutdown_nodelet", file, [](pid_t pid) { ::kill(pid, SIGINT); }, true);
   EXPECT_GE(status, 0) << log;
-  expectSaved(log, file);
+  expectSaved(log, file, "hpds_shutdown_nodelet");
   std::string lost;
   const auto [status2, log2] = runWithVanishingFolder("hpds_shutdown_nodelet_fail", true, lost);
   EXPECT_GE(status2, 0) << log2;
-  EXPECT_TRUE(contains(log2, "[ERROR]") && contains(log2, "hpds: shutdown: the map was not saved")) << log2;
+  EXPECT_TRUE(contains(log2, "[ERROR]") && contains(log2, "hpds /hpds_shutdown_nodelet_fail: shutdown: the map was not saved")) << log2;
 }
 
 // A map file that names a folder passed the start-up check and failed at shutdown, after all the mapping.

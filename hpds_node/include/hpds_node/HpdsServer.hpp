@@ -46,6 +46,7 @@
 #include <ros/callback_queue.h>
 #include <ros/spinner.h>
 
+#include <atomic>
 #include <map>
 #include <memory>
 #include <mutex>
@@ -103,6 +104,8 @@ class HpdsServer {
   /// False when a line with this key was logged less than 5 s ago: each drop reason gets its own throttle (ROS's
   /// throttles are per call site, so one reason would hide the others).
   bool logAllowed(const std::string &key);
+  /// `text` with a leading "hpds: " replaced by tag_.
+  [[nodiscard]] std::string tagged(const std::string &text) const;
   /// What the parameter server holds for ros/map_file now, when it differs from what the node started with.
   [[nodiscard]] std::string mapFileSetSinceStart() const;
 
@@ -114,6 +117,7 @@ class HpdsServer {
   // Checked before updater_ is built: diagnostic_updater reads it too, and throws on a value ros::Duration cannot hold.
   double diagnostic_period_;
   diagnostic_updater::Updater updater_;
+  std::string tag_;  // "hpds <node or nodelet name>": begins every log line, so that each instance is told apart
 
   tf2_ros::Buffer tf_buffer_;
   std::unique_ptr<tf2_ros::TransformListener> tf_listener_;
@@ -127,6 +131,8 @@ class HpdsServer {
   std::uint64_t received_ = 0, overload_ = 0, lost_upstream_ = 0;
   SequenceGaps sequence_gaps_;
   std::set<std::string> fields_not_carried_;  // already warned about
+  // Said once per instance (not ROS_*_ONCE, whose flag is shared by every nodelet of the process).
+  std::atomic<bool> warned_sensor_at_origin_{false}, warned_rounding_{false};
   std::mutex log_mutex_;
   std::map<std::string, double> last_logged_;  // logAllowed: wall time [s] of the last line per key
   static constexpr double kLogThrottleSeconds = 5.0;

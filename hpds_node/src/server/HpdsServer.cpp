@@ -41,7 +41,8 @@ HpdsServer::HpdsServer(ros::NodeHandle nh, ros::NodeHandle private_nh, const std
       pnh_(private_nh),
       config_(loadNodeConfigFromParams(private_nh)),
       diagnostic_period_(diagnosticPeriod(private_nh)),
-      updater_(nh, private_nh, name) {
+      updater_(nh, private_nh, name),
+      tag_("hpds " + name) {
   // Scan mode: frames are independent, so `threads` workers take one frame each, each processor on one thread.
   const std::size_t workers =
       config_.hpds.mode == hpds::Mode::Scan ? static_cast<std::size_t>(hpds::resolveThreads(config_.hpds.threads)) : 1;
@@ -79,7 +80,7 @@ HpdsServer::HpdsServer(ros::NodeHandle nh, ros::NodeHandle private_nh, const std
       updater_.force_update();
     } catch (const std::exception &e) {
       if (logAllowed("diagnostics"))
-        ROS_ERROR_STREAM_NAMED("hpds", "hpds: diagnostics not published: " << e.what());
+        ROS_ERROR_STREAM_NAMED("hpds", tag_ << ": diagnostics not published: " << e.what());
     }
   });
   snapshot_.stats.resize(processors_.size());
@@ -107,7 +108,7 @@ HpdsServer::HpdsServer(ros::NodeHandle nh, ros::NodeHandle private_nh, const std
   service_spinner_->start();
 
   std::ostringstream summary;
-  summary << "hpds: " << processors_.front()->samplingSummary();
+  summary << tag_ << ": " << processors_.front()->samplingSummary();
   if (!target_frame_.empty()) summary << ", outputs in frame '" << target_frame_ << "'";
   if (processors_.size() > 1) summary << ", " << processors_.size() << " frames in parallel";
   ROS_INFO_STREAM_NAMED("hpds", summary.str() << "; input " << sub_.getTopic() << ", output "
@@ -140,15 +141,20 @@ bool HpdsServer::shutdown() {
   };
   const std::size_t discarded = pool_ ? pool_->stop() : 0;
   if (discarded > 0)
-    say(false, "hpds: shutdown: " + std::to_string(discarded) + " received frame(s) were still queued and are not "
+    say(false, tag_ + ": shutdown: " + std::to_string(discarded) + " received frame(s) were still queued and are not "
                "processed");
   // The workers are gone: the map is complete (no frame half-inserted) and nothing else touches it.
   if (config_.ros.save_map_on_shutdown && config_.hpds.mode == hpds::Mode::Map) {
     const auto [ok, message] = runMapCommand(true);
     shutdown_ok_ = ok;
-    say(!ok, ok ? "hpds: shutdown: " + message : "hpds: shutdown: the map was not saved: " + message);
+    say(!ok, ok ? tag_ + ": shutdown: " + message : tag_ + ": shutdown: the map was not saved: " + message);
   }
   return shutdown_ok_;
+}
+
+std::string HpdsServer::tagged(const std::string &text) const {
+  // KeepUpCheck's lines start "hpds: "; with several nodelets in one manager each line must say whose it is.
+  return text.rfind("hpds: ", 0) == 0 ? tag_ + text.substr(4) : text;
 }
 
 bool HpdsServer::logAllowed(const std::string &key) {
@@ -172,13 +178,13 @@ void HpdsServer::loadMapOnStart() {
   const std::string &path = config_.ros.map_file;
   std::error_code ec;
   if (std::filesystem::status(path, ec).type() == std::filesystem::file_type::not_found) {
-    ROS_WARN_STREAM_NAMED("hpds", "hpds: ros/load_map_on_start: map file '"
+    ROS_WARN_STREAM_NAMED("hpds", tag_ << ": ros/load_map_on_start: map file '"
                                       << path << "' does not exist (yet): starting with an empty map");
     return;
   }
   const auto [ok, message] = runMapCommand(false);
   if (!ok) throw std::runtime_error("ros/load_map_on_start: " + message);
-  ROS_INFO_STREAM_NAMED("hpds", "hpds: " << message);
+  ROS_INFO_STREAM_NAMED("hpds", tag_ << ": " << message);
 }
 
 std::pair<bool, std::string> HpdsServer::runMapCommand(bool save) {
@@ -194,7 +200,7 @@ std::pair<bool, std::string> HpdsServer::runMapCommand(bool save) {
       // Saved all the same (it is what the run has), but the caller, the shutdown log and the log all hear why the
       // map is weaker than the one loaded.
       if (const std::string w = processor.shallowSaveWarning(); !w.empty()) {
-        ROS_WARN_STREAM_NAMED("hpds", "hpds: " << w);
+        ROS_WARN_STREAM_NAMED("hpds", tag_ << ": " << w);
         msg << "; warning: " << w;
       }
     } else {
@@ -204,7 +210,7 @@ std::pair<bool, std::string> HpdsServer::runMapCommand(bool save) {
       // As with a weaker save: the caller and the log both hear it.
       for (const std::string &w : {hpds::shallowMapWarning(processor.pipeline()), normals_warning})
         if (!w.empty()) {
-          ROS_WARN_STREAM_NAMED("hpds", "hpds: " << w);
+          ROS_WARN_STREAM_NAMED("hpds", tag_ << ": " << w);
           msg << "; warning: " << w;
         }
     }
@@ -247,9 +253,9 @@ bool HpdsServer::onMapService(bool save, std_srvs::Trigger::Request &, std_srvs:
                      "uses '" + config_.ros.map_file + "' until it is restarted)";
   }
   if (res.success) {
-    ROS_INFO_STREAM_NAMED("hpds", "hpds: " << service << ": " << res.message);
+    ROS_INFO_STREAM_NAMED("hpds", tag_ << ": " << service << ": " << res.message);
   } else {
-    ROS_ERROR_STREAM_NAMED("hpds", "hpds: " << service << ": " << res.message);
+    ROS_ERROR_STREAM_NAMED("hpds", tag_ << ": " << service << ": " << res.message);
   }
   return true;  // the outcome is in the response: a false return would hide the message from the caller
 }
@@ -279,13 +285,13 @@ void HpdsServer::onCloud(const ros::MessageEvent<const sensor_msgs::PointCloud2>
   // Throttled on the wall clock (logAllowed), not ROS time: under use_sim_time without /clock a ROS-time throttle
   // never lets the first line through.
   if (lost > 0 && logAllowed("lost_upstream"))
-    ROS_WARN_STREAM_NAMED("hpds", "hpds: " << lost << " frame(s) from " << publisher << " never arrived (header.seq "
+    ROS_WARN_STREAM_NAMED("hpds", tag_ << ": " << lost << " frame(s) from " << publisher << " never arrived (header.seq "
                                            << "jumped to " << msg->header.seq << "): lost before hpds received them ("
                                            << lost_total << " so far, counted in /diagnostics as 'frames lost "
                                            << "upstream'; a throttle, drop or filter upstream skips numbers on "
                                            << "purpose, and then this is expected)");
   if (dropped && logAllowed("overload"))
-    ROS_WARN_STREAM_NAMED("hpds", "hpds: dropped the oldest queued frame: frames arrive faster than they are "
+    ROS_WARN_STREAM_NAMED("hpds", tag_ << ": dropped the oldest queued frame: frames arrive faster than they are "
                                   "processed ("
                                       << overload_total << " so far, counted as overload; ros.queue_size "
                                       << config_.ros.queue_size << ")");
@@ -295,14 +301,14 @@ void HpdsServer::onCloud(const ros::MessageEvent<const sensor_msgs::PointCloud2>
     keep_up_->arrived(now);
     if (dropped) warning = keep_up_->dropped();
   }
-  if (!warning.empty()) ROS_WARN_STREAM_NAMED("hpds", warning);
+  if (!warning.empty()) ROS_WARN_STREAM_NAMED("hpds", tagged(warning));
 }
 
 void HpdsServer::onInternalError(std::size_t worker, const std::string &what) {
   // A bug or an exhausted resource must not take the node down with it; the frame is lost, counted and said so.
   processors_[worker]->countDrop(DropReason::InternalError);
   if (logAllowed("internal_error"))
-    ROS_ERROR_STREAM_NAMED("hpds", "hpds: frame dropped by an internal error ("
+    ROS_ERROR_STREAM_NAMED("hpds", tag_ << ": frame dropped by an internal error ("
                                        << statsSoFar(worker).dropped[int(DropReason::InternalError)]
                                        << " so far, counted as internal_error): " << what);
   takeSnapshot(worker, 0.0);
@@ -313,7 +319,7 @@ void HpdsServer::warnFieldNotCarriedOnce(const std::string &name) {
     std::lock_guard<std::mutex> lock(input_mutex_);
     if (!fields_not_carried_.insert(name).second) return;
   }
-  ROS_WARN_STREAM_NAMED("hpds", "hpds: input field '" << name << "' is not in the outputs: " << hpds::fieldNotCarriedReason(name)
+  ROS_WARN_STREAM_NAMED("hpds", tag_ << ": input field '" << name << "' is not in the outputs: " << hpds::fieldNotCarriedReason(name)
                                                       << "; rename the field in the input to keep it");
 }
 
@@ -360,7 +366,7 @@ void HpdsServer::handle(const sensor_msgs::PointCloud2::ConstPtr &msg, std::size
   const CloudError error = processor.check(*msg, &why);
   if (error != CloudError::None) {
     if (logAllowed(std::string("malformed ") + toString(error)))
-      ROS_ERROR_STREAM_NAMED("hpds", "hpds: dropped malformed PointCloud2 ("
+      ROS_ERROR_STREAM_NAMED("hpds", tag_ << ": dropped malformed PointCloud2 ("
                                          << toString(error) << ", " << statsSoFar(worker).malformedTotal()
                                          << " malformed so far): " << why);
   } else if (config_.hpds.mode == hpds::Mode::Scan && !wants.any()) {
@@ -377,7 +383,7 @@ void HpdsServer::handle(const sensor_msgs::PointCloud2::ConstPtr &msg, std::size
     if (!posed) {
       processor.countDrop(DropReason::NoTransform);
       if (logAllowed("no_transform"))
-        ROS_WARN_STREAM_NAMED("hpds", "hpds: dropped frame at "
+        ROS_WARN_STREAM_NAMED("hpds", tag_ << ": dropped frame at "
                                           << msg->header.stamp << ": no transform"
                                           << (target_frame_.empty() ? std::string()
                                                                     : " '" + msg->header.frame_id + "' -> '" +
@@ -389,9 +395,9 @@ void HpdsServer::handle(const sensor_msgs::PointCloud2::ConstPtr &msg, std::size
       //    pipeline counts the frames itself; several take the index of their frame in the stream.
       const std::uint32_t index = turns.takeIndex();
       if (processors_.size() > 1) processor.setNextFrameIndex(index);
-      if (sensorAtMapOrigin(config_, msg->header.frame_id))
-        ROS_WARN_STREAM_ONCE_NAMED(
-            "hpds", "hpds: clouds arrive in the fixed frame '"
+      if (sensorAtMapOrigin(config_, msg->header.frame_id) && !warned_sensor_at_origin_.exchange(true))
+        ROS_WARN_STREAM_NAMED(
+            "hpds", tag_ << ": clouds arrive in the fixed frame '"
                         << config_.ros.fixed_frame
                         << "' itself, so where the sensor was is unknown: it is taken as that frame's origin, which "
                            "normals face and map/evict_distance and input ranges measure from (far from it, each "
@@ -399,11 +405,11 @@ void HpdsServer::handle(const sensor_msgs::PointCloud2::ConstPtr &msg, std::size
       ProcessedFrame frame = processor.process(*msg, pose, wants, viewpoint);
       if (!frame.processed) {
         if (logAllowed(std::string("dropped ") + toString(frame.drop)))
-          ROS_ERROR_STREAM_NAMED("hpds", "hpds: dropped frame (" << toString(frame.drop) << ", " << count(frame.drop)
+          ROS_ERROR_STREAM_NAMED("hpds", tag_ << ": dropped frame (" << toString(frame.drop) << ", " << count(frame.drop)
                                                                  << " so far): " << frame.why);
       } else {
         if (frame.counters.out_of_range > 0 && logAllowed("out_of_range"))
-          ROS_WARN_STREAM_NAMED("hpds", "hpds: " << frame.counters.out_of_range << " of the frame's "
+          ROS_WARN_STREAM_NAMED("hpds", tag_ << ": " << frame.counters.out_of_range << " of the frame's "
                                                                 << frame.counters.input
                                                                 << " points lie beyond the exact key range of the "
                                                                    "finest level (|coordinate| / cell edge >= 2^30) "
@@ -418,7 +424,7 @@ void HpdsServer::handle(const sensor_msgs::PointCloud2::ConstPtr &msg, std::size
             config_.hpds.output.float32_xyz ? "the parameter output/float64_xyz true instead of output/float32_xyz true"
                                             : "the parameter output/float64_xyz true",
             frame.input_rounding);
-        if (!rounding.empty()) ROS_WARN_STREAM_ONCE_NAMED("hpds", "hpds: " << rounding);
+        if (!rounding.empty() && !warned_rounding_.exchange(true)) ROS_WARN_STREAM_NAMED("hpds", tag_ << ": " << rounding);
         turns.waitToPublish();
         publish(frame);
         seconds = frame.seconds;
@@ -436,7 +442,7 @@ void HpdsServer::checkKeepUp(double frame_seconds, double waited) {
     std::lock_guard<std::mutex> lock(keep_up_mutex_);
     warning = keep_up_->processed(frame_seconds, waited);
   }
-  if (!warning.empty()) ROS_WARN_STREAM_NAMED("hpds", warning);
+  if (!warning.empty()) ROS_WARN_STREAM_NAMED("hpds", tagged(warning));
 }
 
 void HpdsServer::publish(ProcessedFrame &frame) {
