@@ -170,7 +170,8 @@ int runReplay(const ReplayArgs &a) {
     } catch (const rosbag::BagException &e) {
       throw std::runtime_error("'" + a.output + "': " + e.what());
     }
-    for (const rosbag::MessageInstance &m : tf_view) out.write(m.getTopic(), m.getTime(), m);
+    // With each message's connection header: /tf_static must stay latched for `rosbag play` of the output.
+    for (const rosbag::MessageInstance &m : tf_view) out.write(m.getTopic(), m.getTime(), m, m.getConnectionHeader());
   }
 
   RunReport report = reportFor("replay", processor.pipeline());
