@@ -316,6 +316,11 @@ TEST(ConfigYaml, InvalidDocumentsNameTheKey) {
       {"hierarchy: {max_depth: abc}", "hierarchy.max_depth", "expected an integer, got 'abc'"},
       {"hierarchy: {max_depth: 3.5}", "hierarchy.max_depth", "expected an integer, got '3.5'"},
       {"hierarchy: {max_depth: 0x10}", "hierarchy.max_depth", "expected an integer"},
+      // a leading zero: octal to a YAML 1.1 reader (rosparam), so the node would read another number
+      {"output: {level: 010}", "output.level", "'010' has a leading zero"},
+      {"order: {seed: 007}", "order.seed", "leading zero"},
+      {"hierarchy: {cell_size: 010}", "hierarchy.cell_size", "leading zero"},
+      {"hierarchy: {max_depth: -05}", "hierarchy.max_depth", "leading zero"},
       {"hierarchy: {max_depth: 99999999999}", "hierarchy.max_depth", "out of range"},
       {"hierarchy: {cell_size: abc}", "hierarchy.cell_size", "expected a number, got 'abc'"},
       {"hierarchy: {cell_size: '4.0'}", "hierarchy.cell_size", "quoted string"},
@@ -359,6 +364,14 @@ TEST(ConfigYaml, InvalidDocumentsNameTheKey) {
     EXPECT_EQ(message.rfind(std::string(c.key) + ":", 0), 0u) << "yaml: " << c.yaml << "\nmessage: " << message;
     EXPECT_NE(message.find(c.detail), std::string::npos) << "yaml: " << c.yaml << "\nmessage: " << message;
   }
+  // With the cell derived from the spacing, the output level's cell is 2 S / sqrt(3) at any max_depth: the advice is
+  // the spacing alone; with a fixed cell, max_depth helps too.
+  for (const char *depth : {"8", "2"}) {
+    const std::string derived = loadError(std::string("output: {spacing: 1e-8}\nhierarchy: {max_depth: ") + depth + "}");
+    EXPECT_NE(derived.find("are needed); raise it"), std::string::npos) << derived;
+    EXPECT_EQ(derived.find("max_depth", derived.find("are needed")), std::string::npos) << derived;
+  }
+  EXPECT_NE(loadError("hierarchy: {cell_size: 1e-6}").find("raise it or lower hierarchy.max_depth"), std::string::npos);
   // A NUL byte (yaml-cpp reported what followed it as an "unknown escape character").
   const std::string nul("output:\n  spacing: 0.3\0garbage", 28);
   const std::string message = loadError(nul);

@@ -180,11 +180,15 @@ void validateConfig(const HpdsConfig &c) {
   // of key range and every output empty.
   const double finest_edge = cellEdge(resolveOutput(c).cell_size, c.hierarchy.max_depth);
   const double reach = (kMaxCellCoord - 8.0) * finest_edge;
-  if (!(reach >= kMinKeyReach))
-    fail(c.hierarchy.cell_size == 0.0 ? "output.spacing" : "hierarchy.cell_size",
+  if (!(reach >= kMinKeyReach)) {
+    // A derived cell makes the output level's cell 2 S / sqrt(3) whatever max_depth is: only the spacing helps.
+    const bool derived = c.hierarchy.cell_size == 0.0;
+    fail(derived ? "output.spacing" : "hierarchy.cell_size",
          "is too small: level " + std::to_string(c.hierarchy.max_depth) + " (hierarchy.max_depth) gets cells of " +
              metres(finest_edge) + ", whose exact keys reach only " + metres(reach) + " from the origin (at least " +
-             metres(kMinKeyReach) + " are needed); raise it or lower hierarchy.max_depth");
+             metres(kMinKeyReach) + " are needed); " +
+             (derived ? std::string("raise it") : std::string("raise it or lower hierarchy.max_depth")));
+  }
   validateNeighbourhoods(c);
 }
 

@@ -50,6 +50,14 @@ bool isDecimalNumber(std::string_view s) {
   return i == s.size();
 }
 
+// A YAML 1.1 reader (rosparam, PyYAML) takes 010 as octal 8 and 09 as a string: the same file would mean one number
+// to hpds and another to the node's parameter server. Refused like yes/no and quoted numbers.
+void refuseLeadingZero(std::string_view digits, std::string_view text, const std::string &key) {
+  if (digits.size() > 1 && digits[0] == '0')
+    fail(key, "'" + std::string(text) + "' has a leading zero, which YAML 1.1 readers (rosparam) take as an octal "
+                  "number; write it without the zero");
+}
+
 template <typename Int>
 Int parseInteger(std::string_view text, bool quoted, const std::string &key) {
   constexpr bool kUnsigned = std::is_unsigned_v<Int>;
@@ -61,6 +69,7 @@ Int parseInteger(std::string_view text, bool quoted, const std::string &key) {
   if (!kUnsigned && !digits.empty() && digits[0] == '-') digits.remove_prefix(1);
   if (digits.empty() || !std::all_of(digits.begin(), digits.end(), isDigit))
     fail(key, std::string("expected ") + expected + ", got '" + std::string(text) + "'");
+  refuseLeadingZero(digits, text, key);
   Int value{};
   const auto [end, ec] = std::from_chars(number.data(), number.data() + number.size(), value);
   if (ec == std::errc::result_out_of_range)
@@ -83,6 +92,7 @@ double parseNumber(std::string_view text, bool quoted, const std::string &key) {
     return negative ? -std::numeric_limits<double>::infinity() : std::numeric_limits<double>::infinity();
   if (text == ".nan" || text == ".NaN" || text == ".NAN") return std::numeric_limits<double>::quiet_NaN();
   if (!isDecimalNumber(text)) fail(key, "expected a number, got '" + std::string(text) + "'");
+  if (std::all_of(body.begin(), body.end(), isDigit)) refuseLeadingZero(body, text, key);
   double value = 0.0;
   const auto [end, ec] = std::from_chars(body.data(), body.data() + body.size(), value);
   if (ec == std::errc::result_out_of_range)
