@@ -344,6 +344,7 @@ TEST(Cli, BadInputGivesAClearErrorAndNonZeroExit) {
   { std::ofstream y(tmp / "bad.yaml"); y << "hierarchy:\n  cell_sise: 2\n"; }
   { std::ofstream y(tmp / "neg.yaml"); y << "hierarchy:\n  cell_size: -1\n"; }
   { std::ofstream y(tmp / "cov.yaml"); y << "normals:\n  enabled: false\n  covariances: true\n"; }
+  { std::ofstream y(tmp / "ros.yaml"); y << "ros:\n  queue_sise: 3\n"; }
   struct Case {
     std::string args;
     int code;
@@ -362,6 +363,8 @@ TEST(Cli, BadInputGivesAClearErrorAndNonZeroExit) {
       {shellQuote(tmp / "odd.bin") + out + " --cell-size nan", 1, "hierarchy.cell_size"},
       {shellQuote(tmp / "odd.bin") + out + " --order zigzag", 1, "zigzag"},
       {shellQuote(tmp / "odd.bin") + out + " --config " + shellQuote(tmp / "cov.yaml"), 1, "normals.covariances"},
+      // the node's own keys are checked as the node checks them: a file the CLI accepts, the node accepts
+      {shellQuote(tmp / "odd.bin") + out + " --config " + shellQuote(tmp / "ros.yaml"), 1, "ros.queue_sise: unknown key"},
       {shellQuote(tmp / "odd.bin"), 2, "output"},
   };
   for (const Case &c : cases) {

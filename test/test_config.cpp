@@ -174,7 +174,8 @@ TEST(ConfigYaml, DefaultYamlDocumentsEveryKey) {
     if (key.rfind("ros.", 0) == 0 || key == "diagnostic_period") continue;
     EXPECT_EQ(dumped.count(key), 1u) << key << " in config/hpds.yaml is not a key";
   }
-  EXPECT_EQ(hpds::loadConfigString("ros: {fixed_frame: odom, anything: 1}\n").hierarchy.cell_size, HpdsConfig{}.hierarchy.cell_size);
+  EXPECT_EQ(hpds::loadConfigString("ros: {fixed_frame: odom, queue_size: 3}\ndiagnostic_period: 0.5\n").hierarchy.cell_size,
+            HpdsConfig{}.hierarchy.cell_size);
   EXPECT_NE(loadError("ros: 3\n").find("ros: expected a map"), std::string::npos);
 }
 
@@ -376,6 +377,32 @@ TEST(ConfigYaml, InvalidDocumentsNameTheKey) {
   const std::string nul("output:\n  spacing: 0.3\0garbage", 28);
   const std::string message = loadError(nul);
   EXPECT_NE(message.find("NUL byte at line 2"), std::string::npos) << message;
+}
+
+// The ROS node's part of a config file is validated by every reader (loadConfig, applyConfigYaml, the CLI's
+// --config) exactly as the node validates it: a file that `hpds sample --config` accepts is never refused by the node.
+TEST(ConfigYaml, TheNodesKeysAreValidatedByEveryReader) {
+  const InvalidCase cases[] = {
+      {"ros: {queue_sise: 3}", "ros.queue_sise", "unknown key"},
+      {"ros: {queue_size: 0}", "ros.queue_size", "1..1000"},
+      {"ros: {publish_levels: [99]}", "ros.publish_levels", "outside 0..hierarchy.max_depth (8)"},
+      {"ros: {tf_timeout: '0.1'}", "ros.tf_timeout", "quoted string"},
+      {"ros: {tf_timeout: !!str 0.1}", "ros.tf_timeout", "YAML tag !!str"},
+      {"ros: {fixed_frame: !!str odom}", "ros.fixed_frame", "YAML tag !!str"},
+      {"ros: {load_map_on_start: true}", "ros.load_map_on_start", "needs mode: map"},
+      {"diagnostic_period: abc", "diagnostic_period", "expected a number"},
+      {"diagnostic_period: 0", "diagnostic_period", "(0, 3600]"},
+      {"fixed_frame: odom", "fixed_frame", "did you mean 'ros.fixed_frame'"},
+  };
+  for (const InvalidCase &c : cases) {
+    const std::string message = loadError(c.yaml);
+    EXPECT_EQ(message.rfind(std::string(c.key) + ":", 0), 0u) << "yaml: " << c.yaml << "\nmessage: " << message;
+    EXPECT_NE(message.find(c.detail), std::string::npos) << "yaml: " << c.yaml << "\nmessage: " << message;
+    HpdsConfig config;
+    EXPECT_THROW(hpds::applyConfigYaml(c.yaml, config), std::invalid_argument) << c.yaml;
+  }
+  // The node's keys are checked against the whole file's config: level 10 is fine at max_depth 12.
+  EXPECT_EQ(hpds::loadConfigString("hierarchy: {max_depth: 12}\nros: {publish_levels: [10]}\n").hierarchy.max_depth, 12);
 }
 
 TEST(ConfigYaml, FileErrorsNameThePath) {

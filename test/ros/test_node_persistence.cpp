@@ -344,16 +344,18 @@ TEST(NodePersistenceBusy, FramesKeepArrivingAndAreCountedWhileTheMapIsSaved) {
 TEST(NodeParameters, DiagnosticPeriodIsBounded) {
   const std::string ns = "/hpds_bad_period";
   ros::NodeHandle nh;
-  for (const auto &set : std::vector<std::function<void()>>{
-           [&] { ros::param::set(ns + "/diagnostic_period", 1e12); },
-           [&] { ros::param::set(ns + "/diagnostic_period", 0.0); },
-           [&] { ros::param::set(ns + "/diagnostic_period", std::string("often")); }}) {
+  const std::vector<std::pair<std::function<void()>, std::string>> cases = {
+      {[&] { ros::param::set(ns + "/diagnostic_period", 1e12); }, "must be a number of seconds in (0, 3600]"},
+      {[&] { ros::param::set(ns + "/diagnostic_period", 0.0); }, "must be a number of seconds in (0, 3600]"},
+      {[&] { ros::param::set(ns + "/diagnostic_period", std::string("often")); },
+       "expected a number, got the string parameter 'often'"}};
+  for (const auto &[set, message] : cases) {
     set();
     try {
       hpds_node::HpdsServer server(nh, ros::NodeHandle(ns), "hpds_bad_period");
       ADD_FAILURE() << "started with a bad diagnostic_period";
     } catch (const std::invalid_argument &e) {
-      EXPECT_TRUE(contains(e.what(), ns + "/diagnostic_period: must be a number of seconds in (0, 3600]")) << e.what();
+      EXPECT_TRUE(contains(e.what(), "parameter " + ns + "/diagnostic_period: " + message)) << e.what();
     }
   }
   ros::param::del(ns);

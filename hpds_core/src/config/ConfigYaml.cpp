@@ -1,4 +1,7 @@
 #include "hpds/config/ConfigYaml.hpp"
+
+#include "ConfigKeysYaml.hpp"
+#include "hpds/config/NodeConfig.hpp"
 #include "hpds/config/YamlScalar.hpp"
 
 #include <yaml-cpp/yaml.h>
@@ -308,7 +311,7 @@ bool hasContent(std::string_view text) {
   return false;
 }
 
-// Top-level section owned by the ROS node (hpds_node/NodeConfig); the core accepts it without reading it.
+// Top-level section owned by the ROS node: NodeConfig reads and validates it before the keys come here.
 constexpr const char *kRosSection = "ros";
 constexpr const char *kRosDiagnosticPeriod = "diagnostic_period";
 
@@ -325,12 +328,12 @@ void applyDocument(const YAML::Node &root, HpdsConfig &config) {
     }
     const YAML::Node &section = entry.second;
     if (name == kRosSection) {
-      // The ROS node's own settings (topics' frames, rates, queue): read and validated by hpds_node, which keeps
+      // The ROS node's own settings (topics' frames, rates, queue): read and validated by NodeConfig, which keeps
       // one file for the node and the CLI. Here only its shape is checked.
       if (!section.IsNull() && !section.IsMap()) fail(name, "expected a map of ros.* keys, got " + describe(section));
       continue;
     }
-    if (name == kRosDiagnosticPeriod) continue;  // the node's diagnostics period, validated by hpds_node
+    if (name == kRosDiagnosticPeriod) continue;  // the node's diagnostics period, validated by NodeConfig
     if (!isSection(name)) failUnknown(name);
     if (section.IsNull()) continue;  // a section whose keys are all commented out
     if (!section.IsMap()) fail(name, "expected a map of " + name + ".* keys, got " + describe(section));
@@ -347,7 +350,7 @@ void applyDocument(const YAML::Node &root, HpdsConfig &config) {
 
 }  // namespace
 
-void applyConfigYaml(const std::string &yaml_text, HpdsConfig &config, const std::string &source) {
+void applyConfigKeysYaml(const std::string &yaml_text, HpdsConfig &config, const std::string &source) {
   try {
     // yaml-cpp takes a few hundred bytes per node: a 6 MB sequence took 1.4 GB.
     if (yaml_text.size() > kMaxConfigBytes)
@@ -384,6 +387,14 @@ void applyConfigYaml(const std::string &yaml_text, HpdsConfig &config, const std
     if (source.empty()) throw;
     throw std::invalid_argument(std::string(e.what()) + " (in " + source + ")");
   }
+}
+
+void applyConfigYaml(const std::string &yaml_text, HpdsConfig &config, const std::string &source) {
+  // The whole file as the node reads it: its `ros:` section and diagnostic_period are validated, then dropped.
+  NodeConfig node;
+  node.hpds = config;
+  applyNodeConfigYaml(yaml_text, node, source);
+  config = node.hpds;
 }
 
 HpdsConfig loadConfigString(const std::string &yaml_text) {

@@ -1,65 +1,18 @@
-// Settings of the ROS node and `hpds replay`: the shared HpdsConfig plus the node-only RosConfig.
-//
-// Contract
-// - One YAML shape for every source: the keys of config/hpds.yaml (mode, hierarchy.*, ..., threads) at the top
-//   level, node-only keys under `ros:`. Private rosparams (~hierarchy/cell_size, ~ros/fixed_frame, ...) are turned
-//   into the same YAML and go through the same loader, so the node and the CLI accept and refuse the same values.
-// - HpdsConfig keys go through hpds::applyConfigYaml (strict: unknown keys, wrong types, quoted numbers are errors)
-//   and validateConfig; `ros:` keys are parsed here with the same strictness. Every error is std::invalid_argument
-//   starting with the dotted key ("ros.tf_timeout: ...", "hierarchy.max_depth: ...") and ending with
-//   " (in <source>)".
-// - Strong guarantee: on error the NodeConfig passed in is unchanged.
-// - Frame ids are stored without a leading '/', which tf2 refuses.
+// The node's settings: hpds::NodeConfig (hpds/config/NodeConfig.hpp), which lives in the core so that the CLI and
+// the library validate a config file's `ros:` section exactly as the node does. Names kept for the node's code.
 #pragma once
 
-#include <string>
-#include <vector>
-
-#include "hpds/config/Config.hpp"
+#include "hpds/config/NodeConfig.hpp"
 
 namespace hpds_node {
 
-struct RosConfig {
-  std::string fixed_frame = "map";  ///< map mode: frame of the persistent hierarchy and of every output
-  std::string output_frame;         ///< scan mode: publish in this frame (tf at the stamp); empty = input frame
-  /// The sensor's frame when clouds arrive in another one (registered clouds in the fixed frame, clouds in
-  /// base_link): its origin at the stamp is the viewpoint (normals face it, input ranges and map eviction measure
-  /// from it). Empty = the cloud's own frame.
-  std::string sensor_frame;
-  double tf_timeout = 0.1;          ///< [s] wall time to wait for a transform before dropping the frame, >= 0
-  double local_map_radius = 50.0;   ///< [m] map mode: ~local_map holds output-level samples within this of the sensor
-  double local_map_rate = 1.0;      ///< [Hz] map mode: ~local_map at most this often (frame stamps); 0 = never
-  std::vector<int> publish_levels;  ///< levels D that get their own ~level_<D> topic (samples of level D only)
-  int queue_size = 1;               ///< frames waiting to be processed; when full the oldest is dropped (counted)
-  // Map persistence (node only; `hpds replay` ignores these three).
-  std::string map_file;              ///< map mode: the file ~save_map writes and ~load_map reads
-  bool load_map_on_start = false;    ///< map mode: start from map_file (absent: empty map, warned; unreadable: no start)
-  bool save_map_on_shutdown = false;  ///< map mode: write the map to map_file when the node stops
-};
-
-struct NodeConfig {
-  hpds::HpdsConfig hpds;
-  RosConfig ros;
-};
-
-/// Top-level keys that belong to the node's namespace but not to the config, skipped by applyNodeConfigYaml:
-/// `config_file` (read by the node itself) and `diagnostic_period` (diagnostic_updater's), so that one YAML file
-/// serves `<rosparam load>`, ~config_file and `hpds replay --config` alike.
-[[nodiscard]] const std::vector<std::string> &nodeOnlyKeys();
-
-/// Overlays the YAML `yaml_text` (top-level config keys and an optional `ros:` map) onto `config` and validates
-/// the result (validateConfig + validateRosConfig).
-void applyNodeConfigYaml(const std::string &yaml_text, NodeConfig &config, const std::string &source);
-
-/// Reads a YAML file (same shape) over the defaults; errors name the path.
-[[nodiscard]] NodeConfig loadNodeConfigFile(const std::string &path);
-
-/// Throws std::invalid_argument naming the "ros.*" key for a bad value; publish_levels are checked against
-/// hierarchy.max_depth, fixed_frame must be set in map mode, load_map_on_start / save_map_on_shutdown need map mode
-/// and a non-empty map_file.
-void validateRosConfig(const RosConfig &ros, const hpds::HpdsConfig &config);
-
-/// The `ros:` section with every key, e.g. for documentation or for logging what the node runs with.
-[[nodiscard]] std::string dumpRosConfigYaml(const RosConfig &ros);
+using hpds::applyNodeConfigYaml;
+using hpds::checkDiagnosticPeriod;
+using hpds::dumpRosConfigYaml;
+using hpds::loadNodeConfigFile;
+using hpds::NodeConfig;
+using hpds::nodeOnlyKeys;
+using hpds::RosConfig;
+using hpds::validateRosConfig;
 
 }  // namespace hpds_node

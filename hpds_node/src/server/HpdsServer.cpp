@@ -28,10 +28,11 @@ double diagnosticPeriod(const ros::NodeHandle &pnh) {
   } else {
     period = NAN;
   }
-  if (!(std::isfinite(period) && period > 0.0 && period <= 3600.0))
-    throw std::invalid_argument("parameter " + pnh.getNamespace() +
-                                "/diagnostic_period: must be a number of seconds in (0, 3600]");
-  return period;
+  try {
+    return checkDiagnosticPeriod(period);  // the rule a config file's diagnostic_period is checked by
+  } catch (const std::invalid_argument &e) {
+    throw std::invalid_argument("parameter " + pnh.getNamespace() + "/" + e.what());
+  }
 }
 
 }  // namespace

@@ -3,9 +3,10 @@
 // Contract
 // - The YAML mirrors the struct: top-level `mode`, `threads` and one map per section
 //   (`hierarchy`, `order`, `output`, `normals`, `map`, `input`); enums are their toString() names.
-// - Strict: unknown keys, wrong types, quoted numbers and yes/no booleans are errors, never ignored. The one
-//   exception is the ROS node's own top-level keys (`ros:` map, `diagnostic_period`): read and validated by
-//   hpds_node, so that one file configures the node and the CLI alike.
+// - Strict: unknown keys, wrong types, quoted numbers, yes/no booleans and integers with a leading zero are errors,
+//   never ignored. The ROS node's own top-level keys (`ros:` map, `diagnostic_period`) are validated exactly as the
+//   node does (NodeConfig.hpp) and not kept, so that one file configures the node and the CLI alike and a file the
+//   CLI accepts is never refused by the node.
 // - Every error is std::invalid_argument whose message starts with the dotted key
 //   ("hierarchy.max_depth: expected an integer, got 'abc'"); errors with no key start with "(document)"
 //   (syntax errors, which carry yaml-cpp's line and column) or "config file '<path>'" (unreadable file).

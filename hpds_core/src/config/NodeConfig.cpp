@@ -1,4 +1,4 @@
-#include "hpds_node/NodeConfig.hpp"
+#include "hpds/config/NodeConfig.hpp"
 
 #include <yaml-cpp/yaml.h>
 
@@ -9,11 +9,12 @@
 #include <sstream>
 #include <stdexcept>
 
+#include "ConfigKeysYaml.hpp"
 #include "hpds/config/ConfigYaml.hpp"
 #include "hpds/io/HierarchyFile.hpp"
 #include "hpds/config/YamlScalar.hpp"
 
-namespace hpds_node {
+namespace hpds {
 
 namespace {
 
@@ -31,29 +32,40 @@ std::string describe(const YAML::Node &n) {
   return isQuoted(n) ? "the quoted string '" + n.Scalar() + "'" : "'" + n.Scalar() + "'";
 }
 
+// An explicit tag (!!str 0.1, !custom) would make the text mean something else to another YAML reader: refused, as
+// ConfigYaml refuses it for the other keys.
+void rejectTag(const YAML::Node &n, const std::string &key) {
+  const std::string &tag = n.Tag();
+  if (tag.empty() || tag == "?" || tag == "!") return;
+  const std::string shown = tag.rfind("tag:yaml.org,2002:", 0) == 0 ? "!!" + tag.substr(18) : tag;
+  fail(key, "has the YAML tag " + shown + "; config values are plain scalars (remove the tag)");
+}
+
 // Numbers, integers and booleans go through the core's one strict scalar parser, so the node accepts and refuses
 // the same text as a config file.
 const std::string &scalarText(const YAML::Node &n, const std::string &key, const char *expected) {
+  rejectTag(n, key);
   if (!n.IsScalar()) fail(key, std::string("expected ") + expected + ", got " + describe(n));
   return n.Scalar();
 }
 
 double parseNumber(const YAML::Node &n, const std::string &key) {
-  return hpds::yaml::parseNumber(scalarText(n, key, "a number"), isQuoted(n), key);
+  return yaml::parseNumber(scalarText(n, key, "a number"), isQuoted(n), key);
 }
 
 int parseInt(const YAML::Node &n, const std::string &key) {
-  return hpds::yaml::parseInt(scalarText(n, key, "an integer"), isQuoted(n), key);
+  return yaml::parseInt(scalarText(n, key, "an integer"), isQuoted(n), key);
 }
 
 std::string parseString(const YAML::Node &n, const std::string &key) {
+  rejectTag(n, key);
   if (n.IsNull()) return "";
   if (!n.IsScalar()) fail(key, "expected a string, got " + describe(n));
   return n.Scalar();
 }
 
 bool parseBool(const YAML::Node &n, const std::string &key) {
-  return hpds::yaml::parseBool(scalarText(n, key, "true or false"), isQuoted(n), key);
+  return yaml::parseBool(scalarText(n, key, "true or false"), isQuoted(n), key);
 }
 
 std::string parseFrameId(const YAML::Node &n, const std::string &key) {
@@ -117,9 +129,10 @@ void applyRosSection(const YAML::Node &section, RosConfig &ros) {
   }
 }
 
-// Re-emits a parsed node for hpds::applyConfigYaml, keeping quoted scalars quoted so that its "quoted numbers are
-// errors" rule still sees them.
+// Re-emits a parsed node for applyConfigKeysYaml, keeping quoted scalars quoted and explicit tags (verbatim), so that
+// its "quoted numbers are errors" and "tags are errors" rules still see them, naming the key.
 void emit(YAML::Emitter &out, const YAML::Node &n) {
+  if (const std::string &tag = n.Tag(); !tag.empty() && tag != "?" && tag != "!") out << YAML::VerbatimTag(tag);
   if (n.IsMap()) {
     out << YAML::BeginMap;
     for (const auto &item : n) {
@@ -141,7 +154,7 @@ void emit(YAML::Emitter &out, const YAML::Node &n) {
   }
 }
 
-std::string formatDouble(double v) { return hpds::yaml::formatNumber(v); }
+std::string formatDouble(double v) { return yaml::formatNumber(v); }
 
 std::string quoted(const std::string &s) {
   YAML::Emitter e;
@@ -151,7 +164,7 @@ std::string quoted(const std::string &s) {
 
 }  // namespace
 
-void validateRosConfig(const RosConfig &ros, const hpds::HpdsConfig &config) {
+void validateRosConfig(const RosConfig &ros, const HpdsConfig &config) {
   // Upper bounds: a wait, radius or rate beyond them is a typo, and tf_timeout must fit ros::WallDuration.
   if (!std::isfinite(ros.tf_timeout) || ros.tf_timeout < 0.0 || ros.tf_timeout > 60.0)
     fail("ros.tf_timeout", "must be in 0..60 [s], got " + formatDouble(ros.tf_timeout));
@@ -169,17 +182,23 @@ void validateRosConfig(const RosConfig &ros, const hpds::HpdsConfig &config) {
     if (std::find(ros.publish_levels.begin(), ros.publish_levels.begin() + i, d) != ros.publish_levels.begin() + i)
       fail("ros.publish_levels", "level " + std::to_string(d) + " is listed twice");
   }
-  if (config.mode == hpds::Mode::Map && ros.fixed_frame.empty())
+  if (config.mode == Mode::Map && ros.fixed_frame.empty())
     fail("ros.fixed_frame", "must be set in map mode (the frame the map is built in)");
   if (ros.map_file.find('\0') != std::string::npos) fail("ros.map_file", "contains a NUL character");
-  if (hpds::isOtherFormatName(ros.map_file))
+  if (isOtherFormatName(ros.map_file))
     fail("ros.map_file", "'" + ros.map_file + "' has the extension of another format; name the map e.g. map.hpdsmap");
   for (const auto &[key, on] : {std::pair<const char *, bool>{"ros.load_map_on_start", ros.load_map_on_start},
                                 {"ros.save_map_on_shutdown", ros.save_map_on_shutdown}}) {
     if (!on) continue;
-    if (config.mode != hpds::Mode::Map) fail(key, "needs mode: map (scan mode keeps no map)");
+    if (config.mode != Mode::Map) fail(key, "needs mode: map (scan mode keeps no map)");
     if (ros.map_file.empty()) fail(key, "needs ros.map_file (the path of the map file) to be set");
   }
+}
+
+double checkDiagnosticPeriod(double period) {
+  if (!(std::isfinite(period) && period > 0.0 && period <= 3600.0))
+    fail("diagnostic_period", "must be a number of seconds in (0, 3600], got " + formatDouble(period));
+  return period;
 }
 
 const std::vector<std::string> &nodeOnlyKeys() {
@@ -190,21 +209,27 @@ const std::vector<std::string> &nodeOnlyKeys() {
 void applyNodeConfigYaml(const std::string &yaml_text, NodeConfig &config, const std::string &source) {
   const std::vector<std::string> &ignored_keys = nodeOnlyKeys();
   const std::string suffix = source.empty() ? "" : " (in " + source + ")";
-  if (yaml_text.size() > hpds::kMaxConfigBytes)
+  if (yaml_text.size() > kMaxConfigBytes)
     throw std::invalid_argument("(document): " + std::to_string(yaml_text.size()) + " bytes, more than the " +
-                                std::to_string(hpds::kMaxConfigBytes) + " a config may have" + suffix);
+                                std::to_string(kMaxConfigBytes) + " a config may have" + suffix);
+  try {
+    // The whole text through the shared loader first, for the document's own errors, worded as the CLI words them
+    // (syntax, NUL bytes, several documents, of which Load below would read the first only). Errors of single keys
+    // come from the pass below, which knows the node's keys.
+    HpdsConfig scratch = config.hpds;
+    applyConfigKeysYaml(yaml_text, scratch, source);
+  } catch (const std::invalid_argument &e) {
+    if (std::string(e.what()).rfind("(document)", 0) == 0) throw;
+  }
   YAML::Node root;
   try {
     root = YAML::Load(yaml_text);
   } catch (const YAML::Exception &) {
-    // Let the shared loader word the syntax error exactly as the CLI does.
-    hpds::HpdsConfig scratch = config.hpds;
-    hpds::applyConfigYaml(yaml_text, scratch, source);
     throw std::invalid_argument("(document): YAML syntax error" + suffix);
   }
   NodeConfig result = config;
   if (!root.IsMap()) {
-    hpds::applyConfigYaml(yaml_text, result.hpds, source);  // empty document: defaults; anything else: its error
+    applyConfigKeysYaml(yaml_text, result.hpds, source);  // empty document: defaults; anything else: its error
   } else {
     YAML::Node rest(YAML::NodeType::Map);
     try {
@@ -223,6 +248,8 @@ void applyNodeConfigYaml(const std::string &yaml_text, NodeConfig &config, const
           fail(name, "expected a map of input.* keys (skip_zero_points, min_range, max_range), got '" +
                          entry.second.Scalar() + "': the topic is not a parameter, remap it: ~input:=" +
                          entry.second.Scalar());
+        } else if (name == "diagnostic_period") {
+          checkDiagnosticPeriod(parseNumber(entry.second, name));
         } else if (std::find(ignored_keys.begin(), ignored_keys.end(), name) == ignored_keys.end()) {
           rest[entry.first] = entry.second;
         }
@@ -232,7 +259,7 @@ void applyNodeConfigYaml(const std::string &yaml_text, NodeConfig &config, const
     }
     YAML::Emitter out;
     emit(out, rest);
-    hpds::applyConfigYaml(rest.size() ? std::string(out.c_str()) : std::string(), result.hpds, source);
+    applyConfigKeysYaml(rest.size() ? std::string(out.c_str()) : std::string(), result.hpds, source);
   }
   try {
     validateRosConfig(result.ros, result.hpds);
@@ -244,7 +271,7 @@ void applyNodeConfigYaml(const std::string &yaml_text, NodeConfig &config, const
 
 NodeConfig loadNodeConfigFile(const std::string &path) {
   NodeConfig config;
-  applyNodeConfigYaml(hpds::readConfigFile(path), config, path);
+  applyNodeConfigYaml(readConfigFile(path), config, path);
   return config;
 }
 
@@ -267,4 +294,4 @@ std::string dumpRosConfigYaml(const RosConfig &ros) {
   return s.str();
 }
 
-}  // namespace hpds_node
+}  // namespace hpds
