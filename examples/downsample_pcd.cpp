@@ -3,16 +3,37 @@
 // The PCL call keeps every field of the input points; the plain call gives indices into the input. Both must agree.
 #include <pcl/PCLPointCloud2.h>
 #include <pcl/common/io.h>
+#include <pcl/conversions.h>
 #include <pcl/io/pcd_io.h>
 #include <pcl/point_types.h>
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
+#include <cstring>
 #include <filesystem>
 #include <iostream>
 
 #include <hpds/hpds.hpp>
 #include <hpds/pcl.hpp>
+
+// One value of a PCL field of any numeric type, as float.
+float fieldAsFloat(const std::uint8_t *p, std::uint8_t datatype) {
+  auto as = [p](auto v) {
+    std::memcpy(&v, p, sizeof v);
+    return static_cast<float>(v);
+  };
+  switch (datatype) {
+    case pcl::PCLPointField::INT8: return as(std::int8_t{});
+    case pcl::PCLPointField::UINT8: return as(std::uint8_t{});
+    case pcl::PCLPointField::INT16: return as(std::int16_t{});
+    case pcl::PCLPointField::UINT16: return as(std::uint16_t{});
+    case pcl::PCLPointField::INT32: return as(std::int32_t{});
+    case pcl::PCLPointField::UINT32: return as(std::uint32_t{});
+    case pcl::PCLPointField::FLOAT64: return as(double{});
+    default: return as(float{});
+  }
+}
 
 int main(int argc, char **argv) {
   if (argc < 3 || argc > 4) {
@@ -29,27 +50,22 @@ int main(int argc, char **argv) {
   try {
     const hpds::HpdsConfig config = argc == 4 ? hpds::loadConfig(argv[3]) : hpds::HpdsConfig{};
 
-    // Files without intensity are read as x y z (intensity 0): loading them straight into PointXYZI works too, but
-    // PCL then warns about the missing field on every file.
-    pcl::PCLPointCloud2 header;
-    pcl::PCDReader reader;
-    if (reader.readHeader(in.string(), header) != 0) {
+    // x y z through PCL's conversion; intensity by hand, whatever its type: drivers write uint8 (Velodyne's VLP-16),
+    // uint16 or float, and PCL converts a field into PointXYZI only from float32 (otherwise it leaves 0 and warns).
+    pcl::PCLPointCloud2 blob;
+    if (pcl::io::loadPCDFile(in.string(), blob) != 0) {
       std::cerr << "downsample_pcd: cannot read " << in << "\n";
       return 1;
     }
+    pcl::PointCloud<pcl::PointXYZ> xyz_cloud;
+    pcl::fromPCLPointCloud2(blob, xyz_cloud);
     pcl::PointCloud<pcl::PointXYZI> cloud;
-    int read = 0;
-    if (pcl::getFieldIndex(header, "intensity") >= 0) {
-      read = reader.read(in.string(), cloud);
-    } else {
-      pcl::PointCloud<pcl::PointXYZ> xyz_only;
-      read = reader.read(in.string(), xyz_only);
-      pcl::copyPointCloud(xyz_only, cloud);
-    }
-    if (read != 0) {
-      std::cerr << "downsample_pcd: cannot read " << in << "\n";
-      return 1;
-    }
+    pcl::copyPointCloud(xyz_cloud, cloud);
+    if (const int f = pcl::getFieldIndex(blob, "intensity"); f >= 0)
+      for (std::size_t i = 0; i < cloud.size(); ++i) {
+        const std::size_t at = (i / blob.width) * blob.row_step + (i % blob.width) * blob.point_step;
+        cloud[i].intensity = fieldAsFloat(&blob.data[at + blob.fields[f].offset], blob.fields[f].datatype);
+      }
 
     // 1. The PCL call: real input points with every field, and their normals in the same order.
     pcl::PointCloud<pcl::Normal> normals;
