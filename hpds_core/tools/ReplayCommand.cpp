@@ -10,6 +10,7 @@
 #include <filesystem>
 #include <fstream>
 #include <iostream>
+#include <map>
 #include <optional>
 #include <set>
 #include <sstream>
@@ -112,14 +113,14 @@ std::string messagesJson(const hpds_node::ProcessorStats &s, std::uint64_t wrong
 }
 
 std::string messageSummary(std::size_t messages, const std::string &topic, const hpds_node::ProcessorStats &s,
-                           std::uint64_t wrong_type, const std::string &target) {
+                           std::uint64_t wrong_type, const std::string &target, bool map_mode) {
   std::ostringstream m;
   m << messages << " on " << topic << ", " << s.processed << " processed, " << s.malformedTotal() << " malformed, ";
-  // Only map mode looks transforms up and keeps a map's fields (its target frame is then never empty): a scan-mode
-  // summary naming an empty frame would read as a misconfiguration.
+  // Transforms are looked up only toward a target frame (map mode's fixed frame, scan mode's --output-frame), and
+  // only a map has fields of its own: a summary naming what the run never did would read as a misconfiguration.
   if (!target.empty())
-    m << s.dropped[int(hpds_node::DropReason::NoTransform)] << " without transform to '" << target << "', "
-      << s.dropped[int(hpds_node::DropReason::LayoutChanged)] << " with other fields than the map, ";
+    m << s.dropped[int(hpds_node::DropReason::NoTransform)] << " without transform to '" << target << "', ";
+  if (map_mode) m << s.dropped[int(hpds_node::DropReason::LayoutChanged)] << " with other fields than the map, ";
   m << wrong_type << " not PointCloud2";
   if (const std::uint64_t lost = s.dropped[int(hpds_node::DropReason::LostUpstream)])
     m << ", " << lost << " missing from the recording (gaps in header.seq)";
@@ -175,6 +176,7 @@ int runReplay(const ReplayArgs &a) {
   }
 
   RunReport report = reportFor("replay", processor.pipeline());
+  std::map<std::string, std::uint32_t> next_seq;  // per output topic
   PointBuffer ply;
   std::uint64_t wrong_type = 0;
   hpds_node::SequenceGaps gaps;
@@ -217,11 +219,15 @@ int runReplay(const ReplayArgs &a) {
     // 3. Outputs.
     const auto t_write = std::chrono::steady_clock::now();
     if (to_bag) {
-      if (frame.has_output) out.write(a.ns + "/output", m.getTime(), frame.output);
-      if (frame.has_new_samples) out.write(a.ns + "/new_samples", m.getTime(), frame.new_samples);
-      if (frame.has_local_map) out.write(a.ns + "/local_map", m.getTime(), frame.local_map);
-      for (const auto &[level, cloud] : frame.levels)
-        out.write(a.ns + "/level_" + std::to_string(level), m.getTime(), cloud);
+      // header.seq counts each topic's messages from 0, as roscpp numbers the live node's.
+      const auto write = [&](const std::string &topic, sensor_msgs::PointCloud2 &cloud) {
+        cloud.header.seq = next_seq[topic]++;
+        out.write(topic, m.getTime(), cloud);
+      };
+      if (frame.has_output) write(a.ns + "/output", frame.output);
+      if (frame.has_new_samples) write(a.ns + "/new_samples", frame.new_samples);
+      if (frame.has_local_map) write(a.ns + "/local_map", frame.local_map);
+      for (auto &[level, cloud] : frame.levels) write(a.ns + "/level_" + std::to_string(level), cloud);
     } else if (scan && frame.has_output) {
       PointBuffer part;
       if (hpds_node::fromRosCloud(frame.output, part) != hpds_node::CloudError::None)
@@ -238,7 +244,7 @@ int runReplay(const ReplayArgs &a) {
   const hpds_node::ProcessorStats &s = processor.stats();
   if (s.processed == 0) {
     // Nothing to write: an existing output stays as it is (the temporary bag is removed).
-    throw std::runtime_error("no frame processed: " + messageSummary(clouds.size(), a.topic, s, wrong_type, target) +
+    throw std::runtime_error("no frame processed: " + messageSummary(clouds.size(), a.topic, s, wrong_type, target, !scan) +
                              "; nothing written");
   }
   const hpds::Pipeline &pipeline = processor.pipeline();
@@ -277,7 +283,7 @@ int runReplay(const ReplayArgs &a) {
   if (stats_file) stats_file->commit();
 
   std::cout << levelSummary(report);
-  std::cout << "messages: " << messageSummary(clouds.size(), a.topic, s, wrong_type, target) << "\n";
+  std::cout << "messages: " << messageSummary(clouds.size(), a.topic, s, wrong_type, target, !scan) << "\n";
   std::cout << "wrote " << a.output << "\n";
   if (!to_bag) {
     const std::string rounding = roundingWarning(ply, report.output_radius, config.hpds.output, input_rounding);

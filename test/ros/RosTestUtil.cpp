@@ -129,6 +129,7 @@ DiagnosticsReader::DiagnosticsReader(ros::NodeHandle &nh, const std::string &nod
           if (status.name.find(node_name_) == std::string::npos) continue;
           std::lock_guard<std::mutex> lock(mutex_);
           for (const auto &kv : status.values) values_[kv.key] = kv.value;
+          hardware_id_ = status.hardware_id;
           highest_level_ = std::max(highest_level_, int(status.level));
           ++updates_;
         }
@@ -144,6 +145,11 @@ double DiagnosticsReader::value(const std::string &key) const {
 int DiagnosticsReader::highestLevel() const {
   std::lock_guard<std::mutex> lock(mutex_);
   return highest_level_;
+}
+
+std::string DiagnosticsReader::hardwareId() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return hardware_id_;
 }
 
 std::size_t DiagnosticsReader::updates() const {

@@ -99,6 +99,8 @@ class DiagnosticsReader {
   /// Value of `key` as a number, or -1 when not reported yet.
   double value(const std::string &key) const;
   std::size_t updates() const;
+  /// hardware_id of the latest status.
+  std::string hardwareId() const;
   /// The highest level (diagnostic_msgs::DiagnosticStatus::OK, WARN, ERROR) of any status seen, -1 before the first.
   int highestLevel() const;
 
@@ -107,6 +109,7 @@ class DiagnosticsReader {
   ros::Subscriber sub_;
   mutable std::mutex mutex_;
   std::map<std::string, std::string> values_;
+  std::string hardware_id_;
   std::size_t updates_ = 0;
   int highest_level_ = -1;
 };

@@ -26,6 +26,13 @@ def latching(path):
 inp, out = latching(sys.argv[1]), latching(sys.argv[2])
 assert inp == ["1"], "input /tf_static latching: %s" % inp
 assert out == inp, "output /tf_static latching %s, input %s" % (out, inp)
+# Each output topic numbers its messages from 0, as roscpp numbers the live node's (all were 0).
+with rosbag.Bag(sys.argv[2]) as b:
+    seqs = {}
+    for topic, msg, _ in b.read_messages():
+        if msg._type == "sensor_msgs/PointCloud2":
+            seqs.setdefault(topic, []).append(msg.header.seq)
+assert seqs and all(v == list(range(len(v))) for v in seqs.values()), "header.seq per topic: %s" % seqs
 PY
 "$hpds" replay "$work/input.bag" "${common[@]}" -o "$work/map1.ply" > /dev/null
 "$hpds" replay "$work/input.bag" "${common[@]}" -o "$work/map2.ply" --threads 2 > /dev/null
@@ -47,6 +54,10 @@ grep -q "clouds arrive in the fixed frame 'velodyne' itself" "$work/fixed.log" |
 # Scan mode looks no transform up: its summary names no target frame.
 grep -q "^messages: .* 6 processed" "$work/scan.log" || { cat "$work/scan.log"; exit 1; }
 grep -q "without transform" "$work/scan.log" && { echo "scan-mode summary names a transform"; cat "$work/scan.log"; exit 1; }
+# With --output-frame it looks transforms up, and says so, but keeps no map.
+"$hpds" replay "$work/input.bag" "${common[@]}" --mode scan --output-frame velodyne -o "$work/scan_of.ply" > "$work/scan_of.log"
+grep -q "0 without transform to 'velodyne'" "$work/scan_of.log" || { cat "$work/scan_of.log"; exit 1; }
+grep -q "other fields than the map" "$work/scan_of.log" && { echo "scan-mode summary names a map"; cat "$work/scan_of.log"; exit 1; }
 # Its frames stay apart in the one PLY (the field `frame`, as `hpds sample` writes for several frames): each verifies
 # on its own at the config's cell (4 m); without the field the frames read as one sampling, full of violations.
 head -c 2000 "$work/scan.ply" | grep -aq "^property uint frame$" || { echo "scan-mode PLY without a frame field"; exit 1; }

@@ -1,6 +1,7 @@
 // rostest node: two hpds nodelets in one manager (a front and a rear lidar) are two instances in every respect their
 // users see: each says its own once-only warnings (ROS_*_ONCE's flag is one per process, so the second instance
-// stayed silent), and every line names the instance it comes from (both log through the manager's node name).
+// stayed silent), every line names the instance it comes from (both log through the manager's node name), and
+// each one's diagnostics name its sensor (hardware_id: the input topic; it was "none").
 #include <gtest/gtest.h>
 
 #include <cstring>
@@ -73,6 +74,12 @@ TEST(NodeInstances, EachNodeletWarnsForItselfAndEveryLineNamesIt) {
       30.0))
       << logs.dump();
   EXPECT_FALSE(logs.has(rosgraph_msgs::Log::ERROR, {"hpds /hpds_front: dropped malformed"})) << logs.dump();
+  // Their diagnostics name the sensor each serves: the input topic is the hardware id.
+  for (const std::string &name : names) {
+    hpds_test::DiagnosticsReader diagnostics(nh, name);
+    ASSERT_TRUE(hpds_test::waitFor([&] { return diagnostics.updates() > 0; }, 30.0)) << name << ": no diagnostics";
+    EXPECT_EQ(diagnostics.hardwareId(), "/" + name + "_points");
+  }
 }
 
 }  // namespace

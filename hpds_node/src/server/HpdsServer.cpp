@@ -69,7 +69,9 @@ HpdsServer::HpdsServer(ros::NodeHandle nh, ros::NodeHandle private_nh, const std
   for (int d : config_.ros.publish_levels)
     pub_levels_.push_back(pnh_.advertise<sensor_msgs::PointCloud2>("level_" + std::to_string(d), 4));
 
-  updater_.setHardwareID("none");
+  // The sensor this instance serves, by its input topic: with several instances, what tells their statuses apart
+  // besides the node name.
+  updater_.setHardwareID(pnh_.resolveName("input"));
   updater_.add("processing", this, &HpdsServer::diagnose);
   window_start_ = ros::WallTime::now();
   // Reported on a wall-clock timer: the updater's own rate limit runs on ROS time, which stops with a bag under
