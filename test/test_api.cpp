@@ -7,6 +7,7 @@
 #include <limits>
 #include <set>
 #include <stdexcept>
+#include <thread>
 
 #include "TestData.hpp"
 #include "hpds/config/ConfigYaml.hpp"
@@ -212,6 +213,72 @@ TEST(Downsample, SameInputAndSeedSameSamplesWhateverTheThreads) {
     for (int k = 0; k < 3; ++k)
       EXPECT_TRUE(a.normal[i][k] == b.normal[i][k] || (std::isnan(a.normal[i][k]) && std::isnan(b.normal[i][k])));
   EXPECT_NE(a.index, c.index);
+}
+
+// The header's contract: concurrent calls are safe (no state shared between calls). Several callers at once, each
+// with two threads of its own, get the samples of one call alone (`make test-tsan` watches them for races).
+TEST(Downsample, CallsFromSeveralThreadsAtOnceGiveTheSameSamples) {
+  const std::vector<Eigen::Vector3f> points = xyzOf(syntheticFrame().frame.points);
+  HpdsConfig config = withNormals();
+  config.threads = 2;
+  const Samples expected = downsample(points, config);
+  std::vector<Samples> got(4);
+  std::vector<std::thread> callers;
+  for (Samples &s : got) callers.emplace_back([&] { s = downsample(points, config); });
+  for (std::thread &t : callers) t.join();
+  for (const Samples &s : got) {
+    EXPECT_EQ(s.index, expected.index);
+    EXPECT_EQ(s.level, expected.level);
+    ASSERT_EQ(s.normal.size(), expected.normal.size());
+    for (std::size_t i = 0; i < s.size(); ++i)
+      for (int k = 0; k < 3; ++k)
+        EXPECT_TRUE(s.normal[i][k] == expected.normal[i][k] ||
+                    (std::isnan(s.normal[i][k]) && std::isnan(expected.normal[i][k])));
+  }
+}
+
+// Georeferenced points (a UTM northing of 4e6 m, where float32 keeps 0.25 m) through the double-precision call: the
+// guarantees hold on the float64 positions by brute force (spacing and coverage), a leading no-return (0,0,0) changes
+// nothing, and the sampling is that of the same cloud at the origin (the offset is a whole number of level-0 cells),
+// up to near-ties that double rounding at 4e6 m decides otherwise.
+TEST(Downsample, DoublesKeepTheGuaranteesAtGeoreferencedCoordinates) {
+  const std::vector<Eigen::Vector3f> local32 = xyzOf(syntheticFrame().frame.points);
+  HpdsConfig config;
+  config.normals.enabled = false;
+  const HpdsConfig resolved = resolvedConfig(config);
+  const double cell = resolved.hierarchy.cell_size, r = poissonRadius(cell, resolved.output.level);
+  const Eigen::Vector3d offset = (Eigen::Vector3d(5.0e5, 4.0e6, 30.0) / cell).array().round() * cell;
+  std::vector<Eigen::Vector3d> local, geo;
+  for (const Eigen::Vector3f &p : local32) {
+    if (!p.allFinite() || p.isZero(0.0)) continue;
+    local.push_back(p.cast<double>());
+    geo.push_back(p.cast<double>() + offset);
+  }
+  const Samples at_origin = downsampleDoubles(local, config);
+  const Samples far = downsampleDoubles(geo, config);
+  EXPECT_NEAR(double(far.size()), double(at_origin.size()), 0.01 * double(at_origin.size()));
+  for (std::size_t i = 0; i < far.size(); ++i)
+    for (std::size_t j = i + 1; j < far.size(); ++j)
+      ASSERT_GE((geo[far.index[i]] - geo[far.index[j]]).norm(), r * (1 - 1e-9)) << i << " " << j;
+  for (const Eigen::Vector3d &p : geo) {
+    double nearest = INFINITY;
+    for (std::uint32_t k : far.index) nearest = std::min(nearest, (geo[k] - p).norm());
+    ASSERT_LE(nearest, 2 * r * (1 + 1e-9));
+  }
+  std::vector<Eigen::Vector3d> with_zero = geo;
+  with_zero.insert(with_zero.begin(), Eigen::Vector3d::Zero());
+  const Samples led = downsampleDoubles(with_zero, config);
+  ASSERT_EQ(led.size(), far.size());
+  for (std::size_t i = 0; i < led.size(); ++i) EXPECT_EQ(led.index[i], far.index[i] + 1);
+  // The float32 call on the same cloud cannot keep them: it is what the double call is for.
+  std::vector<Eigen::Vector3f> geo32;
+  for (const Eigen::Vector3d &p : geo) geo32.push_back(p.cast<float>());
+  const Samples rounded = downsample(geo32, config);
+  double closest = INFINITY;
+  for (std::size_t i = 0; i < rounded.size(); ++i)
+    for (std::size_t j = i + 1; j < rounded.size(); ++j)
+      closest = std::min(closest, (geo[rounded.index[i]] - geo[rounded.index[j]]).norm());
+  EXPECT_LT(closest, r);
 }
 
 TEST(Downsample, BadConfigIsAnErrorNamingTheKey) {

@@ -35,11 +35,9 @@ def _config_source(config):
 def downsample(points, config=None, viewpoint=None):
     """Downsamples one point cloud to an additive Poisson-disk hierarchy.
 
-    points: (N, 3) NumPy array of float32 or float64 (float64 is rounded to float32, as the C++ API stores points;
-        where that would round by more than 1 % of the output radius, as georeferenced coordinates do, the points
-        are first moved to a local origin a whole number of level-0 cells away, which changes no sample, unless
-        input.min_range/max_range are set: then a UserWarning says so), in the sensor frame (metres; normals face
-        the origin, or `viewpoint`). NaN/Inf points, exact (0,0,0) no-returns and points outside
+    points: (N, 3) NumPy array of float32 or float64 (float64 is sampled at full precision, as `hpds sample` samples
+        a file with float64 x y z: georeferenced coordinates keep their guarantees), in the sensor frame (metres;
+        normals face the origin, or `viewpoint`). NaN/Inf points, exact (0,0,0) no-returns and points outside
         input.min_range/max_range are skipped.
     config: None (the defaults), a dict in config/hpds.yaml's layout (missing keys keep their defaults), or the path
         of a YAML file in that layout.

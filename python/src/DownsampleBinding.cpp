@@ -9,7 +9,6 @@
 
 #include "Bindings.hpp"
 #include "hpds/hpds.hpp"
-#include "hpds/pipeline/OutputCloud.hpp"
 
 namespace py = pybind11;
 
@@ -23,19 +22,15 @@ std::string shapeText(const py::array &a) {
   return s + (a.ndim() == 1 ? ",)" : ")");
 }
 
-/// The points as the C++ API takes them (float32), and the translation they were given on the way.
+/// The points as the C++ API takes them: float32 arrays as Eigen::Vector3f, float64 ones as Eigen::Vector3d, which
+/// the API samples at full precision (georeferenced coordinates: float32 keeps only 0.5 m at 5e6 m).
 struct ApiPoints {
-  std::vector<Eigen::Vector3f> points;
-  Eigen::Vector3d shift = Eigen::Vector3d::Zero();  ///< subtracted from every point (and so from the viewpoint)
+  std::vector<Eigen::Vector3f> f32;
+  std::vector<Eigen::Vector3d> f64;
+  bool is_f64 = false;
 };
 
-/// float64 coordinates are rounded to float32, as the C++ API's Eigen::Vector3f stores them. Far from the origin
-/// (georeferenced: a UTM northing of 5e6 m rounds by 0.3 m) that breaks the sampling's guarantees, so where the
-/// rounding would exceed 1 % of the output radius the points are first moved by an origin near them: a whole number
-/// of level-0 cells, so that every level's cells, and with them the sampling, stay where they were. Samples are
-/// named by index and normals do not change under a translation, so nothing else shows it. The range limits measure
-/// from the sensor at the origin, so with those set the points cannot move: a UserWarning says what is lost.
-ApiPoints pointsFrom(const py::handle &object, const HpdsConfig &config) {
+ApiPoints pointsFrom(const py::handle &object) {
   if (!py::isinstance<py::array>(object))
     throw py::type_error("points: expected an (N, 3) NumPy array of float32 or float64, got " +
                          std::string(py::str(py::type::of(object).attr("__name__"))));
@@ -52,39 +47,15 @@ ApiPoints pointsFrom(const py::handle &object, const HpdsConfig &config) {
   if (dtype.itemsize() == 8) {
     const auto f64 = py::array_t<double, py::array::c_style | py::array::forcecast>::ensure(array);
     if (!f64) throw py::error_already_set();
-    const std::size_t n = static_cast<std::size_t>(f64.shape(0));
-    const double *p = f64.data();
-    double largest = 0.0;
-    const double *first = nullptr;
-    for (std::size_t i = 0; i < n; ++i) {
-      const double *q = p + 3 * i;
-      if (!(std::isfinite(q[0]) && std::isfinite(q[1]) && std::isfinite(q[2]))) continue;
-      if (!first) first = q;
-      largest = std::max({largest, std::fabs(q[0]), std::fabs(q[1]), std::fabs(q[2])});
-    }
-    const OutputResolution res = resolveOutput(config);
-    const double rounding = std::ldexp(largest, -24);
-    if (roundingMatters(rounding, res.radius)) {
-      if (config.input.min_range > 0.0 || config.input.max_range > 0.0) {
-        const std::string text = "hpds.downsample: float32 rounds these float64 points by up to " +
-                                 std::to_string(rounding) + " m, more than 1 % of the output radius " +
-                                 std::to_string(res.radius) +
-                                 " m, and input.min_range/max_range keep them from being moved to a local origin: "
-                                 "samples may come out closer than the radius; pass sensor-frame points";
-        if (PyErr_WarnEx(PyExc_UserWarning, text.c_str(), 1) != 0) throw py::error_already_set();
-      } else {
-        for (int a = 0; a < 3; ++a) out.shift[a] = std::floor(first[a] / res.cell_size) * res.cell_size;
-      }
-    }
-    out.points.resize(n);
-    for (std::size_t i = 0; i < n; ++i)
-      for (int a = 0; a < 3; ++a) out.points[i][a] = static_cast<float>(p[3 * i + a] - out.shift[a]);
+    out.is_f64 = true;
+    out.f64.resize(static_cast<std::size_t>(f64.shape(0)));
+    if (!out.f64.empty()) std::memcpy(out.f64[0].data(), f64.data(), out.f64.size() * sizeof(Eigen::Vector3d));
     return out;
   }
   const auto f32 = py::array_t<float, py::array::c_style | py::array::forcecast>::ensure(array);
   if (!f32) throw py::error_already_set();
-  out.points.resize(static_cast<std::size_t>(f32.shape(0)));
-  if (!out.points.empty()) std::memcpy(out.points[0].data(), f32.data(), out.points.size() * sizeof(Eigen::Vector3f));
+  out.f32.resize(static_cast<std::size_t>(f32.shape(0)));
+  if (!out.f32.empty()) std::memcpy(out.f32[0].data(), f32.data(), out.f32.size() * sizeof(Eigen::Vector3f));
   return out;
 }
 
@@ -99,19 +70,20 @@ py::array_t<T> arrayOf(const std::vector<T> &v) {
 
 void bindDownsample(py::module_ &m) {
   static_assert(sizeof(Eigen::Vector3f) == 3 * sizeof(float), "Vector3f is three packed floats");
+  static_assert(sizeof(Eigen::Vector3d) == 3 * sizeof(double), "Vector3d is three packed doubles");
   m.def(
       "downsample",
       [](const py::handle &points_object, const std::string &yaml_text, const std::string &path,
          const std::vector<double> &viewpoint) {
         const HpdsConfig config = configFrom(yaml_text, path);
-        const ApiPoints points = pointsFrom(points_object, config);
+        const ApiPoints points = pointsFrom(points_object);
         if (viewpoint.size() != 3)
           throw py::value_error("viewpoint: expected 3 coordinates (x, y, z), got " + std::to_string(viewpoint.size()));
         Samples s;
         {
           py::gil_scoped_release unlocked;
-          s = downsample(points.points, config,
-                         Eigen::Vector3d(viewpoint[0], viewpoint[1], viewpoint[2]) - points.shift);
+          const Eigen::Vector3d at(viewpoint[0], viewpoint[1], viewpoint[2]);
+          s = points.is_f64 ? downsampleDoubles(points.f64, config, at) : downsample(points.f32, config, at);
         }
         py::dict out;
         out["index"] = arrayOf(s.index);

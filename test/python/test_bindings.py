@@ -141,7 +141,7 @@ class Arguments(support.ScratchCase):
 
     def test_georeferenced_float64_keeps_the_guarantees(self):
         # A UTM-like cloud (easting 5e5, northing 4e6): float32 rounds it by up to 0.25 m, more than the 0.1 m
-        # radius. The points go to a local origin first: every two samples are at least r apart and every point is
+        # radius. float64 is sampled at full precision: every two samples are at least r apart and every point is
         # within 2 r of one, on the float64 positions; with an offset of whole level-0 cells the samples are those
         # of the cloud at the origin; normals are those of the cloud at the origin too.
         rng = np.random.default_rng(12)
@@ -166,14 +166,21 @@ class Arguments(support.ScratchCase):
         valid = np.isfinite(at_origin["normal"][:, 0])
         self.assertGreater(valid.mean(), 0.95)
         np.testing.assert_allclose(shifted_view["normal"][valid], at_origin["normal"][valid], atol=1e-4)
-        # With range limits the points cannot move (ranges are measured from the origin): a warning says so.
-        with self.assertWarnsRegex(UserWarning, "min_range/max_range"):
-            hpds.downsample(geo, {"output": {"spacing": 0.1}, "input": {"max_range": 1.0e7}})
-        # float32 input, or float64 near the origin, is taken as before: no warning, no move.
+        # The same with range limits, and with a no-return (0,0,0) or a stray point near the origin first: the
+        # guarantees do not depend on where the first rows lie (they chose a local origin once, and a leading
+        # (0,0,0) left the cloud in float32 at 4e6 m: samples 8 mm apart).
         import warnings
-        with warnings.catch_warnings():
-            warnings.simplefilter("error")
-            hpds.downsample(local, {"output": {"spacing": 0.1}, "input": {"max_range": 1.0e7}})
+        for first, extra in ((None, {"input": {"max_range": 1.0e7}}), ((0.0, 0.0, 0.0), {}), ((1.0, 1.0, 1.0), {})):
+            cloud = geo if first is None else np.vstack([np.array([first]), geo])
+            with warnings.catch_warnings():
+                warnings.simplefilter("error")
+                got = hpds.downsample(cloud, dict(config, **extra))
+            pts = cloud[got["index"]]
+            far = pts[np.abs(pts).max(axis=1) > 1e3]
+            d2 = ((far[:, None, :] - far[None, :, :]) ** 2).sum(axis=2)
+            np.fill_diagonal(d2, np.inf)
+            self.assertGreaterEqual(np.sqrt(d2.min()), 0.1 * (1 - 1e-6), first)
+            self.assertGreater(len(far), 0.9 * len(s["index"]), first)
 
     def test_skipped_points_never_appear(self):
         pts = self.points.copy()

@@ -48,6 +48,13 @@ struct Samples {
 /// The same with the sensor at `viewpoint` (finite; std::invalid_argument otherwise), in the points' frame.
 [[nodiscard]] Samples downsample(const std::vector<Eigen::Vector3f> &points, const HpdsConfig &config,
                                  const Eigen::Vector3d &viewpoint);
+/// downsample for double-precision points (georeferenced coordinates: float32 keeps 0.5 m at 5e6 m), sampled at their
+/// full precision, as `hpds sample` samples a file with float64 x y z. Its own name: an overload would make existing
+/// calls with a braced list (`downsample({}, config)`) ambiguous.
+[[nodiscard]] Samples downsampleDoubles(const std::vector<Eigen::Vector3d> &points,
+                                        const HpdsConfig &config = HpdsConfig{});
+[[nodiscard]] Samples downsampleDoubles(const std::vector<Eigen::Vector3d> &points, const HpdsConfig &config,
+                                        const Eigen::Vector3d &viewpoint);
 
 /// Reads a config file in config/hpds.yaml's format over the defaults, with the same validation as the CLI and the
 /// node. Throws std::invalid_argument naming the key (or the file, when it cannot be read or parsed).

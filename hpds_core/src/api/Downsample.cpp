@@ -11,37 +11,34 @@ namespace hpds {
 namespace {
 
 // Each record carries the point's input position next to x/y/z, so a sample names the point it came from.
-constexpr std::uint32_t kIndexOffset = 12;
-
-Frame frameOf(const std::vector<Eigen::Vector3f> &points) {
+template <typename Scalar>
+Frame frameOf(const std::vector<Eigen::Matrix<Scalar, 3, 1>> &points) {
+  constexpr FieldType kXyz = sizeof(Scalar) == 8 ? FieldType::Float64 : FieldType::Float32;
+  constexpr std::uint32_t kIndexOffset = 3 * sizeof(Scalar);
   PointLayout layout;
-  layout.append("x", FieldType::Float32);
-  layout.append("y", FieldType::Float32);
-  layout.append("z", FieldType::Float32);
+  layout.append("x", kXyz);
+  layout.append("y", kXyz);
+  layout.append("z", kXyz);
   layout.append("index", FieldType::UInt32);
   Frame frame;
   frame.points = PointBuffer(layout, points.size());
   for (std::size_t i = 0; i < points.size(); ++i) {
     std::uint8_t *rec = frame.points.record(i);
-    std::memcpy(rec, points[i].data(), 3 * sizeof(float));
+    std::memcpy(rec, points[i].data(), 3 * sizeof(Scalar));
     const auto index = static_cast<std::uint32_t>(i);
     std::memcpy(rec + kIndexOffset, &index, sizeof index);
   }
   return frame;
 }
 
-}  // namespace
-
-Samples downsample(const std::vector<Eigen::Vector3f> &points, const HpdsConfig &config) {
-  return downsample(points, config, Eigen::Vector3d::Zero());
-}
-
-Samples downsample(const std::vector<Eigen::Vector3f> &points, const HpdsConfig &config,
-                   const Eigen::Vector3d &viewpoint) {
+template <typename Scalar>
+Samples downsampleFrame(const std::vector<Eigen::Matrix<Scalar, 3, 1>> &points, const HpdsConfig &config,
+                        const Eigen::Vector3d &viewpoint) {
   if (!viewpoint.allFinite()) throw std::invalid_argument("downsample: viewpoint is not finite");
   if (points.size() > std::numeric_limits<std::uint32_t>::max())
     throw std::invalid_argument("downsample: " + std::to_string(points.size()) +
                                 " points, at most 2^32 - 1 fit the sample index");
+  constexpr std::uint32_t kIndexOffset = 3 * sizeof(Scalar);
   Pipeline pipeline(config);
   Frame frame = frameOf(points);
   frame.viewpoint = viewpoint;
@@ -78,6 +75,26 @@ Samples downsample(const std::vector<Eigen::Vector3f> &points, const HpdsConfig 
     }
   }
   return out;
+}
+
+}  // namespace
+
+Samples downsample(const std::vector<Eigen::Vector3f> &points, const HpdsConfig &config) {
+  return downsampleFrame(points, config, Eigen::Vector3d::Zero());
+}
+
+Samples downsample(const std::vector<Eigen::Vector3f> &points, const HpdsConfig &config,
+                   const Eigen::Vector3d &viewpoint) {
+  return downsampleFrame(points, config, viewpoint);
+}
+
+Samples downsampleDoubles(const std::vector<Eigen::Vector3d> &points, const HpdsConfig &config) {
+  return downsampleFrame(points, config, Eigen::Vector3d::Zero());
+}
+
+Samples downsampleDoubles(const std::vector<Eigen::Vector3d> &points, const HpdsConfig &config,
+                          const Eigen::Vector3d &viewpoint) {
+  return downsampleFrame(points, config, viewpoint);
 }
 
 HpdsConfig loadConfig(const std::string &path) { return loadConfigFile(path); }
