@@ -3,6 +3,8 @@
 #   make test   every test (GoogleTest suites and ROS tests) through ctest
 #   make test-sanitize   the same tests, node and ROS tests included, built with AddressSanitizer +
 #                        UndefinedBehaviorSanitizer (in build-asan/)
+#   make test-tsan   the core's tests (no ROS node) built with ThreadSanitizer (in build-tsan/): the pipeline's
+#                    second thread, the parallel normals, scan-mode workers, the tiled builds
 #   make fuzz   libFuzzer targets for every parser of outside data, FUZZ_SECONDS each (in build-fuzz/)
 #   make registration   scan matching (PCL ICP/GICP) on hpds levels vs voxel grids at equal point count
 # catkin and rostest need Debian's python3, not a pyenv one that may come first on PATH.
@@ -12,6 +14,7 @@ BUILD ?= build
 JOBS ?= 2
 DEMO_DIR ?= $(BUILD)/demo
 ASAN_BUILD ?= build-asan
+TSAN_BUILD ?= build-tsan
 FUZZ_BUILD ?= build-fuzz
 FUZZ_SECONDS ?= 60
 # The node, the nodelet and their ROS tests are sanitized too whenever ROS is installed (the tests that start Debian's
@@ -20,7 +23,7 @@ ASAN_NODE ?=
 ASAN_NODE_FLAG := $(if $(ASAN_NODE),-DHPDS_BUILD_NODE=$(ASAN_NODE),-UHPDS_BUILD_NODE)
 HPDS := $(BUILD)/hpds
 
-.PHONY: all deps configure build test test-sanitize fuzz demo bench clean
+.PHONY: all deps configure build test test-sanitize test-tsan fuzz demo bench clean
 
 all: build
 
@@ -44,6 +47,15 @@ test-sanitize: deps
 	@cmake --build $(ASAN_BUILD) -j$(JOBS)
 	@cd $(ASAN_BUILD) && ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=halt_on_error=1:print_stacktrace=1 \
 	  ctest --output-on-failure -j$(JOBS) --timeout 1800
+
+# Any report fails its test (halt_on_error). PCL's OpenNI2 dependency, not built with TSan, is suppressed
+# (test/tsan.supp); the setting is needed while building too, as gtest_discover_tests runs every test binary.
+TSAN_ENV := TSAN_OPTIONS="suppressions=$(CURDIR)/test/tsan.supp halt_on_error=1 second_deadlock_stack=1"
+test-tsan: deps
+	@mkdir -p $(TSAN_BUILD)
+	@cmake -S . -B $(TSAN_BUILD) -DCMAKE_BUILD_TYPE=RelWithDebInfo -DHPDS_TSAN=ON -DHPDS_BUILD_NODE=OFF -DHPDS_BUILD_PYTHON=OFF -DHPDS_BUILD_BENCH=OFF > $(TSAN_BUILD)/configure.log 2>&1 || { cat $(TSAN_BUILD)/configure.log; exit 1; }
+	@$(TSAN_ENV) cmake --build $(TSAN_BUILD) -j$(JOBS)
+	@cd $(TSAN_BUILD) && $(TSAN_ENV) ctest --output-on-failure -j$(JOBS) --timeout 1800
 
 fuzz: deps
 	@FUZZ_BUILD=$(FUZZ_BUILD) FUZZ_SECONDS=$(FUZZ_SECONDS) JOBS=$(JOBS) scripts/fuzz.sh

@@ -26,3 +26,14 @@ if(HPDS_SANITIZE)
                   OUTPUT_STRIP_TRAILING_WHITESPACE)
   set(HPDS_SANITIZER_PRELOAD_ENV "LD_PRELOAD=${HPDS_LIBASAN}:${HPDS_LIBUBSAN};ASAN_OPTIONS=detect_leaks=0")
 endif()
+
+# ThreadSanitizer (`make test-tsan`): the core's threads (the pipeline's second thread during insertion, the parallel
+# normals, the tiled builds) under the core tests. Not with HPDS_SANITIZE: the two runtimes exclude each other.
+option(HPDS_TSAN "Build with -fsanitize=thread (own build directory)" OFF)
+if(HPDS_TSAN)
+  if(HPDS_SANITIZE)
+    message(FATAL_ERROR "HPDS_TSAN and HPDS_SANITIZE cannot be combined: build them in separate directories")
+  endif()
+  add_compile_options(-fsanitize=thread -fno-omit-frame-pointer)
+  add_link_options(-fsanitize=thread)
+endif()

@@ -22,6 +22,8 @@ long minorFaults() {
 TEST(FrameMemory, DenseFramesInARowFaultNoMemoryInAgain) {
 #if defined(__SANITIZE_ADDRESS__)
   GTEST_SKIP() << "AddressSanitizer's allocator replaces glibc's malloc, whose setting this tests";
+#elif defined(__SANITIZE_THREAD__)
+  GTEST_SKIP() << "ThreadSanitizer's allocator replaces glibc's malloc, whose setting this tests";
 #elif !defined(__GLIBC__)
   GTEST_SKIP() << "not glibc: keepFreedFrameMemory does nothing here";
 #else

@@ -2,7 +2,7 @@
 # The installed package as its users get it: `cmake --install` the build into a fresh prefix, check what lands there,
 # then build examples/ against it as a separate project (find_package(hpds)) and run it on a real frame (a
 # synthetic one when ../shared is absent).
-# Usage: install_and_use.sh BUILD_DIR SOURCE_DIR NODE_BUILT(ON|OFF) [SANITIZED(ON|OFF)]
+# Usage: install_and_use.sh BUILD_DIR SOURCE_DIR NODE_BUILT(ON|OFF) [SANITIZERS(OFF|address,undefined|thread)]
 # A sanitized build installs instrumented libraries: a program using them must be built with the same sanitizers
 # (the runtime has to come first), as a user of such a build would.
 # The prefix is made under the system's temporary folder, outside the source tree: roslaunch looks for launch files
@@ -68,8 +68,8 @@ fi
 
 # A separate project against the prefix.
 example_flags=()
-if [ "$sanitized" = ON ]; then
-  example_flags=(-DCMAKE_CXX_FLAGS=-fsanitize=address,undefined -DCMAKE_EXE_LINKER_FLAGS=-fsanitize=address,undefined)
+if [ "$sanitized" != OFF ]; then
+  example_flags=(-DCMAKE_CXX_FLAGS=-fsanitize=$sanitized -DCMAKE_EXE_LINKER_FLAGS=-fsanitize=$sanitized)
 fi
 cmake -S "$src/examples" -B "$work/example" -DCMAKE_PREFIX_PATH="$prefix" -DCMAKE_BUILD_TYPE=Release \
   "${example_flags[@]}" > "$work/example-configure.log" 2>&1 || { cat "$work/example-configure.log"; fail "examples/ does not configure"; }
