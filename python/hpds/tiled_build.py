@@ -125,18 +125,36 @@ def _lock(outdir):
     return f
 
 
+def _refuse_if_building(outdir):
+    """Refuses a build into a folder another build is writing: its tiles are live, not an incomplete build's."""
+    path = os.path.join(outdir, LOCK)
+    if not os.path.isfile(path):
+        return
+    with open(path, "a") as f:
+        try:
+            fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            raise BuildError("another tiled build is writing to %s (it holds %s): wait for it, or choose another "
+                             "output folder" % (outdir, LOCK)) from None
+
+
 def _check_layouts(bucketed, chunks, inputs):
-    """Every frame of a map must have the first frame's point fields (as `hpds sample --mode map` requires): each
-    bucketing task checks its own frames, this compares the tasks."""
-    first = bucketed["bucket-0"]["layout"]
+    """Every frame with points must have the point layout of the first frame with points: each bucketing task
+    checks its own frames, this compares the tasks (a task whose frames were all empty has none and takes any)."""
+    first = first_at = None
     for c, (a, b) in enumerate(chunks):
         layout = bucketed["bucket-%d" % c]["layout"]
-        if layout != first:
+        if layout is None:
+            continue
+        if first is None:
+            first, first_at = layout, a
+        elif layout != first:
             names = lambda l: " ".join(f[0] for f in l[0]) or "(none)"  # noqa: E731
-            raise BuildError("frame's point fields differ from the map's (the first frame's) fields: '%s' (one of "
-                             "frames %d..%d) has %s (%d bytes per point), '%s' has %s (%d bytes per point); every "
-                             "frame of a map needs the same fields" % (inputs[a], a, b - 1, names(layout), layout[1],
-                                                                        inputs[0], names(first), first[1]))
+            raise BuildError("frame's point fields or their layout differ from those of the first frame with points: "
+                             "'%s' (one of frames %d..%d) has %s (%d bytes per point), '%s' (or a frame after it) has "
+                             "%s (%d bytes per point); a tiled build needs one layout, byte for byte"
+                             % (inputs[a], a, b - 1, names(layout), layout[1], inputs[first_at], names(first),
+                                first[1]))
 
 
 def _chunks(n, workers, chunk_frames):
@@ -178,6 +196,7 @@ def build(inputs, poses_path, outdir, tile_size, config_yaml, runner, chunk_fram
         raise BuildError("--poses: '%s' has %d poses for %d inputs (one pose per input is required)"
                          % (poses_path, len(poses), len(inputs)))
     read = inputs + [os.fspath(poses_path)] + [os.fspath(p) for p in other_inputs]
+    _refuse_if_building(outdir)  # before check_paths, which would call a running build's files leftovers
     check_paths(read, outdir)  # before the folder is made, so that a refused build leaves nothing behind
     made = not os.path.exists(outdir)
     os.makedirs(outdir, exist_ok=True)

@@ -117,6 +117,7 @@ void bindTiling(py::module_ &m) {
         std::vector<std::tuple<std::int32_t, std::int32_t, std::uint64_t, std::string>> tiles;
         std::size_t bytes = 0;
         PointLayout layout;
+        bool has_layout = false;
         {
           py::gil_scoped_release unlocked;
           TileBucketer bucketer(config, grid);
@@ -132,6 +133,7 @@ void bindTiling(py::module_ &m) {
           }
           bytes = bucketer.memUsage();
           layout = bucketer.layout();
+          has_layout = bucketer.hasLayout();
           std::filesystem::create_directories(out_dir);
           for (const auto &[key, n] : bucketer.tiles()) {
             const std::string path = (std::filesystem::path(out_dir) / tileFileName(key, ".bkt")).string();
@@ -143,11 +145,12 @@ void bindTiling(py::module_ &m) {
         d["tiles"] = tiles;
         d["counters"] = countersDict(totals);
         d["memory_bytes"] = bytes;
-        // The frames' point fields, which every bucketing task of one build must share (map mode's rule).
+        // The frames' point fields, which every bucketing task of one build must share (map mode's rule); None when
+        // every frame of the task was empty (those take any fields).
         py::list fields;
         for (const PointField &f : layout.fields)
           fields.append(py::make_tuple(f.name, f.offset, fieldTypeName(f.type), f.count));
-        d["layout"] = py::make_tuple(fields, layout.point_step);
+        d["layout"] = has_layout ? py::object(py::make_tuple(fields, layout.point_step)) : py::object(py::none());
         return d;
       },
       py::arg("config_yaml"), py::arg("tile_size"), py::arg("inputs"), py::arg("poses"), py::arg("first_frame"),

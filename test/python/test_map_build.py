@@ -295,7 +295,7 @@ class MapBuild(unittest.TestCase):
         with self.assertRaises(BuildError) as e:
             build([self.frames[0], kitti], self.two_poses("poses_mixed.txt"), self.out("mixed"), TILE,
                   self.config_yaml, SerialRunner(), chunk_frames=1, log=lambda m: None)
-        self.assertIn("point fields differ", str(e.exception))
+        self.assertIn("point fields or their layout differ", str(e.exception))
         self.assertIn("other_fields.bin", str(e.exception))
         self.assertEqual(tile_files(self.out("mixed")), [])
         self.assertFalse(os.path.exists(os.path.join(self.out("mixed"), ".hpds_work")))
@@ -316,6 +316,26 @@ class MapBuild(unittest.TestCase):
         self.assertIn("is a file", str(e.exception))
         with open(self.out("a_file")) as f:
             self.assertEqual(f.read(), "x")
+
+    def test_empty_frames_of_other_fields_are_taken(self):
+        # A driver's empty x y z cloud before the first scan, and another at the end: as in `hpds sample --mode map`,
+        # frames without points neither fix the layout nor have to match it, in one bucketing task or in their own.
+        empty = self.out("empty_xyz.pcd")
+        with open(empty, "w") as f:
+            f.write("# .PCD v0.7\nVERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 0\n"
+                    "HEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS 0\nDATA ascii\n")
+        with open(self.poses) as f:
+            rows = [line for line in f if line.strip()][:2]
+        poses = self.out("poses_with_empty.txt")
+        with open(poses, "w") as f:
+            f.writelines([rows[0]] + rows[:2] + [rows[1]])
+        for chunk in (1, None):
+            out = self.out("with_empty_%s" % chunk)
+            manifest = build([empty] + self.frames[:2] + [empty], poses, out, TILE, self.config_yaml, SerialRunner(),
+                             chunk_frames=chunk, log=lambda m: None)
+            self.assertGreater(len(tile_files(out)), 0, chunk)
+            self.assertEqual(manifest["counts"]["input_points"], sum(len(hpds.read_points(p)) for p in self.frames[:2]))
+            self.assertEqual(manifest["frames"], 4)
 
     def test_a_pcd_viewpoint_is_refused_not_dropped(self):
         # `hpds sample` turns normals toward a PCD's VIEWPOINT; bucket files keep only the pose, so a tiled build
@@ -373,6 +393,8 @@ class MapBuild(unittest.TestCase):
     def test_a_second_build_into_a_folder_in_use_is_refused(self):
         out = self.out("locked")
         os.makedirs(os.path.join(out, ".hpds_work", "buckets"))  # the running build's scratch
+        with open(os.path.join(out, "tile_0_0.ply"), "w") as f:  # and a tile it has finished (not a leftover)
+            f.write("ply\n")
         with open(os.path.join(out, ".hpds_build.lock"), "a") as held:
             fcntl.flock(held, fcntl.LOCK_EX | fcntl.LOCK_NB)
             with self.assertRaises(BuildError) as e:

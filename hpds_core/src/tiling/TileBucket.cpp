@@ -65,9 +65,12 @@ FrameCounters TileBucketer::addFrame(const Frame &frame, std::uint32_t frame_ind
   if (have_frame_ && frame_index <= last_frame_)
     throw std::invalid_argument("frame " + std::to_string(frame_index) + " added after frame " +
                                 std::to_string(last_frame_) + ": frames go in increasing index order");
-  if (have_layout_ && layout != layout_)
-    throw std::invalid_argument("frame " + std::to_string(frame_index) +
-                                "'s point fields differ from the first frame's (a map holds one layout)");
+  // A frame without points files no record: it neither fixes the layout nor has to match it (map mode's rule;
+  // drivers publish empty clouds of other fields, e.g. before the first scan).
+  const bool files_records = !frame.points.empty();
+  if (files_records && have_layout_ && layout != layout_)
+    throw std::invalid_argument("frame " + std::to_string(frame_index) + "'s point fields or their layout differ from "
+                                "those of the first frame with points (a tiled build needs one layout, byte for byte)");
   const PointField *fx = layout.find("x"), *fy = layout.find("y"), *fz = layout.find("z");
   if (!fx || !fy || !fz) throw std::invalid_argument("frame has no x/y/z fields");
   if (fx->count != 1 || fy->count != 1 || fz->count != 1) throw std::invalid_argument("x/y/z fields must have count 1");
@@ -112,8 +115,10 @@ FrameCounters TileBucketer::addFrame(const Frame &frame, std::uint32_t frame_ind
     bytes_ += f.points.bytes().size();
     buckets_[key].push_back(std::move(f));
   }
-  if (!have_layout_) layout_ = layout;
-  have_layout_ = true;
+  if (files_records && !have_layout_) {
+    layout_ = layout;
+    have_layout_ = true;
+  }
   have_frame_ = true;
   last_frame_ = frame_index;
   return c;

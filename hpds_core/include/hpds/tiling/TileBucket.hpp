@@ -51,8 +51,10 @@ class TileBucketer {
   [[nodiscard]] std::vector<std::pair<TileKey, std::uint64_t>> tiles() const;
   /// The bucket of `key` (empty when it holds no points).
   [[nodiscard]] const std::vector<BucketFrame> &framesOf(const TileKey &key) const;
-  /// Layout of every filed record (empty before the first frame).
+  /// Layout of every filed record: the first frame with points'; frames without points may have any (they file
+  /// nothing). Empty before such a frame (hasLayout() false).
   [[nodiscard]] const PointLayout &layout() const { return layout_; }
+  [[nodiscard]] bool hasLayout() const { return have_layout_; }
   /// Bytes of filed records.
   [[nodiscard]] std::size_t memUsage() const { return bytes_; }
 
