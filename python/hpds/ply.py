@@ -106,6 +106,10 @@ def write(path, vertices):
         lines.append("property %s %s" % (_property_type(vertices, name), name))
     lines.append("end_header")
     le = np.dtype([(n, vertices.dtype[n].newbyteorder("<")) for n in vertices.dtype.names])
+    folder = os.path.dirname(os.path.abspath(path))
+    if not os.path.isdir(folder):
+        # Said by the path asked for, not by the temporary's name.
+        raise FileNotFoundError("write: '%s' is in folder '%s', which does not exist" % (path, folder))
     tmp = "%s.tmp.%d" % (path, os.getpid())
     try:
         with open(tmp, "wb") as f:
@@ -131,7 +135,10 @@ def _same_file(a, b):
 
 
 def merge(paths, out_path):
-    """Concatenates PLY files with the same fields (the tiles of one build) into one, written atomically."""
+    """Concatenates PLY files with the same fields (the tiles of one build) into one, written atomically.
+
+    paths: an iterable of paths (a list, a generator, glob's result); a single path is taken as one file."""
+    paths = [paths] if isinstance(paths, (str, bytes, os.PathLike)) else list(paths)
     for p in paths:
         if _same_file(p, out_path):
             raise ValueError("merge: the output '%s' is the input '%s'" % (out_path, p))

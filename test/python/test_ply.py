@@ -120,6 +120,18 @@ class Merge(support.ScratchCase):
     def assert_inputs_untouched(self):
         self.assertEqual([self.bytes_of(p) for p in self.inputs], self.before)
 
+    def test_merge_takes_any_iterable_or_one_path_and_names_a_missing_folder(self):
+        # A generator failed ('not subscriptable'), one path as a string was read character by character, and a
+        # missing output folder was named by the temporary's name.
+        hpds.ply.merge((p for p in self.inputs), self.path("gen.ply"))
+        hpds.ply.merge(self.inputs[0], self.path("one.ply"))
+        self.assertEqual(len(hpds.ply.read(self.path("one.ply"))), len(hpds.ply.read(self.inputs[0])))
+        self.assertEqual(len(hpds.ply.read(self.path("gen.ply"))), sum(len(hpds.ply.read(p)) for p in self.inputs))
+        with self.assertRaises(FileNotFoundError) as e:
+            hpds.ply.merge(self.inputs, self.path(os.path.join("nodir", "x.ply")))
+        self.assertIn("nodir", str(e.exception))
+        self.assertNotIn(".tmp.", str(e.exception))
+
     def test_merges(self):
         hpds.ply.merge(self.inputs, self.path("all.ply"))
         self.assertEqual(len(hpds.ply.read(self.path("all.ply"))), 8)
