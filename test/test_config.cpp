@@ -267,6 +267,12 @@ struct InvalidCase {
   const char *detail;  // and contain this
 };
 
+void expectRefused(const InvalidCase &c) {
+  const std::string message = loadError(c.yaml);
+  EXPECT_EQ(message.rfind(std::string(c.key) + ":", 0), 0u) << "yaml: " << c.yaml << "\nmessage: " << message;
+  EXPECT_NE(message.find(c.detail), std::string::npos) << "yaml: " << c.yaml << "\nmessage: " << message;
+}
+
 TEST(ConfigYaml, InvalidDocumentsNameTheKey) {
   const InvalidCase cases[] = {
       // values validateConfig rejects
@@ -360,11 +366,7 @@ TEST(ConfigYaml, InvalidDocumentsNameTheKey) {
       {"hierarchy: {cell_size: 4.0\nthreads: 1\n", "(document)", "line "},
       {"hierarchy:\n  cell_size: 4.0\n max_depth: 3\n", "(document)", "YAML syntax error"},
   };
-  for (const InvalidCase &c : cases) {
-    const std::string message = loadError(c.yaml);
-    EXPECT_EQ(message.rfind(std::string(c.key) + ":", 0), 0u) << "yaml: " << c.yaml << "\nmessage: " << message;
-    EXPECT_NE(message.find(c.detail), std::string::npos) << "yaml: " << c.yaml << "\nmessage: " << message;
-  }
+  for (const InvalidCase &c : cases) expectRefused(c);
   // With the cell derived from the spacing, the output level's cell is 2 S / sqrt(3) at any max_depth: the advice is
   // the spacing alone; with a fixed cell, max_depth helps too.
   for (const char *depth : {"8", "2"}) {
@@ -395,9 +397,7 @@ TEST(ConfigYaml, TheNodesKeysAreValidatedByEveryReader) {
       {"fixed_frame: odom", "fixed_frame", "did you mean 'ros.fixed_frame'"},
   };
   for (const InvalidCase &c : cases) {
-    const std::string message = loadError(c.yaml);
-    EXPECT_EQ(message.rfind(std::string(c.key) + ":", 0), 0u) << "yaml: " << c.yaml << "\nmessage: " << message;
-    EXPECT_NE(message.find(c.detail), std::string::npos) << "yaml: " << c.yaml << "\nmessage: " << message;
+    expectRefused(c);
     HpdsConfig config;
     EXPECT_THROW(hpds::applyConfigYaml(c.yaml, config), std::invalid_argument) << c.yaml;
   }

@@ -126,16 +126,10 @@ def _lock(outdir):
 
 
 def _refuse_if_building(outdir):
-    """Refuses a build into a folder another build is writing: its tiles are live, not an incomplete build's."""
-    path = os.path.join(outdir, LOCK)
-    if not os.path.isfile(path):
-        return
-    with open(path, "a") as f:
-        try:
-            fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            raise BuildError("another tiled build is writing to %s (it holds %s): wait for it, or choose another "
-                             "output folder" % (outdir, LOCK)) from None
+    """Refuses a build into a folder another build is writing (its tiles are live, not an incomplete build's): the
+    lock taken and let go at once, before check_paths would call those tiles leftovers."""
+    if os.path.isfile(os.path.join(outdir, LOCK)):
+        _lock(outdir).close()
 
 
 def _check_layouts(bucketed, chunks, inputs):

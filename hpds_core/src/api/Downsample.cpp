@@ -12,9 +12,11 @@ namespace {
 
 // Each record carries the point's input position next to x/y/z, so a sample names the point it came from.
 template <typename Scalar>
+constexpr std::uint32_t kIndexOffset = 3 * sizeof(Scalar);
+
+template <typename Scalar>
 Frame frameOf(const std::vector<Eigen::Matrix<Scalar, 3, 1>> &points) {
   constexpr FieldType kXyz = sizeof(Scalar) == 8 ? FieldType::Float64 : FieldType::Float32;
-  constexpr std::uint32_t kIndexOffset = 3 * sizeof(Scalar);
   PointLayout layout;
   layout.append("x", kXyz);
   layout.append("y", kXyz);
@@ -26,7 +28,7 @@ Frame frameOf(const std::vector<Eigen::Matrix<Scalar, 3, 1>> &points) {
     std::uint8_t *rec = frame.points.record(i);
     std::memcpy(rec, points[i].data(), 3 * sizeof(Scalar));
     const auto index = static_cast<std::uint32_t>(i);
-    std::memcpy(rec + kIndexOffset, &index, sizeof index);
+    std::memcpy(rec + kIndexOffset<Scalar>, &index, sizeof index);
   }
   return frame;
 }
@@ -38,7 +40,6 @@ Samples downsampleFrame(const std::vector<Eigen::Matrix<Scalar, 3, 1>> &points, 
   if (points.size() > std::numeric_limits<std::uint32_t>::max())
     throw std::invalid_argument("downsample: " + std::to_string(points.size()) +
                                 " points, at most 2^32 - 1 fit the sample index");
-  constexpr std::uint32_t kIndexOffset = 3 * sizeof(Scalar);
   Pipeline pipeline(config);
   Frame frame = frameOf(points);
   frame.viewpoint = viewpoint;
@@ -50,7 +51,7 @@ Samples downsampleFrame(const std::vector<Eigen::Matrix<Scalar, 3, 1>> &points, 
   out.index.resize(ids.size());
   out.level.resize(ids.size());
   for (std::size_t i = 0; i < ids.size(); ++i) {
-    std::memcpy(&out.index[i], hierarchy.record(ids[i]) + kIndexOffset, sizeof(std::uint32_t));
+    std::memcpy(&out.index[i], hierarchy.record(ids[i]) + kIndexOffset<Scalar>, sizeof(std::uint32_t));
     out.level[i] = static_cast<std::uint8_t>(hierarchy.level(ids[i]));
   }
   if (config.normals.enabled) {

@@ -350,6 +350,15 @@ void applyDocument(const YAML::Node &root, HpdsConfig &config) {
 
 }  // namespace
 
+namespace yaml_node {
+std::string describeNode(const YAML::Node &node) { return describe(node); }
+bool isQuotedScalar(const YAML::Node &node) { return isQuoted(node); }
+void refuseExplicitTag(const YAML::Node &node, const std::string &key) { refuseTag(node, key); }
+const std::string &plainScalarText(const YAML::Node &node, const std::string &key, const char *expected) {
+  return scalarText(node, key, expected);
+}
+}  // namespace yaml_node
+
 void applyConfigKeysYaml(const std::string &yaml_text, HpdsConfig &config, const std::string &source) {
   try {
     // yaml-cpp takes a few hundred bytes per node: a 6 MB sequence took 1.4 GB.

@@ -22,50 +22,30 @@ namespace {
   throw std::invalid_argument(key + ": " + why);
 }
 
-// yaml-cpp tags quoted scalars "!"; numbers must be plain, as in ConfigYaml, so a quoted "0.1" is reported.
-bool isQuoted(const YAML::Node &n) { return n.Tag() == "!"; }
-
-std::string describe(const YAML::Node &n) {
-  if (n.IsNull()) return "nothing (null)";
-  if (n.IsSequence()) return "a sequence";
-  if (n.IsMap()) return "a map";
-  return isQuoted(n) ? "the quoted string '" + n.Scalar() + "'" : "'" + n.Scalar() + "'";
-}
-
-// An explicit tag (!!str 0.1, !custom) would make the text mean something else to another YAML reader: refused, as
-// ConfigYaml refuses it for the other keys.
-void rejectTag(const YAML::Node &n, const std::string &key) {
-  const std::string &tag = n.Tag();
-  if (tag.empty() || tag == "?" || tag == "!") return;
-  const std::string shown = tag.rfind("tag:yaml.org,2002:", 0) == 0 ? "!!" + tag.substr(18) : tag;
-  fail(key, "has the YAML tag " + shown + "; config values are plain scalars (remove the tag)");
-}
-
-// Numbers, integers and booleans go through the core's one strict scalar parser, so the node accepts and refuses
-// the same text as a config file.
-const std::string &scalarText(const YAML::Node &n, const std::string &key, const char *expected) {
-  rejectTag(n, key);
-  if (!n.IsScalar()) fail(key, std::string("expected ") + expected + ", got " + describe(n));
-  return n.Scalar();
-}
+// Single values by ConfigYaml's own rules (quoted numbers, explicit tags, wording), so that the node accepts and refuses
+// the same text for ros.* as for every other key.
+using yaml_node::describeNode;
+using yaml_node::isQuotedScalar;
+using yaml_node::plainScalarText;
+using yaml_node::refuseExplicitTag;
 
 double parseNumber(const YAML::Node &n, const std::string &key) {
-  return yaml::parseNumber(scalarText(n, key, "a number"), isQuoted(n), key);
+  return yaml::parseNumber(plainScalarText(n, key, "a number"), isQuotedScalar(n), key);
 }
 
 int parseInt(const YAML::Node &n, const std::string &key) {
-  return yaml::parseInt(scalarText(n, key, "an integer"), isQuoted(n), key);
+  return yaml::parseInt(plainScalarText(n, key, "an integer"), isQuotedScalar(n), key);
 }
 
 std::string parseString(const YAML::Node &n, const std::string &key) {
-  rejectTag(n, key);
+  refuseExplicitTag(n, key);
   if (n.IsNull()) return "";
-  if (!n.IsScalar()) fail(key, "expected a string, got " + describe(n));
+  if (!n.IsScalar()) fail(key, "expected a string, got " + describeNode(n));
   return n.Scalar();
 }
 
 bool parseBool(const YAML::Node &n, const std::string &key) {
-  return yaml::parseBool(scalarText(n, key, "true or false"), isQuoted(n), key);
+  return yaml::parseBool(plainScalarText(n, key, "true or false"), isQuotedScalar(n), key);
 }
 
 std::string parseFrameId(const YAML::Node &n, const std::string &key) {
@@ -78,7 +58,7 @@ std::string parseFrameId(const YAML::Node &n, const std::string &key) {
 
 void applyRosSection(const YAML::Node &section, RosConfig &ros) {
   if (section.IsNull()) return;
-  if (!section.IsMap()) fail("ros", "expected a map of ros.* keys, got " + describe(section));
+  if (!section.IsMap()) fail("ros", "expected a map of ros.* keys, got " + describeNode(section));
   std::vector<std::string> seen;
   for (const auto &item : section) {
     if (!item.first.IsScalar()) fail("ros", "map keys must be strings");
@@ -111,15 +91,15 @@ void applyRosSection(const YAML::Node &section, RosConfig &ros) {
       ros.publish_levels.clear();
       YAML::Node list = v;
       // roslaunch <param> and <arg> values are strings: "[2, 4]" is taken as the list it spells.
-      if (v.IsScalar() && isQuoted(v)) {
+      if (v.IsScalar() && isQuotedScalar(v)) {
         try {
           list = YAML::Load(v.Scalar());
         } catch (const YAML::Exception &) {
-          fail(key, "expected a list of levels, e.g. [2, 4], got " + describe(v));
+          fail(key, "expected a list of levels, e.g. [2, 4], got " + describeNode(v));
         }
       }
       if (list.IsNull()) continue;
-      if (!list.IsSequence()) fail(key, "expected a list of levels, e.g. [2, 4], got " + describe(v));
+      if (!list.IsSequence()) fail(key, "expected a list of levels, e.g. [2, 4], got " + describeNode(v));
       for (std::size_t i = 0; i < list.size(); ++i) ros.publish_levels.push_back(parseInt(list[i], key));
     } else {
       fail(key,
@@ -147,7 +127,7 @@ void emit(YAML::Emitter &out, const YAML::Node &n) {
     for (const auto &item : n) emit(out, item);
     out << YAML::EndSeq;
   } else if (n.IsScalar()) {
-    if (isQuoted(n)) out << YAML::DoubleQuoted;
+    if (isQuotedScalar(n)) out << YAML::DoubleQuoted;
     out << n.Scalar();
   } else {
     out << YAML::Null;
