@@ -9,6 +9,7 @@
 The samples are those of the C++ one-call API (hpds/hpds.hpp): the samples `hpds sample` writes for the same points
 and config, in the same order. A tiled map build of a whole drive runs with `python3 -m hpds.map_build`.
 """
+import errno
 import os
 
 from . import _hpds
@@ -16,6 +17,14 @@ from . import ply
 from .config import to_yaml
 
 __all__ = ["downsample", "load_config", "ply", "read_points", "read_poses"]
+
+
+def _refuse_unreadable(path, what):
+    """OSError subclasses a Python caller can catch as such, before the core's own message (a RuntimeError)."""
+    if not os.path.exists(path):
+        raise FileNotFoundError(errno.ENOENT, "%s does not exist" % what, path)
+    if os.path.isdir(path):
+        raise IsADirectoryError(errno.EISDIR, "%s is a folder" % what, path)
 
 
 def _config_source(config):
@@ -26,8 +35,7 @@ def _config_source(config):
         path = os.fspath(config)
         if not path:
             raise ValueError("config: empty path")
-        if not os.path.exists(path):
-            raise FileNotFoundError("config file '%s' does not exist" % path)
+        _refuse_unreadable(path, "config file")
         return "", path
     return to_yaml(config), ""
 
@@ -70,10 +78,17 @@ def read_points(path, return_viewpoint=False):
 
     With return_viewpoint, a tuple (points, viewpoint): the sensor position a PCD's VIEWPOINT gives ((3,) float64;
     zeros for other formats or without one), which downsample(points, config, viewpoint) turns the normals toward,
-    as `hpds sample` does."""
-    return _hpds.read_points(os.fspath(path), bool(return_viewpoint))
+    as `hpds sample` does. Raises FileNotFoundError / IsADirectoryError for a path that is no file, RuntimeError
+    naming the file for one that cannot be read."""
+    path = os.fspath(path)
+    _refuse_unreadable(path, "point cloud file")
+    return _hpds.read_points(path, bool(return_viewpoint))
 
 
 def read_poses(path):
-    """A KITTI pose file (one 3x4 sensor-to-world matrix per line) as an (N, 4, 4) float64 array."""
-    return _hpds.read_poses(os.fspath(path))
+    """A KITTI pose file (one 3x4 sensor-to-world matrix per line) as an (N, 4, 4) float64 array.
+
+    Raises FileNotFoundError / IsADirectoryError for a path that is no file, RuntimeError for a malformed one."""
+    path = os.fspath(path)
+    _refuse_unreadable(path, "pose file")
+    return _hpds.read_poses(path)

@@ -301,6 +301,22 @@ class Viewpoint(support.ScratchCase):
         support.write_kitti_bin(self.path("ground.bin"), xyz)
         np.testing.assert_array_equal(hpds.read_points(self.path("ground.bin"), return_viewpoint=True)[1], [0, 0, 0])
 
+    def test_missing_files_raise_the_os_errors_python_callers_catch(self):
+        missing = self.path("no_such_frame.pcd")
+        for call in (lambda p: hpds.read_points(p), lambda p: hpds.read_poses(p), lambda p: hpds.load_config(p)):
+            with self.assertRaises(FileNotFoundError) as e:
+                call(missing)
+            self.assertEqual(e.exception.filename, missing)
+            with self.assertRaises(IsADirectoryError):
+                call(self.path(""))
+        # A file that exists but is no point cloud stays the core's error, naming the file.
+        garbage = self.path("garbage.pcd")
+        with open(garbage, "w") as f:
+            f.write("not a point cloud\n")
+        with self.assertRaises(RuntimeError) as e:
+            hpds.read_points(garbage)
+        self.assertIn("garbage.pcd", str(e.exception))
+
     def test_normals_face_the_viewpoint_as_in_hpds_sample(self):
         support.require_tools(self)
         config = {"output": {"spacing": 0.2}, "normals": {"enabled": True}}
