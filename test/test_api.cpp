@@ -151,7 +151,25 @@ TEST(Downsample, NanInfAndNoReturnPointsNeverComeOut) {
   const Samples s = downsample(points, HpdsConfig{});
   std::set<std::uint32_t> got(s.index.begin(), s.index.end());
   EXPECT_EQ(got, (std::set<std::uint32_t>{3, 4}));
+  EXPECT_EQ(s.skipped_invalid, 2u);
+  EXPECT_EQ(s.skipped_zero, 1u);
+  EXPECT_EQ(s.skipped_range + s.out_of_range, 0u);
   EXPECT_TRUE(downsample({}, HpdsConfig{}).index.empty());
+}
+
+// Found: points beyond the exact key range (2e7 m: georeferenced coordinates given as they are) left the result
+// without a word. They are counted, as are the other points left out.
+TEST(Downsample, PointsLeftOutAreCountedByReason) {
+  HpdsConfig config;
+  config.normals.enabled = false;
+  config.input.min_range = 0.5;
+  const std::vector<Eigen::Vector3d> points = {{1, 2, 3}, {2e7, 0, 0}, {0, -2e7, 1}, {0.1, 0, 0}, {3, 2, 1}};
+  const Samples s = downsampleDoubles(points, config);
+  EXPECT_EQ(s.out_of_range, 2u);
+  EXPECT_EQ(s.skipped_range, 1u);
+  EXPECT_EQ(s.skipped_invalid + s.skipped_zero, 0u);
+  const std::set<std::uint32_t> got(s.index.begin(), s.index.end());
+  EXPECT_EQ(got, (std::set<std::uint32_t>{0, 4}));
 }
 
 TEST(Downsample, NormalsFaceTheOriginAndAreNanWhereNotEstimable) {

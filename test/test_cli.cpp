@@ -323,6 +323,29 @@ TEST(Cli, VerifyRefusesLevelsDeeperThanItsSpacingMakes) {
   EXPECT_EQ(runHpds("verify " + shellQuote(tmp / "s.ply") + " --spacing 0.1 --max-depth 0", &log), 1) << log;
   EXPECT_NE(log.find("holds level 5"), std::string::npos) << log;
   EXPECT_NE(log.find("levels 0..0"), std::string::npos) << log;
+
+  // Found: a sampling without its finest levels, and an empty one, passed `verify --spacing 0.1 --input`: only the
+  // levels present were checked. The level --spacing gives counts, present or not.
+  const PointBuffer full = readPointCloud((tmp / "s.ply").string());
+  const PointField &level = *full.layout().find("level");
+  PointBuffer coarse(full.layout(), 0), none(full.layout(), 0);
+  for (std::size_t i = 0; i < full.size(); ++i)
+    if (readAsDouble(full.record(i), level) <= 3.0) coarse.pushBack(full.record(i));
+  ASSERT_GT(coarse.size(), 0u);
+  ASSERT_LT(coarse.size(), full.size());
+  writePly((tmp / "coarse.ply").string(), coarse);
+  writePly((tmp / "none.ply").string(), none);
+  const std::string input = " --input " + shellQuote(tmp / "plane.pcd");
+  EXPECT_EQ(runHpds("verify " + shellQuote(tmp / "s.ply") + " --spacing 0.1" + input, &log), 0) << log;
+  EXPECT_EQ(runHpds("verify " + shellQuote(tmp / "coarse.ply") + " --spacing 0.1" + input, &log), 1) << log;
+  EXPECT_NE(log.find("FAILED"), std::string::npos) << log;
+  EXPECT_EQ(runHpds("verify " + shellQuote(tmp / "coarse.ply") + " --spacing 0.1", &log), 0) << log;
+  EXPECT_NE(log.find("note: level 5 (the level --spacing gives) holds no sample"), std::string::npos) << log;
+  for (const std::string cell : {" --spacing 0.1", " --cell-size 4"}) {
+    EXPECT_EQ(runHpds("verify " + shellQuote(tmp / "none.ply") + cell + input, &log), 1) << cell << log;
+    EXPECT_NE(log.find("FAILED: "), std::string::npos) << log;
+    EXPECT_NE(log.find("the sampling holds no sample"), std::string::npos) << log;
+  }
 }
 
 TEST(Cli, BadInputGivesAClearErrorAndNonZeroExit) {

@@ -15,6 +15,7 @@
 #include "TestData.hpp"
 #include "hpds/config/Config.hpp"
 #include "hpds/config/ConfigYaml.hpp"
+#include "hpds/config/NodeConfig.hpp"
 
 namespace {
 
@@ -405,6 +406,26 @@ TEST(ConfigYaml, TheNodesKeysAreValidatedByEveryReader) {
   EXPECT_EQ(hpds::loadConfigString("hierarchy: {max_depth: 12}\nros: {publish_levels: [10]}\n").hierarchy.max_depth, 12);
 }
 
+// Found: `fixed_frame: odom` with mode left at scan gave scan output in the sensor frame, without a word.
+TEST(ConfigYaml, SettingsTheModeIgnoresAreNamed) {
+  hpds::NodeConfig config;
+  EXPECT_EQ(hpds::ignoredRosKeysWarning(config.ros, hpds::Mode::Scan), "") << "the defaults say nothing";
+  EXPECT_EQ(hpds::ignoredRosKeysWarning(config.ros, hpds::Mode::Map), "");
+  hpds::applyNodeConfigYaml("ros: {fixed_frame: odom}", config, "test");
+  std::string w = hpds::ignoredRosKeysWarning(config.ros, hpds::Mode::Scan);
+  EXPECT_NE(w.find("ros.fixed_frame ('odom') is a map-mode setting, ignored in scan mode"), std::string::npos) << w;
+  EXPECT_NE(w.find("set mode: map"), std::string::npos) << w;
+  EXPECT_EQ(hpds::ignoredRosKeysWarning(config.ros, hpds::Mode::Map), "") << "map mode uses it";
+  hpds::applyNodeConfigYaml("ros: {local_map_rate: 2.0, map_file: /tmp/m.hpdsmap}", config, "test");
+  w = hpds::ignoredRosKeysWarning(config.ros, hpds::Mode::Scan);
+  EXPECT_NE(w.find("ros.fixed_frame ('odom'), ros.local_map_rate and ros.map_file are map-mode settings"),
+            std::string::npos) << w;
+  hpds::applyNodeConfigYaml("ros: {output_frame: base_link}", config, "test");
+  w = hpds::ignoredRosKeysWarning(config.ros, hpds::Mode::Map);
+  EXPECT_NE(w.find("ros.output_frame ('base_link') is a scan-mode setting, ignored in map mode"), std::string::npos)
+      << w;
+}
+
 TEST(ConfigYaml, FileErrorsNameThePath) {
   const auto dir = hpds::test::scratchDir("config_errors");
 
@@ -434,6 +455,17 @@ TEST(ConfigYaml, FileErrorsNameThePath) {
   message = errorOf([&] { (void)hpds::loadConfigFile(broken); });
   EXPECT_EQ(message.rfind("(document): YAML syntax error at line ", 0), 0u) << message;
   EXPECT_NE(message.find(broken), std::string::npos) << message;
+
+  // A text file that is no config (found: config_file:=/etc/passwd, whose 1.5 KB filled the FATAL line): its start
+  // and its length are named, not all of it.
+  const std::string not_config = (dir / "passwd").string();
+  std::string lines;
+  for (int i = 0; i < 40; ++i) lines += "user" + std::to_string(i) + ":x:100" + std::to_string(i) + ":/home/user\n";
+  writeFile(not_config, lines);
+  message = errorOf([&] { (void)hpds::loadConfigFile(not_config); });
+  EXPECT_NE(message.find("expected a map of config keys, got 'user0:x:1000:/home/user"), std::string::npos) << message;
+  EXPECT_NE(message.find("... ("), std::string::npos) << message;
+  EXPECT_LT(message.size(), 300u) << message;
 
   const std::string bad_value = (dir / "bad_value.yaml").string();
   writeFile(bad_value, "hierarchy:\n  max_depth: 22\n");

@@ -354,6 +354,42 @@ TEST(SamplingVerifier, FarInputPointIsUncoveredAndItsDistanceMatches) {
   expectSameReport(rep, bruteForce(sampling, 1.0, &input));
 }
 
+// Found: `hpds verify --spacing` passed a sampling without its finest levels, and an empty one, against their input:
+// only the levels present were checked. through_level makes the levels a sampling was asked to reach count.
+TEST(SamplingVerifier, LevelsTheSamplingWasAskedToReachAreCheckedEvenWhenEmpty) {
+  const Scene &scene = validScene();
+  std::vector<Sample> coarse;
+  for (const Sample &s : scene.samples)
+    if (s.level <= 2) coarse.push_back(s);
+  const PointBuffer sampling = makeSampling(coarse);
+  const PointBuffer input = makeCloud(scene.candidates);
+  EXPECT_EQ(verifySampling(sampling, 1.0, &input).total_violations(), 0u) << "levels 0..2 alone are a valid sampling";
+  const VerifyReport rep = verifySampling(sampling, 1.0, &input, 1, -1, 5);
+  ASSERT_EQ(rep.levels.size(), 6u);
+  for (int d = 3; d <= 5; ++d) {
+    const LevelReport &l = rep.levels[d];
+    EXPECT_EQ(l.count, 0u);
+    EXPECT_EQ(l.union_count, coarse.size());
+    // The oracle: candidates farther than 2 r_D from every kept sample (none lies within the tolerance of it).
+    std::size_t uncovered = 0;
+    for (const P3 &p : scene.candidates) {
+      double best = kInf;
+      for (const Sample &q : coarse) best = std::min(best, dist({f32(p[0]), f32(p[1]), f32(p[2])}, {f32(q.x), f32(q.y), f32(q.z)}));
+      uncovered += best > 2.0 * radius(1.0, d) ? 1 : 0;
+    }
+    EXPECT_GT(uncovered, 0u) << "level " << d;
+    EXPECT_EQ(l.coverage_violations, uncovered) << "level " << d;
+  }
+
+  // An empty sampling covers nothing: every input point counts at each level asked for.
+  const VerifyReport empty = verifySampling(makeSampling({}), 1.0, &input, 1, -1, 0);
+  ASSERT_EQ(empty.levels.size(), 1u);
+  EXPECT_EQ(empty.levels[0].coverage_violations, scene.candidates.size());
+  EXPECT_TRUE(verifySampling(makeSampling({}), 1.0, &input).levels.empty()) << "without through_level: nothing to check";
+  EXPECT_THROW((void)verifySampling(sampling, 1.0, &input, 1, -1, 22), std::invalid_argument);
+  EXPECT_THROW((void)verifySampling(sampling, 1.0, &input, 1, -1, -2), std::invalid_argument);
+}
+
 // The sampler inserts no point 2^30 - 8 cells of its finest level or more from the origin (CellKey.hpp): no sample
 // can cover one, and counting it as uncovered failed samplings that did all they could.
 TEST(SamplingVerifier, InputBeyondTheKeyRangeIsCountedNotCovered) {

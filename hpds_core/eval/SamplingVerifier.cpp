@@ -183,7 +183,7 @@ std::size_t VerifyReport::total_violations() const {
 }
 
 VerifyReport verifySampling(const PointBuffer &sampling, double cell_size, const PointBuffer *input, int threads,
-                            int max_depth) {
+                            int max_depth, int through_level) {
   if (!(std::isfinite(cell_size) && cell_size > 0.0))
     throw std::invalid_argument("verifySampling: cell_size must be finite and > 0");
   const Xyz sxyz = requireXyz(sampling, "sampling");
@@ -219,6 +219,9 @@ VerifyReport verifySampling(const PointBuffer &sampling, double cell_size, const
       ++nonfinite[l];
     }
   }
+  if (!(through_level >= -1 && through_level <= kMaxLevel))
+    throw std::invalid_argument("verifySampling: through_level " + std::to_string(through_level) +
+                                ": expected -1 or a level in 0..21");
   if (max_depth != -1 && !(max_depth >= std::max(max_level, 0) && max_depth <= kMaxLevel))
     throw std::invalid_argument("verifySampling: max_depth " + std::to_string(max_depth) +
                                 (max_depth >= 0 && max_depth < max_level
@@ -279,7 +282,7 @@ VerifyReport verifySampling(const PointBuffer &sampling, double cell_size, const
   std::unique_ptr<Tree> tree;
   const nanoflann::SearchParams params(32, 0.0f, false);
 
-  for (int d = 0; d <= max_level; ++d) {
+  for (int d = 0; d <= std::max(max_level, through_level); ++d) {
     const double cell = std::ldexp(cell_size, -d);
     const double r = std::sqrt(3.0) / 2.0 * cell;
     const double thr = r - tol;

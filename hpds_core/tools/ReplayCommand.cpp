@@ -144,6 +144,8 @@ int runReplay(const ReplayArgs &a) {
 
   hpds_node::FrameProcessor processor(config);
   const std::string target = processor.targetFrame();
+  if (const std::string w = hpds::ignoredRosKeysWarning(config.ros, config.hpds.mode); !w.empty())
+    std::cerr << "hpds: warning: " << w << "\n";
 
   // 1. Every transform of the bag, before any cloud (see the contract).
   const std::vector<std::string> tf_topics = {"/tf", "/tf_static"};
@@ -224,7 +226,15 @@ int runReplay(const ReplayArgs &a) {
         cloud.header.seq = next_seq[topic]++;
         out.write(topic, m.getTime(), cloud);
       };
-      if (frame.has_output) write(a.ns + "/output", frame.output);
+      if (frame.has_output) {
+        // What --stats reports for a bag: the points of every ~output message, as the PLY's are counted.
+        PointBuffer part;
+        if (hpds_node::fromRosCloud(frame.output, part) != hpds_node::CloudError::None)
+          throw std::logic_error("replay: an output cloud does not convert back");
+        report.output_points += part.size();
+        report.invalid_normals += countInvalidNormals(part);
+        write(a.ns + "/output", frame.output);
+      }
       if (frame.has_new_samples) write(a.ns + "/new_samples", frame.new_samples);
       if (frame.has_local_map) write(a.ns + "/local_map", frame.local_map);
       for (auto &[level, cloud] : frame.levels) write(a.ns + "/level_" + std::to_string(level), cloud);
@@ -266,6 +276,7 @@ int runReplay(const ReplayArgs &a) {
     bag_file->finish();
   } else {
     report.output_points = ply.size();
+    report.invalid_normals = countInvalidNormals(ply);
     ply_file.emplace(a.output);
     writePly(*ply_file, ply);
     ply_file->finish();

@@ -61,6 +61,14 @@ RunReport reportFor(const std::string &command, const Pipeline &pipeline) {
   return r;
 }
 
+std::uint64_t countInvalidNormals(const PointBuffer &cloud) {
+  const PointField *nx = cloud.layout().find("normal_x");
+  if (!nx) return 0;
+  std::uint64_t n = 0;
+  for (std::size_t i = 0; i < cloud.size(); ++i) n += std::isnan(readAsDouble(cloud.record(i), *nx)) ? 1 : 0;
+  return n;
+}
+
 std::uint64_t peakMemoryBytes() {
   rusage ru{};
   if (getrusage(RUSAGE_SELF, &ru) != 0) return 0;

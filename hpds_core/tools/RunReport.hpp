@@ -41,6 +41,9 @@ struct RunReport {
 /// and a zero count for each level built.
 [[nodiscard]] RunReport reportFor(const std::string &command, const Pipeline &pipeline);
 
+/// Points of `cloud` whose normal_x is NaN (no valid normal); 0 when it has no normals.
+[[nodiscard]] std::uint64_t countInvalidNormals(const PointBuffer &cloud);
+
 /// Peak resident set size of this process in bytes (getrusage), 0 if unknown.
 [[nodiscard]] std::uint64_t peakMemoryBytes();
 

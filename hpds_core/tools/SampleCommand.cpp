@@ -41,14 +41,6 @@ double since(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 }
 
-std::uint64_t countInvalidNormals(const PointBuffer &cloud) {
-  const PointField *nx = cloud.layout().find("normal_x");
-  if (!nx) return 0;
-  std::uint64_t n = 0;
-  for (std::size_t i = 0; i < cloud.size(); ++i) n += std::isnan(readAsDouble(cloud.record(i), *nx)) ? 1 : 0;
-  return n;
-}
-
 // The file takes the fields of the first frame with samples, as map mode's layout rule does: a recorded drive often
 // holds an empty frame (a driver's first message, a blocked sensor) with fewer fields, which has nothing to write.
 void appendCloud(PointBuffer &all, const PointBuffer &part, const std::string &input) {

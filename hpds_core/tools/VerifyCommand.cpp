@@ -112,11 +112,17 @@ void addVerifyCommand(CLI::App &app) {
     }
     PointBuffer input;
     if (!a->input.empty()) input = readPointCloud(a->input);
+    // The levels the sampling must reach: --spacing names its output level, and a sampling that stops short of it
+    // (its finest levels missing) leaves the input uncovered at that spacing. With --cell-size only the levels
+    // present are known; an input must then be covered at level 0 at least, which an empty sampling is not.
+    const int implied = deepestLevelFor(a->cell);
+    const int through = implied >= 0 ? implied : (a->input.empty() ? -1 : 0);
     std::size_t bad = 0, bad_frames = 0;
     for (const auto &[frame, sampling] : frames) {
       VerifyReport report;
       try {
-        report = verifySampling(sampling, cell_size, a->input.empty() ? nullptr : &input, a->threads, key_depth);
+        report = verifySampling(sampling, cell_size, a->input.empty() ? nullptr : &input, a->threads,
+                                std::max(key_depth, through), through);
       } catch (const std::invalid_argument &e) {
         // The verifier knows no file names; its complaints are about the sampling's content.
         std::string why = e.what();
@@ -132,6 +138,16 @@ void addVerifyCommand(CLI::App &app) {
       }
       bad += v;
       bad_frames += v > 0 ? 1 : 0;
+      // Without an input nothing can fail there, but a sampling asked for --spacing that holds none of its finest
+      // levels is not what that spacing gives.
+      if (a->input.empty() && implied >= 0 && !report.levels.empty() && report.levels.back().union_count > 0 &&
+          report.levels.back().count == 0)
+        std::cout << "note: level " << implied << " (the level --spacing gives) holds no sample"
+                  << (several ? " in frame " + std::to_string(frame) : std::string())
+                  << ": the sampling may stop short of that spacing; give --input to check its coverage\n";
+      if (report.levels.empty() || report.levels.back().union_count == 0)
+        std::cout << "note: " << (several ? "frame " + std::to_string(frame) + " of " : std::string()) << "the sampling holds no sample"
+                  << (a->input.empty() ? ": give --input to check it against the input" : "") << "\n";
     }
     if (frames.size() > 1)
       std::cout << frames.size() << " frames checked on their own, " << bad_frames << " with violations\n";

@@ -19,6 +19,14 @@ CloudError fail(CloudError error, std::string *why, const std::string &text) {
 CloudError checkLayout(const sensor_msgs::PointCloud2 &msg, hpds::PointLayout &layout, std::string *why) {
   if (msg.is_bigendian) return fail(CloudError::BigEndian, why, "is_bigendian is true (only little-endian data)");
   layout.fields.clear();
+  // A default-constructed message (no fields, no points: what some drivers publish for a blocked or idle sensor)
+  // is an empty frame, counted as such, not a cloud without x.
+  if (msg.fields.empty() && msg.data.empty() && (msg.width == 0 || msg.height == 0)) {
+    layout.point_step = 12;
+    for (std::uint32_t i = 0; i < 3; ++i)
+      layout.fields.push_back(hpds::PointField{std::string(1, char('x' + i)), 4 * i, hpds::FieldType::Float32, 1});
+    return CloudError::None;
+  }
   layout.point_step = msg.point_step;
   std::set<std::string> names;
   for (const sensor_msgs::PointField &f : msg.fields) {

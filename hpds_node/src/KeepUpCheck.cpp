@@ -13,6 +13,9 @@ constexpr std::size_t kKept = 64;
 // Gaps this much shorter or longer than the usual one, all in a row, are a new rate.
 constexpr double kRateChange = 1.5;
 
+// [s] Before any period is known, a median wait for transforms longer than this is worth a warning of its own.
+constexpr double kWaitWithoutPeriod = 0.01;
+
 template <class It>
 double median(It begin, It end) {
   std::vector<double> v(begin, end);
@@ -60,9 +63,10 @@ void KeepUpCheck::arrived(double wall_seconds) {
 
 std::string KeepUpCheck::processed(double seconds, double waited) {
   if (waited > 0.0) keep(waits_, waited);
-  // A drop came before anything was measured: said with the first measurement (a wait, or a cost after the first).
+  // A drop came before anything was measured: said with the first measurement (a wait that matters, or a cost
+  // after the first).
   auto pendingDrop = [this]() -> std::string {
-    if (!drop_pending_ || warned_ || (costs_.empty() && waits_.empty())) return "";
+    if (!drop_pending_ || warned_ || (costs_.empty() && !waitsMatter())) return "";
     warned_ = true;
     return warning(true);
   };
@@ -85,12 +89,19 @@ std::string KeepUpCheck::dropped() {
   if (warned_) return "";
   // Nothing measured yet (the first frame still running, or waiting for its transform): a warning now could name
   // neither the cost nor the wait, and it is said once. processed() says it with the first measurement.
-  if (costs_.empty() && waits_.empty()) {
+  if (costs_.empty() && !waitsMatter()) {
     drop_pending_ = true;
     return "";
   }
   warned_ = true;
   return warning(true);
+}
+
+bool KeepUpCheck::waitsMatter() const {
+  // A lookup that returns at once (a transform already there) still takes microseconds: no measurement to report.
+  if (waits_.empty()) return false;
+  const double wait = median(waits_);
+  return gaps_.empty() ? wait > kWaitWithoutPeriod : wait > 0.5 * median(gaps_);
 }
 
 std::string KeepUpCheck::warning(bool on_drop) const {
@@ -120,10 +131,9 @@ std::string KeepUpCheck::warning(bool on_drop) const {
   }
   // A worker waiting for a transform takes no next frame: when that is most of the period (a transform that never
   // comes costs ros/tf_timeout per frame), no sampling setting helps.
-  if (!waits_.empty()) {
+  if (waitsMatter()) {
     const double wait = median(waits_);
-    if (gaps_.empty() ? wait > 0.0 : wait > 0.5 * median(gaps_))
-      text += ". Frames also wait " + format("%.0f ms", 1e3 * wait) +
+    text += ". Frames also wait " + format("%.0f ms", 1e3 * wait) +
               " each for their transforms (up to ros/tf_timeout, now " + format("%.3g s", tf_timeout_) +
               "): check that tf has the sensor's frame in the fixed frame at the frames' stamps (frames without one "
               "are counted as no_transform), or lower ros/tf_timeout; no sampling setting shortens that wait";

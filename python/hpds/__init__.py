@@ -11,12 +11,21 @@ and config, in the same order. A tiled map build of a whole drive runs with `pyt
 """
 import errno
 import os
+import warnings
 
 from . import _hpds
 from . import ply
 from .config import to_yaml
 
-__all__ = ["downsample", "load_config", "ply", "read_points", "read_poses"]
+__all__ = ["Samples", "downsample", "load_config", "ply", "read_points", "read_poses"]
+
+
+class Samples(dict):
+    """What downsample returns: a dict of per-sample arrays, plus `skipped`, the input points left out by reason
+    ({"invalid": NaN/Inf, "zero": (0,0,0) no-returns, "range": outside input.min_range/max_range, "out_of_range":
+    beyond the exact key range of the finest level})."""
+
+    skipped = None
 
 
 def _refuse_unreadable(path, what):
@@ -55,6 +64,9 @@ def downsample(points, config=None, viewpoint=None):
         0..D of the output level D) and, with normals.enabled, "normal" ((n, 3) float32, facing the sensor; NaN where
         no normal could be estimated) and "curvature" (float32); with normals.covariances also "covariance"
         ((n, 3, 3) float32: the sample's covariance for generalized ICP, NaN where the normal is).
+        The dict is a Samples: its `skipped` attribute counts the input points left out, by reason. Points beyond
+        the exact key range of the finest level (|coordinate| of about 1.5e7 m at the defaults: georeferenced
+        coordinates) are left out too; when there are any, a RuntimeWarning says how many.
     Raises ValueError naming the key for an invalid config, TypeError for a points array of another type.
     """
     text, path = _config_source(config)
@@ -64,7 +76,15 @@ def downsample(points, config=None, viewpoint=None):
         viewpoint = [float(v) for v in viewpoint]
     except (TypeError, ValueError):
         raise ValueError("viewpoint: expected 3 numbers (x, y, z), got %r" % (viewpoint,)) from None
-    return _hpds.downsample(points, text, path, viewpoint)
+    arrays, skipped = _hpds.downsample(points, text, path, viewpoint)
+    result = Samples(arrays)
+    result.skipped = skipped
+    if skipped["out_of_range"]:
+        warnings.warn("hpds.downsample: %d points lie beyond the exact key range of the finest level and were not "
+                      "sampled (see samples.skipped); sample georeferenced points relative to a local origin, or "
+                      "use a coarser output.spacing or a smaller hierarchy.max_depth" % skipped["out_of_range"],
+                      RuntimeWarning, stacklevel=2)
+    return result
 
 
 def load_config(config=None):

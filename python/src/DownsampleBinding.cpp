@@ -101,12 +101,17 @@ void bindDownsample(py::module_ &m) {
           if (s.size()) std::memcpy(cov.mutable_data(), s.covariance.data(), s.size() * sizeof(Eigen::Matrix3f));
           out["covariance"] = cov;
         }
-        return out;
+        py::dict skipped;
+        skipped["invalid"] = s.skipped_invalid;
+        skipped["zero"] = s.skipped_zero;
+        skipped["range"] = s.skipped_range;
+        skipped["out_of_range"] = s.out_of_range;
+        return py::make_tuple(out, skipped);
       },
       py::arg("points"), py::arg("config_yaml"), py::arg("config_path"), py::arg("viewpoint"),
       "Samples of `points` ((N, 3) float32/float64) with the config (file `config_path` if not empty, else "
-      "`config_yaml`) and normals facing `viewpoint` (x, y, z in the points' frame): dict of index, level and, with "
-      "normals, normal and curvature, with covariances covariance.");
+      "`config_yaml`) and normals facing `viewpoint` (x, y, z in the points' frame): (dict of index, level and, with "
+      "normals, normal and curvature, with covariances covariance; dict of the points left out by reason).");
 }
 
 }  // namespace hpds::python

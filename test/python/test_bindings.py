@@ -2,6 +2,7 @@
 frames, bit for bit; configs as dicts and YAML files; errors as Python exceptions naming the key."""
 import os
 import unittest
+import warnings
 
 import numpy as np
 
@@ -188,6 +189,26 @@ class Arguments(support.ScratchCase):
         pts[1::5] = 0.0
         s = hpds.downsample(pts)
         self.assertTrue((s["index"] % 5 >= 2).all())
+        self.assertIsInstance(s, dict)
+        self.assertEqual(s.skipped["invalid"], len(pts[::5]))
+        self.assertEqual(s.skipped["zero"], len(pts[1::5]))
+        self.assertEqual(s.skipped["out_of_range"], 0)
+
+    def test_points_beyond_the_key_range_are_counted_and_warned(self):
+        # Found: 2e7 m coordinates left the result without a word.
+        pts = np.array([[1.0, 2.0, 3.0], [2e7, 0.0, 0.0], [3.0, 2.0, 1.0], [0.0, -2e7, 5.0]])
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            s = hpds.downsample(pts)
+        self.assertEqual(s.skipped["out_of_range"], 2)
+        self.assertEqual(sorted(s["index"].tolist()), [0, 2])
+        self.assertEqual(len(caught), 1)
+        self.assertIs(caught[0].category, RuntimeWarning)
+        self.assertIn("2 points lie beyond the exact key range", str(caught[0].message))
+        with warnings.catch_warnings(record=True) as quiet:
+            warnings.simplefilter("always")
+            hpds.downsample(pts[[0, 2]])
+        self.assertEqual(quiet, [])
 
     def test_empty_input(self):
         s = hpds.downsample(np.zeros((0, 3), np.float32), NORMALS)

@@ -34,6 +34,20 @@ with rosbag.Bag(sys.argv[2]) as b:
             seqs.setdefault(topic, []).append(msg.header.seq)
 assert seqs and all(v == list(range(len(v))) for v in seqs.values()), "header.seq per topic: %s" % seqs
 PY
+# --stats of a bag counts the ~output messages' points and their invalid normals (both were 0 for bags).
+/usr/bin/python3 - "$work/cli.bag" "$work/stats.json" <<'PY' || exit 1
+import json, math, sys, rosbag
+from sensor_msgs import point_cloud2
+points = invalid = 0
+with rosbag.Bag(sys.argv[1]) as b:
+    for topic, msg, _ in b.read_messages():
+        if topic.endswith("/output"):
+            points += msg.width * msg.height
+            invalid += sum(1 for (nx,) in point_cloud2.read_points(msg, field_names=["normal_x"]) if math.isnan(nx))
+s = json.load(open(sys.argv[2]))
+assert points > 0 and s["output_points"] == points, "output_points %s, the bag's ~output %d" % (s["output_points"], points)
+assert s["invalid_normals"] == invalid, "invalid_normals %s, the bag's ~output %d" % (s["invalid_normals"], invalid)
+PY
 "$hpds" replay "$work/input.bag" "${common[@]}" -o "$work/map1.ply" > /dev/null
 "$hpds" replay "$work/input.bag" "${common[@]}" -o "$work/map2.ply" --threads 2 > /dev/null
 cmp "$work/map1.ply" "$work/map2.ply" || { echo "replay is not deterministic"; exit 1; }
@@ -50,7 +64,16 @@ grep -q "6 without transform" "$work/sf.log" || { cat "$work/sf.log"; exit 1; }
 grep -q "clouds arrive in the fixed frame 'velodyne' itself" "$work/fixed.log" || { cat "$work/fixed.log"; exit 1; }
 # Scan mode into one PLY, and a fixed frame that the bag does not have: every frame dropped, exit status 1 with an
 # error line, and the existing outputs of an earlier run (bag and PLY) left as they were.
-"$hpds" replay "$work/input.bag" "${common[@]}" --mode scan -o "$work/scan.ply" > "$work/scan.log"
+"$hpds" replay "$work/input.bag" "${common[@]}" --mode scan -o "$work/scan.ply" --stats "$work/scan.json" > "$work/scan.log"
+# Its --stats counts the PLY's points and the NaN normals among them.
+/usr/bin/python3 - "$work/scan.ply" "$work/scan.json" <<'PY' || exit 1
+import json, sys
+data = open(sys.argv[1], "rb").read()
+header = data[:data.index(b"end_header\n")].decode().splitlines()
+count = int(next(l.split()[2] for l in header if l.startswith("element vertex")))
+s = json.load(open(sys.argv[2]))
+assert count > 0 and s["output_points"] == count, "output_points %s, the PLY %d" % (s["output_points"], count)
+PY
 # Scan mode looks no transform up: its summary names no target frame.
 grep -q "^messages: .* 6 processed" "$work/scan.log" || { cat "$work/scan.log"; exit 1; }
 grep -q "without transform" "$work/scan.log" && { echo "scan-mode summary names a transform"; cat "$work/scan.log"; exit 1; }

@@ -429,6 +429,21 @@ TEST(FrameProcessor, DropsAreCountedByReason) {
   EXPECT_EQ(processor.stats().dropped[int(hpds_node::DropReason::NoTransform)], 1u);
   EXPECT_EQ(processor.stats().droppedTotal(), 3u);
   EXPECT_EQ(processor.stats().processed, 1u);
+
+  // A default-constructed message (no fields, 0 x 0: a driver's idle output) is an empty frame, not a malformed
+  // one without x (it was counted as missing_xyz), whatever fields the map has.
+  const PointCloud2 idle;
+  EXPECT_EQ(processor.check(idle), hpds_node::CloudError::None);
+  const auto e = processor.process(idle, lidar.pose(2), OutputRequest::all());
+  EXPECT_TRUE(e.processed) << e.why;
+  EXPECT_EQ(processor.stats().processed, 2u);
+  EXPECT_EQ(processor.stats().empty, 1u);
+  EXPECT_EQ(processor.stats().malformedTotal(), 1u);
+  EXPECT_EQ(processor.pipeline().hierarchy().sampleCount(), before);
+  // Fields without points, or points without fields, are still refused.
+  PointCloud2 no_fields;
+  no_fields.width = no_fields.height = 1;
+  EXPECT_EQ(processor.check(no_fields), hpds_node::CloudError::MissingXyz);
 }
 
 // A static-looking transform parent -> child at 5 s: a translation, no rotation.

@@ -155,6 +155,19 @@ TEST(KeepUpCheck, TheFirstOverloadDropIsReportedOnceWithWhatWasMeasured) {
   early.arrived(0.20);
   EXPECT_EQ(early.processed(0.15), "") << "said twice";
 
+  // Transform lookups that return at once (microseconds) are no measurement: found with VLS-128 frames at the
+  // defaults, the pending drop was spent on "none has been processed yet" and the cost was never said.
+  KeepUpCheck instant(hpds::HpdsConfig{}, 1, 8);
+  instant.arrived(0.0);
+  instant.arrived(0.05);
+  instant.arrived(0.10);
+  EXPECT_EQ(instant.dropped(), "");
+  EXPECT_EQ(instant.processed(2.0, 2e-5), "") << "a 20 us lookup is no wait worth a warning";
+  instant.arrived(0.15);
+  const std::string said = instant.processed(0.15, 2e-5);
+  EXPECT_TRUE(contains(said, "every 50 ms (20.0 Hz) and take 150 ms each")) << said;
+  EXPECT_FALSE(contains(said, "for their transforms")) << said;
+
   // The first frame waits for a transform that never comes while the queue overflows: said when that wait ends,
   // naming it, not as sampling advice alone.
   hpds::HpdsConfig map;

@@ -508,6 +508,23 @@ TEST(NodePersistenceRestart, ARestartLosesNothing) {
     live(2, 3);
   }
 
+  {
+    // Found rewriting a map loaded with other normal settings without its normals, by a run that took no frame. The
+    // save renames a new file into place, so an untouched file keeps its inode.
+    SCOPED_TRACE("third life: no frame, the loaded map is left as it is");
+    struct stat before {}, after {};
+    ASSERT_EQ(::stat(file.c_str(), &before), 0);
+    const std::vector<std::uint8_t> bytes_before = readBytes(file);
+    ros::param::set(ns + "/normals/k", 12);  // other normals: a re-save would drop the loaded ones
+    auto server = std::make_unique<hpds_node::HpdsServer>(nh, ros::NodeHandle(ns), "hpds_restart");
+    EXPECT_TRUE(server->shutdown());
+    server.reset();
+    ros::param::del(ns + "/normals/k");
+    ASSERT_EQ(::stat(file.c_str(), &after), 0);
+    EXPECT_EQ(before.st_ino, after.st_ino) << "the map was rewritten by a run that processed no frame";
+    EXPECT_TRUE(readBytes(file) == bytes_before);
+  }
+
   // A file that exists but does not load: the server refuses to start, names the file and the reason, and does
   // not touch it (no save on the way out).
   std::vector<std::uint8_t> bytes = readBytes(file);

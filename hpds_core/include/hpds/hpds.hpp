@@ -9,7 +9,7 @@
 //   skipped; they never appear in the result. So are points beyond the exact cell-key range of the finest level
 //   (|coordinate| >= 2^30 cells of level hierarchy.max_depth: 1.55e7 m at the defaults; 8.4e6 to 1.7e7 m for any
 //   output.spacing above 1.4 cm with the derived cell; less for finer spacings, a larger hierarchy.max_depth or a
-//   smaller fixed cell); sample georeferenced points relative to a local origin, or check with Pipeline's counters.
+//   smaller fixed cell): Samples::out_of_range counts them. Sample georeferenced points relative to a local origin.
 // - The samples are those `hpds sample` writes for the same points and config (one frame, its mode and seed), in
 //   the same order: levels 0..D of the output level D (output.level / output.spacing).
 // - Deterministic: the same points and config give the same samples, whatever config.threads is.
@@ -39,6 +39,10 @@ struct Samples {
   /// (hpds/normals/SampleCovariance.hpp: dimensionless, the normal its small axis, the identity on one scan line),
   /// NaN where the normal is.
   std::vector<Eigen::Matrix3f> covariance;
+  /// Input points left out, by reason (see the contract): NaN/Inf coordinates, exact (0,0,0) no-returns, outside
+  /// input.min_range/max_range, and beyond the exact key range of the finest level. The last is the one a caller
+  /// may not expect (georeferenced coordinates): when it is not 0, part of the cloud was not sampled.
+  std::uint64_t skipped_invalid = 0, skipped_zero = 0, skipped_range = 0, out_of_range = 0;
 
   [[nodiscard]] std::size_t size() const { return index.size(); }
 };

@@ -43,11 +43,15 @@ Samples downsampleFrame(const std::vector<Eigen::Matrix<Scalar, 3, 1>> &points, 
   Pipeline pipeline(config);
   Frame frame = frameOf(points);
   frame.viewpoint = viewpoint;
-  pipeline.addFrame(frame);
+  const FrameCounters counters = pipeline.addFrame(frame).counters;
   const Hierarchy &hierarchy = pipeline.hierarchy();
   const std::vector<SampleId> ids = pipeline.outputSamples();
 
   Samples out;
+  out.skipped_invalid = counters.skipped_invalid;
+  out.skipped_zero = counters.skipped_zero;
+  out.skipped_range = counters.skipped_range;
+  out.out_of_range = counters.out_of_range;
   out.index.resize(ids.size());
   out.level.resize(ids.size());
   for (std::size_t i = 0; i < ids.size(); ++i) {

@@ -131,9 +131,15 @@ std::string describe(const YAML::Node &node) {
       return "a sequence";
     case YAML::NodeType::Map:
       return "a map";
-    case YAML::NodeType::Scalar:
+    case YAML::NodeType::Scalar: {
+      // A file that is no config at all (found: /etc/passwd as config_file) reads as one long scalar: its start
+      // says what it is, the whole of it would fill the terminal.
+      constexpr std::size_t kShown = 80;
+      std::string text = node.Scalar();
+      if (text.size() > kShown) text = text.substr(0, kShown) + "... (" + std::to_string(text.size()) + " characters)";
       // yaml-cpp tags quoted scalars "!"; saying so explains why '4.0' was not taken as a number.
-      return node.Tag() == "!" ? "the quoted string '" + node.Scalar() + "'" : "'" + node.Scalar() + "'";
+      return node.Tag() == "!" ? "the quoted string '" + text + "'" : "'" + text + "'";
+    }
     case YAML::NodeType::Undefined:
       break;
   }

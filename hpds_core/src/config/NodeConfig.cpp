@@ -175,6 +175,29 @@ void validateRosConfig(const RosConfig &ros, const HpdsConfig &config) {
   }
 }
 
+std::string ignoredRosKeysWarning(const RosConfig &ros, Mode mode) {
+  const RosConfig defaults;
+  std::vector<std::string> keys;
+  if (mode == Mode::Scan) {
+    if (ros.fixed_frame != defaults.fixed_frame) keys.push_back("ros.fixed_frame ('" + ros.fixed_frame + "')");
+    if (ros.local_map_radius != defaults.local_map_radius) keys.emplace_back("ros.local_map_radius");
+    if (ros.local_map_rate != defaults.local_map_rate) keys.emplace_back("ros.local_map_rate");
+    if (!ros.map_file.empty()) keys.emplace_back("ros.map_file");
+  } else if (!ros.output_frame.empty()) {
+    keys.push_back("ros.output_frame ('" + ros.output_frame + "')");
+  }
+  if (keys.empty()) return "";
+  std::string text;
+  for (std::size_t i = 0; i < keys.size(); ++i) text += (i == 0 ? "" : i + 1 == keys.size() ? " and " : ", ") + keys[i];
+  text += (keys.size() == 1 ? " is a " : " are ");
+  if (mode == Mode::Scan)
+    return text + (keys.size() == 1 ? "map-mode setting" : "map-mode settings") +
+           ", ignored in scan mode: set mode: map to build a map in ros.fixed_frame, or ros.output_frame to publish "
+           "each scan in another frame";
+  return text + "scan-mode setting, ignored in map mode: map-mode outputs are in ros.fixed_frame ('" +
+         ros.fixed_frame + "')";
+}
+
 double checkDiagnosticPeriod(double period) {
   if (!(std::isfinite(period) && period > 0.0 && period <= 3600.0))
     fail("diagnostic_period", "must be a number of seconds in (0, 3600], got " + formatDouble(period));

@@ -11,7 +11,8 @@
 //   width * point_step) is removed, since PointBuffer stores records densely.
 // - Fields named "_" are PCL's padding placeholders: they are left out of the layout (their bytes stay in the
 //   records), as the PCD reader of hpds_core does, so several of them do not count as a repeated name.
-// - A zero-size cloud (width * height == 0) with a valid layout converts to an empty buffer.
+// - A zero-size cloud (width * height == 0) with a valid layout converts to an empty buffer; so does a message with
+//   no fields and no data (a default-constructed PointCloud2), as an empty x y z float32 buffer.
 // - toRosCloud writes the buffer's layout and bytes unchanged; is_dense is true exactly when every floating-point
 //   field of every point is finite (PCL's meaning: an invalid normal, NaN, makes the cloud not dense).
 // - Reentrant; no ROS runtime (master, node handle) needed.

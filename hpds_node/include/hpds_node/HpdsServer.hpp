@@ -32,8 +32,8 @@
 //   start on an unreadable map (and, with ros.save_map_on_shutdown, overwrite it with an empty one).
 // - shutdown() (also called by the destructor) stops the input, answers pending service calls, stops the workers
 //   after their current frame (queued frames are discarded and logged) and then, with ros.save_map_on_shutdown,
-//   saves the map to ros.map_file, logging the outcome (ROS_ERROR on failure). It returns false when that save
-//   failed. Call it while roscpp's logging still works (before ros::shutdown()), or the outcome goes unseen.
+//   saves the map to ros.map_file, logging the outcome (ROS_ERROR on failure), unless no frame was processed since
+//   the start or the last load or save (the file is then left as it is). It returns false when that save failed. Call it while roscpp's logging still works (before ros::shutdown()), or the outcome goes unseen.
 #pragma once
 
 #include <diagnostic_updater/diagnostic_updater.h>
@@ -47,6 +47,7 @@
 #include <ros/spinner.h>
 
 #include <atomic>
+#include <cstdint>
 #include <map>
 #include <memory>
 #include <mutex>
@@ -132,7 +133,7 @@ class HpdsServer {
   SequenceGaps sequence_gaps_;
   std::set<std::string> fields_not_carried_;  // already warned about
   // Said once per instance (not ROS_*_ONCE, whose flag is shared by every nodelet of the process).
-  std::atomic<bool> warned_sensor_at_origin_{false}, warned_rounding_{false};
+  std::atomic<bool> warned_sensor_at_origin_{false}, warned_rounding_{false}, warned_empty_frame_id_{false};
   std::mutex log_mutex_;
   std::map<std::string, double> last_logged_;  // logAllowed: wall time [s] of the last line per key
   static constexpr double kLogThrottleSeconds = 5.0;
@@ -164,6 +165,11 @@ class HpdsServer {
   ros::ServiceServer srv_save_map_, srv_load_map_;
   bool shut_down_ = false;
   bool shutdown_ok_ = true;
+  // The map's frame counter when it was last loaded or saved (0: the empty map of the start). A shutdown with no
+  // frame since leaves ros/map_file alone: re-saving a map just loaded would rewrite it under this run's settings
+  // (normals of other settings dropped) and an empty start would overwrite a map nobody asked to load.
+  std::uint32_t frames_at_last_sync_ = 0;
+  bool loaded_or_saved_ = false;
 };
 
 }  // namespace hpds_node

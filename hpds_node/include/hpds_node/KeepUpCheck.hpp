@@ -16,11 +16,12 @@
 //   processed() returns the warning. The verdict is taken once.
 // - dropped() returns the warning at the first overload drop, whatever the verdict (a load spike, a frame larger
 //   than the first ones), with the current period and the costs measured so far. A drop before anything is
-//   measured (no cost after the first frame's, no transform wait) is said by processed() with the first measurement.
+//   measured (no cost after the first frame's, no transform wait that matters: see below) is said by processed() with
+//   the first measurement.
 // - Each returns a non-empty text at most once over both: the warning names the measured period and cost, the share
 //   of frames lost and the settings that lower the cost, with their current values; when frames wait for their
-//   transforms for more than half the input period, it says that too (a missing or late transform, ros/tf_timeout).
-//   No period before two arrivals at different times.
+//   transforms for more than half the input period (10 ms while no period is known), it says that too (a missing
+//   or late transform, ros/tf_timeout). No period before two arrivals at different times.
 // - Not thread-safe: the caller serialises the calls.
 #pragma once
 
@@ -51,6 +52,8 @@ class KeepUpCheck {
 
  private:
   [[nodiscard]] std::string warning(bool on_drop) const;
+  /// The waits for transforms are worth naming: their median is over half the period (over 10 ms before any period).
+  [[nodiscard]] bool waitsMatter() const;
 
   hpds::HpdsConfig config_;
   std::size_t workers_;

@@ -110,6 +110,8 @@ HpdsServer::HpdsServer(ros::NodeHandle nh, ros::NodeHandle private_nh, const std
   service_spinner_ = std::make_unique<ros::AsyncSpinner>(1, &service_queue_);
   service_spinner_->start();
 
+  if (const std::string w = hpds::ignoredRosKeysWarning(config_.ros, config_.hpds.mode); !w.empty())
+    ROS_WARN_STREAM_NAMED("hpds", tag_ << ": " << w);
   std::ostringstream summary;
   summary << tag_ << ": " << processors_.front()->samplingSummary();
   if (!target_frame_.empty()) summary << ", outputs in frame '" << target_frame_ << "'";
@@ -148,6 +150,12 @@ bool HpdsServer::shutdown() {
                "processed");
   // The workers are gone: the map is complete (no frame half-inserted) and nothing else touches it.
   if (config_.ros.save_map_on_shutdown && config_.hpds.mode == hpds::Mode::Map) {
+    if (processors_.front()->pipeline().framesProcessed() == frames_at_last_sync_) {
+      say(false, tag_ + ": shutdown: no frame was processed since " +
+                     (loaded_or_saved_ ? "the map was last loaded or saved" : "the start") + ": '" +
+                     config_.ros.map_file + "' is left as it is");
+      return shutdown_ok_;
+    }
     const auto [ok, message] = runMapCommand(true);
     shutdown_ok_ = ok;
     say(!ok, ok ? tag_ + ": shutdown: " + message : tag_ + ": shutdown: the map was not saved: " + message);
@@ -217,6 +225,8 @@ std::pair<bool, std::string> HpdsServer::runMapCommand(bool save) {
           msg << "; warning: " << w;
         }
     }
+    frames_at_last_sync_ = pipeline.framesProcessed();
+    loaded_or_saved_ = true;
     return {true, msg.str()};
   } catch (const std::exception &e) {
     msg << (save ? "saving the map failed: " : "loading the map failed: ") << e.what();
@@ -237,6 +247,7 @@ bool HpdsServer::onMapService(bool save, std_srvs::Trigger::Request &, std_srvs:
   const char *service = save ? "~save_map" : "~load_map";
   res.success = false;
   const std::string changed = mapFileSetSinceStart();
+  const bool refused = config_.hpds.mode != hpds::Mode::Map || config_.ros.map_file.empty();
   if (config_.hpds.mode != hpds::Mode::Map) {
     res.message = "this node runs in scan mode, which keeps no map: saving and loading need mode: map";
   } else if (config_.ros.map_file.empty()) {
@@ -257,6 +268,9 @@ bool HpdsServer::onMapService(bool save, std_srvs::Trigger::Request &, std_srvs:
   }
   if (res.success) {
     ROS_INFO_STREAM_NAMED("hpds", tag_ << ": " << service << ": " << res.message);
+  } else if (refused) {
+    // A call this node cannot serve (no map, no file): the caller's mistake, answered; nothing failed here.
+    ROS_WARN_STREAM_NAMED("hpds", tag_ << ": " << service << " refused: " << res.message);
   } else {
     ROS_ERROR_STREAM_NAMED("hpds", tag_ << ": " << service << ": " << res.message);
   }
@@ -379,10 +393,11 @@ void HpdsServer::handle(const sensor_msgs::PointCloud2::ConstPtr &msg, std::size
     // 3. Sensor pose in the target frame at the message stamp.
     Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
     Eigen::Vector3d viewpoint = Eigen::Vector3d::Zero();
+    // Timed only when a transform is looked up: scan mode without output frame has no wait to report.
+    const bool looked_up = !(target_frame_.empty() && config_.ros.sensor_frame.empty());
     const ros::WallTime wait_start = ros::WallTime::now();
-    const bool posed = (target_frame_.empty() && config_.ros.sensor_frame.empty()) ||
-                       waitForPose(target_frame_, msg->header, pose, viewpoint, &why);
-    waited = (ros::WallTime::now() - wait_start).toSec();
+    const bool posed = !looked_up || waitForPose(target_frame_, msg->header, pose, viewpoint, &why);
+    if (looked_up) waited = (ros::WallTime::now() - wait_start).toSec();
     if (!posed) {
       processor.countDrop(DropReason::NoTransform);
       if (logAllowed("no_transform"))
@@ -405,6 +420,10 @@ void HpdsServer::handle(const sensor_msgs::PointCloud2::ConstPtr &msg, std::size
                         << "' itself, so where the sensor was is unknown: it is taken as that frame's origin, which "
                            "normals face and map/evict_distance and input ranges measure from (far from it, each "
                            "frame evicts the last). Set ros/sensor_frame to the sensor's tf frame");
+      // Processed all the same (the output keeps the input's frame), but tf, RViz and PCL's tools cannot place it.
+      if (msg->header.frame_id.empty() && target_frame_.empty() && !warned_empty_frame_id_.exchange(true))
+        ROS_WARN_STREAM_NAMED("hpds", tag_ << ": input clouds have an empty header.frame_id, which the outputs "
+                                              "keep: tf and RViz cannot place them. Fix the driver's frame_id");
       ProcessedFrame frame = processor.process(*msg, pose, wants, viewpoint);
       if (!frame.processed) {
         if (logAllowed(std::string("dropped ") + toString(frame.drop)))

@@ -5,7 +5,8 @@
 //   and optionally the input cloud the sampling was made from (fields x, y, z).
 // - Level D has cell edge c_D = C * 2^-D (cells [k c_D, (k+1) c_D) per axis, anchored at the world origin) and
 //   radius r_D = sqrt(3)/2 * c_D. U_D is the union of the samples of levels 0..D. For every D from 0 to the
-//   highest level present it checks
+//   highest level present, or to `through_level` when that is deeper (the level a sampling was asked to reach: its
+//   empty levels then count, and an input must be covered at their radii), it checks
 //     (1) cells:    at most one level-D sample per level-D cell;
 //     (2) spacing:  every pair of U_D is at least r_D apart;
 //     (3) coverage: every input point lies within 2 r_D of U_D (only when an input cloud is given).
@@ -28,7 +29,7 @@
 //   thousandth of a cell short: a point on it may have been refused by the sampler's rounding.
 // - Throws std::invalid_argument when the sampling lacks x/y/z or `level` (or the input lacks x/y/z), when C is not
 //   finite and positive, when a level value is not an integer in 0..21, or when `max_depth` is not -1 or a level
-//   from the deepest one present to 21.
+//   from the deepest one present to 21, or when `through_level` is not -1 or a level in 0..21.
 // - `threads` (<= 0: hardware concurrency) splits the per-point loops into fixed chunks; every reduction is a min,
 //   max or count, so the report does not depend on the thread count.
 // - Cost: one k-d tree build per level over U_D plus one nearest-neighbour query per sample, one per input point and
@@ -61,14 +62,15 @@ struct VerifyReport {
   int key_range_depth = 0;               ///< M, the level whose cells bound the key range (see the contract)
   std::size_t input_points = 0;          ///< points of the input cloud, 0 without one
   std::size_t input_beyond_key_range = 0;  ///< input points beyond the key range: not checked for coverage
-  std::vector<LevelReport> levels;  ///< index D = level D, 0..max level present
+  std::vector<LevelReport> levels;  ///< index D = level D, 0..max(max level present, through_level)
   [[nodiscard]] std::size_t total_violations() const;
 };
 
 /// Checks `sampling` (see the contract); `input` may be null (no coverage check). `max_depth`: the
-/// hierarchy.max_depth the sampling was made with, for the key range, or -1 (see the contract).
+/// hierarchy.max_depth the sampling was made with, for the key range, or -1 (see the contract). `through_level`:
+/// check levels 0..through_level at least (-1: up to the deepest level present).
 [[nodiscard]] VerifyReport verifySampling(const PointBuffer &sampling, double cell_size, const PointBuffer *input,
-                                          int threads = 1, int max_depth = -1);
+                                          int threads = 1, int max_depth = -1, int through_level = -1);
 
 /// A fixed-width table, one row per level: level, r_D, count, union, min_nn/r, viol, cells, cover/r ('-' without
 /// input), uncov; then the total. A line before it says how many input points lay beyond the key range, if any.
