@@ -33,6 +33,13 @@ install(FILES ${CMAKE_CURRENT_BINARY_DIR}/hpdsConfig.cmake ${CMAKE_CURRENT_BINAR
   DESTINATION ${HPDS_CMAKE_DIR})
 install(FILES LICENSE DESTINATION ${CMAKE_INSTALL_DATADIR}/doc/hpds)
 
+# pkg-config for the core library alone (Eigen, no PCL, no ROS), relocatable: its prefix is found from the .pc
+# file's own folder. The ROS package's hpds.pc (catkin's) names PCL's, VTK's and OpenNI's libraries as well.
+file(RELATIVE_PATH HPDS_PC_TO_PREFIX "/${CMAKE_INSTALL_LIBDIR}/pkgconfig" "/")
+string(REGEX REPLACE "/$" "" HPDS_PC_TO_PREFIX "${HPDS_PC_TO_PREFIX}")
+configure_file(cmake/hpds_core.pc.in ${CMAKE_CURRENT_BINARY_DIR}/hpds_core.pc @ONLY)
+install(FILES ${CMAKE_CURRENT_BINARY_DIR}/hpds_core.pc DESTINATION ${CMAKE_INSTALL_LIBDIR}/pkgconfig)
+
 if(HPDS_WITH_PCL)
   install(TARGETS hpds RUNTIME DESTINATION ${CMAKE_INSTALL_BINDIR})
 endif()
@@ -45,16 +52,32 @@ if(HPDS_BUILD_NODE)
 endif()
 
 if(HPDS_BUILD_NODE)
-  # catkin_package() writes lib/pkgconfig/hpds.pc with the prefix of configure time, so `cmake --install --prefix
-  # P` left `prefix=/usr/local` in it, and its Cflags carry a stray backslash (`-I\${prefix}/include`), which
-  # pkg-config passes on literally. Rewritten once installed, with the prefix of this install.
+  # catkin_package() writes lib/pkgconfig/hpds.pc and share/hpds/cmake/hpdsConfig.cmake (what catkin packages find
+  # with find_package(catkin COMPONENTS hpds)) with the prefix of configure time, so `cmake --install --prefix P`
+  # left /usr/local in them; hpds.pc's Cflags carry a stray backslash (`-I\${prefix}/include`), which pkg-config
+  # passes on literally, and a placeholder description. Rewritten once installed, with the prefix of this install.
+  # catkin's version file accepted versions the package's own (lib/cmake/hpds, SameMinorVersion) refuses, so that
+  # find_package(hpds <version>) fell back to catkin's config and its catkin-only variables: it is replaced by the
+  # package's, so both configs take the same versions.
+  install(FILES ${CMAKE_CURRENT_BINARY_DIR}/hpdsConfigVersion.cmake DESTINATION ${CATKIN_PACKAGE_SHARE_DESTINATION}/cmake
+          RENAME hpdsConfig-version.cmake)
+  install(CODE "set(_hpds_configured_prefix \"${CMAKE_INSTALL_PREFIX}\")")
   install(CODE [[
     set(_hpds_pc "$ENV{DESTDIR}${CMAKE_INSTALL_PREFIX}/lib/pkgconfig/hpds.pc")
     if(EXISTS "${_hpds_pc}")
       file(READ "${_hpds_pc}" _hpds_text)
       string(REGEX REPLACE "^prefix=[^\n]*" "prefix=${CMAKE_INSTALL_PREFIX}" _hpds_text "${_hpds_text}")
       string(REPLACE "\\\${prefix}" "\${prefix}" _hpds_text "${_hpds_text}")
+      string(REPLACE "Description: Description of hpds"
+             "Description: hpds ROS package: hpds_core and hpds_pcl with PCL (hpds_core.pc: the core alone)"
+             _hpds_text "${_hpds_text}")
       file(WRITE "${_hpds_pc}" "${_hpds_text}")
+    endif()
+    set(_hpds_catkin_config "$ENV{DESTDIR}${CMAKE_INSTALL_PREFIX}/share/hpds/cmake/hpdsConfig.cmake")
+    if(EXISTS "${_hpds_catkin_config}" AND NOT _hpds_configured_prefix STREQUAL CMAKE_INSTALL_PREFIX)
+      file(READ "${_hpds_catkin_config}" _hpds_text)
+      string(REPLACE "${_hpds_configured_prefix}" "${CMAKE_INSTALL_PREFIX}" _hpds_text "${_hpds_text}")
+      file(WRITE "${_hpds_catkin_config}" "${_hpds_text}")
     endif()
   ]])
 endif()

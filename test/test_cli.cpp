@@ -130,6 +130,25 @@ TEST(Cli, Hdl32PairInMapModeWithPosesVerifies) {
   EXPECT_NE(log.find("one pose per input"), std::string::npos) << log;
 }
 
+// Found: a second `synth` with fewer frames into the same folder left the first run's extra frames beside the new
+// poses.txt. A run that would leave frames it does not write is refused, and changes nothing.
+TEST(Cli, SynthRefusesAFolderWithFramesItWouldNotReplace) {
+  const auto tmp = test::scratchDir("cli_synth_stale");
+  const std::string dir = shellQuote(tmp / "s");
+  std::string log;
+  ASSERT_EQ(runHpds("synth -o " + dir + " --frames 3 --beams 8 --azimuth-steps 300", &log), 0) << log;
+  const std::string poses = readText(tmp / "s" / "poses.txt");
+  EXPECT_EQ(runHpds("synth -o " + dir + " --frames 2 --beams 8 --azimuth-steps 300 --seed 9", &log), 1) << log;
+  EXPECT_NE(log.find("holds 1 frame file(s) this run would not replace (frame_000002.pcd)"), std::string::npos) << log;
+  EXPECT_EQ(runHpds("synth -o " + dir + " --frames 3 --beams 8 --azimuth-steps 300 --format bin", &log), 1) << log;
+  EXPECT_NE(log.find("holds 3 frame file(s)"), std::string::npos) << log;
+  EXPECT_EQ(readText(tmp / "s" / "poses.txt"), poses);
+  EXPECT_FALSE(std::filesystem::exists(tmp / "s" / "frame_000000.bin"));
+  // The same frames again (or more): every old frame is replaced, so the folder stays one drive.
+  EXPECT_EQ(runHpds("synth -o " + dir + " --frames 4 --beams 8 --azimuth-steps 300", &log), 0) << log;
+  EXPECT_TRUE(std::filesystem::exists(tmp / "s" / "frame_000003.pcd"));
+}
+
 TEST(Cli, SyntheticStreamScanModeTagsFramesAndSeedsAreDeterministic) {
   const auto tmp = test::scratchDir("cli_synth");
   std::string log;

@@ -1,8 +1,10 @@
 // `hpds synth -o DIR [--bag OUT.bag]`: writes a synthetic lidar stream (frames + KITTI poses) that `hpds sample` can
 // read back, and with --bag the same frames as a bag for `roslaunch hpds replay.launch` (SynthBag.hpp).
+#include <algorithm>
 #include <cstdio>
 #include <filesystem>
 #include <iostream>
+#include <set>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -43,6 +45,26 @@ std::string frameName(int index, const std::string &format) {
   return name;
 }
 
+// Found: a second run with fewer frames (or another --format) into the same folder left the first run's extra
+// frames beside the new poses.txt, which a later `hpds sample DIR --poses` took as one drive. Those files are not
+// this run's to delete, so the run is refused before any work.
+void refuseStaleFrames(const std::string &dir, const std::vector<std::string> &files) {
+  std::error_code ec;
+  if (!std::filesystem::is_directory(dir, ec)) return;
+  const std::set<std::string> written(files.begin(), files.end());
+  std::vector<std::string> stale;
+  for (const auto &entry : std::filesystem::directory_iterator(dir, ec)) {
+    const std::string name = entry.path().filename().string();
+    if (name.rfind("frame_", 0) == 0 && !written.count(name)) stale.push_back(name);
+  }
+  if (ec || stale.empty()) return;
+  std::sort(stale.begin(), stale.end());
+  throw std::invalid_argument("-o: '" + dir + "' holds " + std::to_string(stale.size()) + " frame file(s) this run " +
+                              "would not replace (" + stale.front() + (stale.size() > 1 ? ", ..." : "") +
+                              "), which would then lie beside a poses.txt that is not theirs: write into an empty "
+                              "or new folder (or remove them)");
+}
+
 void runSynth(SynthArgs a, SynthBagOpener open_bag) {
   if (!a.bag.path.empty()) {
     // Before any work, as every usage error: a build without ROS has no bag writer.
@@ -69,6 +91,7 @@ void runSynth(SynthArgs a, SynthBagOpener open_bag) {
   files.push_back("poses.txt");
   // The bag is one more output: never one of the folder's files, whatever links lead there.
   checkPaths({}, {{"--bag", a.bag.path, {".bag"}, "a bag", ""}}, {{"-o", a.out_dir, files}});
+  refuseStaleFrames(a.out_dir, files);
   const SyntheticLidar lidar(a.lidar);
   RunFolder folder(a.out_dir);
   // Under a temporary name until the folder is complete: a failed run leaves an existing bag as it was.

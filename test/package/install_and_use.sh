@@ -66,6 +66,72 @@ if [ "$node" = ON ] && command -v pkg-config > /dev/null; then
   case "$pc_flags" in *'\'*) fail "pkg-config hpds gives a backslash: $pc_flags";; esac
 fi
 
+# The share/hpds/cmake config catkin writes (for find_package(catkin COMPONENTS hpds)) takes the versions the package's
+# own takes: find_package(hpds 0.2) found it when lib/cmake/hpds refused, defining no target. Nor does it keep the
+# configure-time prefix.
+if [ "$node" = ON ]; then
+  catkin_config=$prefix/share/hpds/cmake/hpdsConfig.cmake
+  [ -f "$catkin_config" ] || fail "share/hpds/cmake/hpdsConfig.cmake is not installed (catkin packages need it)"
+  if grep -q "/usr/local" "$catkin_config"; then fail "$catkin_config names /usr/local, not the prefix"; fi
+  grep -q "$prefix" "$catkin_config" || fail "$catkin_config does not name the prefix"
+fi
+mkdir -p "$work/version"
+cat > "$work/version/CMakeLists.txt" <<'CMAKE'
+cmake_minimum_required(VERSION 3.16)
+project(hpds_version_check CXX)
+find_package(hpds ${WANT} ${EXACT} QUIET COMPONENTS core)
+message(STATUS "hpds found=${hpds_FOUND} dir=${hpds_DIR} ")
+if(hpds_FOUND AND NOT TARGET hpds::core)
+  message(FATAL_ERROR "hpds found without hpds::core")
+endif()
+CMAKE
+for want in "0.1" "0.1.0 EXACT" "0.2" "1.0" "0.0.1"; do
+  rm -rf "$work/version/build"
+  cmake -S "$work/version" -B "$work/version/build" -DCMAKE_PREFIX_PATH="$prefix" "-DWANT=${want% EXACT}" \
+    "-DEXACT=$([ "${want% EXACT}" = "$want" ] || echo EXACT)" \
+    > "$work/version.log" 2>&1 || { cat "$work/version.log"; fail "find_package(hpds $want) failed to configure"; }
+  found=$(sed -n 's/.*hpds found=\([A-Za-z0-9]*\) .*/\1/p' "$work/version.log")
+  case "$want" in
+    "0.1"|"0.1.0 EXACT") expected=1 ;;
+    *) expected=0 ;;
+  esac
+  if [ "$expected" = 1 ]; then
+    [ "$found" = 1 ] || { cat "$work/version.log"; fail "find_package(hpds $want) did not find the package"; }
+    grep -q "dir=$prefix/lib.*/cmake/hpds " "$work/version.log" ||
+      { cat "$work/version.log"; fail "find_package(hpds $want) found another config than lib/cmake/hpds"; }
+  else
+    [ "$found" = 0 ] || { cat "$work/version.log"; fail "find_package(hpds $want) took version $(cat "$prefix"/lib*/cmake/hpds/hpdsConfigVersion.cmake | sed -n 's/^set(PACKAGE_VERSION \"\(.*\)\")/\1/p')"; }
+  fi
+done
+
+# pkg-config for the core alone: a program built with its flags only (no CMake) links and runs.
+if command -v pkg-config > /dev/null; then
+  core_pc=$(cd "$prefix" && find . -name hpds_core.pc | head -n 1)
+  [ -n "$core_pc" ] || fail "hpds_core.pc is not installed"
+  PKG_CONFIG_PATH=$prefix/${core_pc%/hpds_core.pc} pkg-config --cflags --libs hpds_core > "$work/core_pc.flags" ||
+    fail "pkg-config hpds_core fails"
+  if grep -qiE "pcl|vtk|openni" "$work/core_pc.flags"; then fail "pkg-config hpds_core names PCL: $(cat "$work/core_pc.flags")"; fi
+  cat > "$work/core_pc.cpp" <<'CPP'
+#include <hpds/hpds.hpp>
+#include <cstdio>
+int main() {
+  std::vector<Eigen::Vector3f> points;
+  for (int i = 0; i < 100; ++i)
+    for (int j = 0; j < 100; ++j) points.emplace_back(2.0f + 0.01f * i, 0.01f * j, -1.0f);
+  const hpds::Samples s = hpds::downsample(points);
+  std::printf("%zu\n", s.size());
+  return s.size() > 0 && s.size() < points.size() ? 0 : 1;
+}
+CPP
+  san=()
+  [ "$sanitized" = OFF ] || san=(-fsanitize="$sanitized")
+  # shellcheck disable=SC2046
+  g++ -std=c++17 "${san[@]}" "$work/core_pc.cpp" -o "$work/core_pc" $(cat "$work/core_pc.flags") \
+    > "$work/core_pc.log" 2>&1 || { cat "$work/core_pc.log"; fail "a program built with pkg-config hpds_core does not build"; }
+  LD_LIBRARY_PATH=$prefix/${core_pc%/pkgconfig/hpds_core.pc} "$work/core_pc" > /dev/null ||
+    fail "a program built with pkg-config hpds_core does not run"
+fi
+
 # A separate project against the prefix.
 example_flags=()
 if [ "$sanitized" != OFF ]; then
