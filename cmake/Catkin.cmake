@@ -19,6 +19,12 @@ set(HPDS_CATKIN_COMPONENTS
   roscpp nodelet sensor_msgs std_msgs std_srvs geometry_msgs tf2 tf2_ros tf2_eigen rosbag diagnostic_updater
   diagnostic_msgs)
 find_package(catkin REQUIRED COMPONENTS ${HPDS_CATKIN_COMPONENTS})
+# A catkin workspace's devel/lib lies outside the build folder, so the link path put it into the installed
+# programs' RUNPATH, where a stale devel space would shadow the installed libraries. The install space's own
+# libraries are found through $ORIGIN, the others through setup.bash's LD_LIBRARY_PATH, as for any ROS package.
+if(CATKIN_DEVEL_PREFIX AND NOT CATKIN_DEVEL_PREFIX MATCHES "^${CMAKE_BINARY_DIR}(/|$)")
+  set(CMAKE_INSTALL_RPATH_USE_LINK_PATH OFF)
+endif()
 
 find_package(Eigen3 3.3 REQUIRED NO_MODULE)
 # Another catkin package gets hpds's libraries with find_package(catkin REQUIRED COMPONENTS hpds).

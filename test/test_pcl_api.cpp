@@ -144,6 +144,20 @@ TEST(PclDownsample, CovariancesOnlyWhenAskedForInGicpsType) {
     }
   // A config asking for covariances is fine without the pointer (nothing is computed for them).
   EXPECT_EQ(downsample(cloud, asked)->size(), s.size());
+  // A config every other reader refuses (covariances without normals) is refused here too, named, whatever the
+  // pointers ask for: the switches set from them hid it.
+  HpdsConfig contradictory = config();
+  contradictory.normals.enabled = false;
+  contradictory.normals.covariances = true;
+  EXPECT_THROW((void)downsample(xyzOf(cloud), contradictory), std::invalid_argument);
+  for (SampleCovariances *asked_for : {static_cast<SampleCovariances *>(nullptr), &covariances}) {
+    try {
+      (void)downsample(cloud, contradictory, nullptr, asked_for);
+      ADD_FAILURE() << "covariances on with normals off was taken";
+    } catch (const std::invalid_argument &e) {
+      EXPECT_NE(std::string(e.what()).find("normals.covariances"), std::string::npos) << e.what();
+    }
+  }
 }
 
 // Both one-call APIs promise the samples `hpds sample` writes: run the tool on the same points and config.

@@ -26,6 +26,10 @@ for f in include/hpds/hpds.hpp include/hpds/pcl.hpp include/hpds/config/Config.h
   [ -e "$prefix/$f" ] || fail "$f is not installed"
 done
 ls "$prefix/$libdir"/libhpds_core.* > /dev/null 2>&1 || fail "libhpds_core is not installed"
+# Each target names the include folder once.
+if grep -E 'INTERFACE_INCLUDE_DIRECTORIES "([^"]*/include);\1"' "$prefix/$libdir/cmake/hpds/hpdsTargets.cmake"; then
+  fail "an installed target lists its include folder twice"
+fi
 ls "$prefix/$libdir"/libhpds_pcl.* > /dev/null 2>&1 || fail "libhpds_pcl is not installed"
 [ ! -e "$prefix/include/hpds/eval" ] || fail "the evaluation headers are installed (they belong to no installed library)"
 if find "$prefix" -name 'test_*' -type f | grep -q .; then fail "test binaries are installed"; fi
@@ -103,6 +107,26 @@ for want in "0.1" "0.1.0 EXACT" "0.2" "1.0" "0.0.1"; do
     [ "$found" = 0 ] || { cat "$work/version.log"; fail "find_package(hpds $want) took version $(cat "$prefix"/lib*/cmake/hpds/hpdsConfigVersion.cmake | sed -n 's/^set(PACKAGE_VERSION \"\(.*\)\")/\1/p')"; }
   fi
 done
+
+# Without PCL on the user's machine (hidden here), hpds::pcl says what it needs: at find time, and in the failure of
+# a REQUIRED pcl component (it was a compile error on <pcl/point_cloud.h>).
+cat > "$work/version/CMakeLists.txt" <<'CMAKE'
+cmake_minimum_required(VERSION 3.16)
+project(hpds_pcl_check C CXX)
+find_package(hpds ${WANT})
+CMAKE
+rm -rf "$work/version/build"
+cmake -S "$work/version" -B "$work/version/build" -DCMAKE_PREFIX_PATH="$prefix" -DCMAKE_DISABLE_FIND_PACKAGE_PCL=ON \
+  > "$work/nopcl.log" 2>&1 || { cat "$work/nopcl.log"; fail "find_package(hpds) without PCL failed"; }
+grep -q "hpds::pcl is unusable: install PCL (Debian: libpcl-dev)" "$work/nopcl.log" ||
+  { cat "$work/nopcl.log"; fail "find_package(hpds) without PCL does not say so"; }
+rm -rf "$work/version/build"
+if cmake -S "$work/version" -B "$work/version/build" -DCMAKE_PREFIX_PATH="$prefix" -DCMAKE_DISABLE_FIND_PACKAGE_PCL=ON \
+     "-DWANT=REQUIRED;COMPONENTS;pcl" > "$work/nopcl.log" 2>&1; then
+  cat "$work/nopcl.log"; fail "find_package(hpds REQUIRED COMPONENTS pcl) succeeded without PCL"
+fi
+grep -q "pcl component needs PCL 1.10 or later (Debian: libpcl-dev)" "$work/nopcl.log" ||
+  { cat "$work/nopcl.log"; fail "a REQUIRED pcl component without PCL does not name the cure"; }
 
 # pkg-config for the core alone: a program built with its flags only (no CMake) links and runs.
 if command -v pkg-config > /dev/null; then

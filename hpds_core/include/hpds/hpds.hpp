@@ -31,13 +31,16 @@ namespace hpds {
 struct Samples {
   std::vector<std::uint32_t> index;  ///< position of the sample in the input
   std::vector<std::uint8_t> level;   ///< hierarchy level 0..D of the sample
-  /// With config.normals.enabled (else empty): unit normal facing the sensor, and curvature l0 / (l0 + l1 + l2);
-  /// NaN where a normal could not be estimated (too few neighbours, degenerate neighbourhood), as in PCL.
+  /// With config.normals.enabled (else empty): unit normal facing the sensor (except a near-horizontal one nearly
+  /// perpendicular to the ray, a single scan line's, which faces up where the sample is below the sensor:
+  /// hpds/normals/NormalEstimator.hpp), and curvature l0 / (l0 + l1 + l2); NaN where a normal could not be estimated
+  /// (too few neighbours, degenerate neighbourhood), as in PCL.
   std::vector<Eigen::Vector3f> normal;
   std::vector<float> curvature;
   /// With config.normals.covariances (else empty): the sample's covariance for generalized ICP
-  /// (hpds/normals/SampleCovariance.hpp: dimensionless, the normal its small axis, the identity on one scan line),
-  /// NaN where the normal is.
+  /// (hpds/normals/SampleCovariance.hpp: dimensionless, a plane's; at the default normals.covariance_k its small
+  /// axis is the normal of the 30 nearest output samples, not `normal`; the identity on one scan line), NaN where
+  /// the normal is.
   std::vector<Eigen::Matrix3f> covariance;
   /// Input points left out, by reason (see the contract): NaN/Inf coordinates, exact (0,0,0) no-returns, outside
   /// input.min_range/max_range, and beyond the exact key range of the finest level. The last is the one a caller

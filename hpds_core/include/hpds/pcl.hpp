@@ -12,7 +12,8 @@
 // - `covariances` (optional): likewise, the samples' covariances for generalized ICP (Samples::covariance), in the
 //   type pcl::GeneralizedIterativeClosestPoint's setSourceCovariances/setTargetCovariances take; computed only when
 //   given, whatever config.normals.covariances says.
-// - Throws std::invalid_argument as hpds::downsample does (a sensor_origin_ that is not finite included).
+// - Throws std::invalid_argument as hpds::downsample does (a sensor_origin_ that is not finite included), for
+//   `config` as given (validateConfig) before the switches above are applied.
 #pragma once
 
 #include <pcl/point_cloud.h>
@@ -32,6 +33,9 @@ template <typename PointT>
 typename pcl::PointCloud<PointT>::Ptr downsample(const pcl::PointCloud<PointT> &cloud, const HpdsConfig &config,
                                                  pcl::PointCloud<pcl::Normal> *normals = nullptr,
                                                  SampleCovariances *covariances = nullptr) {
+  // The config as given first: the switches set below would otherwise hide a mistake in it (covariances on with
+  // normals off) that hpds::downsample, the CLI and the node all refuse.
+  validateConfig(config);
   std::vector<Eigen::Vector3f> xyz(cloud.size());
   for (std::size_t i = 0; i < cloud.size(); ++i) xyz[i] = Eigen::Vector3f(cloud[i].x, cloud[i].y, cloud[i].z);
   HpdsConfig run = config;

@@ -16,7 +16,8 @@
 // - Fewer than `min_neighbors` neighbours (the sample included) or a degenerate neighbourhood gives valid = false
 //   and NaN normal/curvature (PCL's convention for "not estimated"); never a garbage direction marked valid.
 // - curvature = l0 / (l0 + l1 + l2). Results are per id, independent of the thread count.
-// - Refinements (both off by default; see RefinedNormals.cpp):
+// - Refinements (both off in this estimator's own parameters; config/hpds.yaml turns both on: offset 2, growth 8;
+//   see RefinedNormals.cpp):
 //   - neighborhood_level_offset o > 0: the footprint is chosen as above at `level` (the radius, or the distance of
 //     the k-th nearest sample of levels 0..level), then every sample of levels 0..level+o inside it is used. Finer
 //     levels average the range noise, which a single Poisson-disk level cannot.
