@@ -318,6 +318,13 @@ TEST(Cli, VerifyCatchesABrokenSampling) {
   std::string log;
   EXPECT_EQ(runHpds("verify " + shellQuote(tmp / "bad.ply") + " --cell-size 4", &log), 1) << log;
   EXPECT_NE(log.find("FAILED"), std::string::npos) << log;
+  // The help advertised [0, 1e6] for both lengths, and 0 failed later with exit 1: a bad command line, said as such.
+  for (const std::string flag : {" --cell-size 0", " --spacing 0", " --spacing -1"}) {
+    EXPECT_EQ(runHpds("verify " + shellQuote(tmp / "bad.ply") + flag, &log), 2) << flag << log;
+    EXPECT_NE(log.find("must be a finite number in (0, "), std::string::npos) << log;
+  }
+  EXPECT_EQ(runHpds("verify --help", &log), 0);
+  EXPECT_EQ(log.find("[0, 1e"), std::string::npos) << log;
 }
 
 // A --spacing with another --max-depth than the sampling's derives another cell, under which every radius shrinks

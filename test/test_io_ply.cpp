@@ -214,6 +214,28 @@ TEST(PlyRoundTrip, RgbAndRgbaTogetherStayPacked) {
 
 // The reader of those files walks elements before the vertex (with list properties), handles ascii and big-endian
 // data and refuses what does not add up.
+// Found: PCL reads nx ny nz as normal_x normal_y normal_z, so a cloud lost its own names and the output's warning
+// about input fields it does not carry named a normal_x the file does not have.
+TEST(PlyRead, NormalPropertiesKeepTheFilesNames) {
+  const ScratchDir scratch("io_ply_nx");
+  const fs::path &dir = scratch.path;
+  writeBytes(dir / "nx.ply", "ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\nproperty float y\n"
+                             "property float z\nproperty float nx\nproperty float ny\nproperty float nz\n"
+                             "end_header\n1 2 3 0 0 1\n4 5 6 0.6 0.8 0\n");
+  const PointBuffer c = readPointCloud((dir / "nx.ply").string());
+  ASSERT_EQ(c.size(), 2u);
+  for (const char *name : {"nx", "ny", "nz"}) ASSERT_NE(c.layout().find(name), nullptr) << name;
+  for (const char *name : {"normal_x", "normal_y", "normal_z"}) EXPECT_EQ(c.layout().find(name), nullptr) << name;
+  EXPECT_EQ(readAsDouble(c.record(1), *c.layout().find("nx")), static_cast<double>(0.6f));
+  EXPECT_EQ(readAsDouble(c.record(0), *c.layout().find("nz")), 1.0);
+  // A file that names them normal_x ... (hpds's own output) keeps those names.
+  writePly((dir / "round.ply").string(), c);
+  EXPECT_NE(readPointCloud((dir / "round.ply").string()).layout().find("nx"), nullptr);
+  writeBytes(dir / "normal_x.ply", "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\n"
+                                   "property float z\nproperty float normal_x\nend_header\n1 2 3 0.5\n");
+  EXPECT_NE(readPointCloud((dir / "normal_x.ply").string()).layout().find("normal_x"), nullptr);
+}
+
 TEST(PlyRead, OwnVertexReaderFormatsAndBadInput) {
   const ScratchDir scratch("io_ply_own");
   const fs::path &dir = scratch.path;

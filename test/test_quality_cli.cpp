@@ -149,7 +149,7 @@ TEST_F(QualityCli, BadInputGivesClearErrors) {
   EXPECT_EQ(runHpds("analyze " + shellQuote(*dir_ / "stream/frame_000000.pcd") + " --cell-size 4 -o " + shellQuote(*dir_ / "bad"), &log), 1);
   EXPECT_NE(log.find("no `level` field"), std::string::npos) << log;
   EXPECT_NE(runHpds("analyze " + shellQuote(*dir_ / "map.ply") + " --cell-size 4 -o " + shellQuote(*dir_ / "bad") + " --patch 1,2", &log), 0);
-  EXPECT_EQ(runHpds("analyze " + shellQuote(*dir_ / "map.ply") + " --cell-size 0 -o " + shellQuote(*dir_ / "bad"), &log), 1);
+  EXPECT_EQ(runHpds("analyze " + shellQuote(*dir_ / "map.ply") + " --cell-size 0 -o " + shellQuote(*dir_ / "bad"), &log), 2);  // a bad command line
   EXPECT_NE(log.find("--cell-size"), std::string::npos) << log;
   // A patch in empty space.
   EXPECT_EQ(runHpds("analyze " + shellQuote(*dir_ / "map.ply") + " --cell-size 4 -o " + shellQuote(*dir_ / "bad") + " --patch 500,500,4 "
@@ -178,7 +178,7 @@ TEST_F(QualityCli, SizeLikeFlagsAreBoundedAndPathsEscaped) {
       {"analyze " + map + " --cell-size 4" + out + " --freq-max 1e9", 2, "--freq-max: must be a finite number"},
       {"analyze " + map + " --cell-size 4" + out + " --seed -1", 2, "--seed: must be an integer in 0..18446744073709551615"},
       {"analyze " + map + " --cell-size nan" + out, 2, "--cell-size: must be a finite number"},
-      {"verify " + map + " --cell-size 0", 1, "--cell-size: must be > 0"},
+      {"verify " + map + " --cell-size 0", 2, "--cell-size: must be a finite number in (0, 1e+06]"},
       // -5 was taken as -1 (check each frame), 2^64 - 1 passed as a frame number.
       {"verify " + map + " --cell-size 4 --frame -5", 2, "--frame: must be an integer in -1..4294967295, got '-5'"},
       {"verify " + map + " --cell-size 4 --frame 18446744073709551615", 2, "--frame: must be an integer in -1.."},

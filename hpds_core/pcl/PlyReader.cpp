@@ -544,6 +544,36 @@ void restorePlyTypes(PointBuffer &cloud, const PlyHeader &h) {
   cloud = std::move(out);
 }
 
+// PCL's PLY reader names the properties nx ny nz normal_x normal_y normal_z. The file's own names are put back: a
+// cloud keeps its fields as they are, and the output's warning about input fields it does not carry named a
+// normal_x the file does not have (hpds writes its own normal_x beside the input's nx).
+void restorePlyNames(PointBuffer &cloud, const PlyHeader &h) {
+  const PlyElement *vertex = findVertex(h);
+  if (!vertex) return;
+  const auto declared = [&](const std::string &name) {
+    for (const auto &p : vertex->properties)
+      if (p.name == name) return true;
+    return false;
+  };
+  PointLayout layout = cloud.layout();
+  bool changed = false;
+  for (const auto &[file_name, pcl_name] : {std::pair<const char *, const char *>{"nx", "normal_x"},
+                                            {"ny", "normal_y"}, {"nz", "normal_z"}}) {
+    if (!declared(file_name) || declared(pcl_name) || layout.find(file_name)) continue;
+    for (auto &f : layout.fields)
+      if (f.name == pcl_name) {
+        f.name = file_name;
+        changed = true;
+      }
+  }
+  if (!changed) return;
+  const std::uint32_t width = cloud.width(), height = cloud.height();
+  PointBuffer out(layout, 0);
+  out.bytes() = std::move(cloud.bytes());
+  out.setOrganization(width, height);
+  cloud = std::move(out);
+}
+
 }  // namespace
 
 PointBuffer readPly(const std::string &path) {
@@ -558,6 +588,7 @@ PointBuffer readPly(const std::string &path) {
   if (vertex && !pclPacksColours(*vertex)) return readPlyVertices(path, file, header);
   PointBuffer cloud = readWithPcl(path, PclFormat::Ply);
   restorePlyTypes(cloud, header);
+  restorePlyNames(cloud, header);
   return cloud;
 }
 

@@ -35,6 +35,21 @@ CLI::Validator finiteIn(double lo, double hi) {
       range);
 }
 
+CLI::Validator positiveUpTo(double hi) {
+  // The help said [0, 1e6] for lengths that 0 cannot be; refused here, 0 is a usage error like any other bad value.
+  const std::string range = "a finite number in (0, " + text(hi) + "]";
+  return CLI::Validator(
+      [=](std::string &value) -> std::string {
+        const char *begin = value.c_str();
+        char *end = nullptr;
+        const double v = std::strtod(begin, &end);
+        if (end == begin || *end != '\0' || !std::isfinite(v) || !(v > 0.0) || v > hi)
+          return "must be " + range + ", got '" + value + "'";
+        return "";
+      },
+      range);
+}
+
 CLI::Validator integerIn(long long lo, long long hi) {
   const std::string range = "an integer in " + std::to_string(lo) + ".." + std::to_string(hi);
   return CLI::Validator(
@@ -149,11 +164,11 @@ HpdsConfig resolveConfig(const SamplingOptions &o) {
 
 void addCellSizeOptions(CLI::App &app, CellSizeOptions &o, bool depth_bounds_keys) {
   auto *cell = app.add_option("--cell-size", o.cell_size, "[m] level-0 cell edge the sampling was made with")
-                   ->check(finiteIn(0.0, 1e6));
+                   ->check(positiveUpTo(1e6));
   auto *spacing = app.add_option("--spacing", o.spacing,
                                  "[m] or: the --spacing (output.spacing) the sampling was made with, the cell derived "
                                  "from it as hpds sample does when no cell size is fixed")
-                      ->check(finiteIn(0.0, 1e6));
+                      ->check(positiveUpTo(1e6));
   auto *depth = app.add_option("--max-depth", o.max_depth,
                                depth_bounds_keys
                                    ? "the hierarchy.max_depth the sampling was made with: with --spacing it "

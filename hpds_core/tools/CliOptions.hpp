@@ -31,6 +31,8 @@ struct SamplingOptions {
 /// 64-bit integer (a leading '-', which CLI11 would wrap to 2^64 - 1, is refused). Failures are CLI11 validation
 /// errors naming the flag and the bound (exit status 2).
 [[nodiscard]] CLI::Validator finiteIn(double lo, double hi);
+/// A finite number in (0, hi]: a length that cannot be 0.
+[[nodiscard]] CLI::Validator positiveUpTo(double hi);
 [[nodiscard]] CLI::Validator integerIn(long long lo, long long hi);
 [[nodiscard]] CLI::Validator unsigned64();
 /// Path flags: an empty path (`-o ""`, an unset shell variable) is refused as a bad command line, not taken for a

@@ -88,7 +88,9 @@ def downsample(points, config=None, viewpoint=None):
 
 
 def load_config(config=None):
-    """Every key of a config (None, dict or YAML path, as for downsample), validated, as a dict of sections."""
+    """The sampling keys of a config (None, dict or YAML path, as for downsample), validated, as a dict of sections:
+    every key downsample reads (mode, hierarchy, output, ...). The node's `ros` section and `diagnostic_period` are
+    validated too but not returned: no Python call uses them."""
     text, path = _config_source(config)
     return _hpds.config_dict(text, path)
 
