@@ -42,6 +42,8 @@ install(FILES ${CMAKE_CURRENT_BINARY_DIR}/hpds_core.pc DESTINATION ${CMAKE_INSTA
 
 if(HPDS_WITH_PCL)
   install(TARGETS hpds RUNTIME DESTINATION ${CMAKE_INSTALL_BINDIR})
+  # `hpds analyze` draws its curves with it (found relative to the installed tool).
+  install(PROGRAMS scripts/plot_quality.py DESTINATION ${CMAKE_INSTALL_DATADIR}/hpds/scripts)
 endif()
 
 if(HPDS_BUILD_NODE)

@@ -78,7 +78,16 @@ struct Patch {
 };
 
 std::string defaultPlotScript() {
-  // This file lives in hpds_core/tools/; the script in scripts/ of the same source tree.
+  // An installed hpds (bin/hpds, or lib/hpds/hpds of a ROS package) uses the script installed beside it in
+  // share/hpds/scripts: the source tree it was built from may be gone, or another version. A build tree's uses the
+  // source tree's (this file lives in hpds_core/tools/, the script in scripts/).
+  std::error_code ec;
+  const fs::path exe_dir = fs::read_symlink("/proc/self/exe", ec).parent_path();
+  if (!ec)
+    for (const char *up : {"..", "../.."}) {
+      const fs::path installed = exe_dir / up / "share" / "hpds" / "scripts" / "plot_quality.py";
+      if (fs::is_regular_file(installed, ec)) return installed.lexically_normal().string();
+    }
   return (fs::path(__FILE__).parent_path().parent_path().parent_path() / "scripts" / "plot_quality.py").string();
 }
 
@@ -464,7 +473,7 @@ void addAnalyzeCommand(CLI::App &app) {
       ->capture_default_str()
       ->check(integerIn(0, 1024));
   cmd->add_flag("--no-plots", a->no_plots, "write data and PNG images only, do not run the plot script");
-  cmd->add_option("--plot-script", a->plot_script, "plot script (default: scripts/plot_quality.py of the source tree)");
+  cmd->add_option("--plot-script", a->plot_script, "plot script (default: " + defaultPlotScript() + ")");
   cmd->callback([a] { runAnalyze(*a); });
 }
 

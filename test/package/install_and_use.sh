@@ -42,6 +42,9 @@ if [ "$node" = ON ]; then
 fi
 # The installed tool runs from the prefix (its libraries found through the install RPATH).
 "$prefix/bin/hpds" --help > /dev/null || fail "the installed hpds tool does not run"
+# `hpds analyze` plots with the script installed beside it, not the source tree's (which a user may not have).
+"$prefix/bin/hpds" analyze --help | tr -s ' \n' ' ' | grep -q "default: $prefix/share/hpds/scripts/plot_quality.py" ||
+  fail "installed hpds analyze does not use the installed plot script: $("$prefix/bin/hpds" analyze --help | grep -A1 plot-script)"
 
 # The ROS package as a ROS user gets it from an install space: the package, its launch files, the nodelet plugin and
 # `rosrun hpds hpds` resolve from the prefix alone (no source tree, no devel space on the paths). catkin_make install
