@@ -408,9 +408,14 @@ TEST(Cli, BadInputGivesAClearErrorAndNonZeroExit) {
       {shellQuote(tmp / "cloud.xyz") + out, 1, "cloud.xyz"},
       {shellQuote(tmp / "odd.bin") + out + " --config " + shellQuote(tmp / "bad.yaml"), 1, "hierarchy.cell_sise"},
       {shellQuote(tmp / "odd.bin") + out + " --config " + shellQuote(tmp / "neg.yaml"), 1, "hierarchy.cell_size"},
-      {shellQuote(tmp / "odd.bin") + out + " --max-depth 22", 1, "hierarchy.max_depth"},
-      {shellQuote(tmp / "odd.bin") + out + " --cell-size nan", 1, "hierarchy.cell_size"},
-      {shellQuote(tmp / "odd.bin") + out + " --order zigzag", 1, "zigzag"},
+      // A bad flag value is a bad command line (2), named by its flag: it was exit 1 naming the config key.
+      {shellQuote(tmp / "odd.bin") + out + " --max-depth 22", 2, "--max-depth"},
+      {shellQuote(tmp / "odd.bin") + out + " --cell-size nan", 2, "--cell-size"},
+      {shellQuote(tmp / "odd.bin") + out + " --order zigzag", 2, "--order: zigzag not in {random,input,sphericity,surface_variation}"},
+      {shellQuote(tmp / "odd.bin") + out + " --level 30", 2, "--level"},
+      {shellQuote(tmp / "odd.bin") + out + " --spacing 0", 2, "--spacing: must be a finite number in (0, "},
+      {shellQuote(tmp / "odd.bin") + out + " --threads 5000", 2, "--threads"},
+      {shellQuote(tmp / "odd.bin") + out + " --seed -1", 2, "--seed"},
       {shellQuote(tmp / "odd.bin") + out + " --config " + shellQuote(tmp / "cov.yaml"), 1, "normals.covariances"},
       // the node's own keys are checked as the node checks them: a file the CLI accepts, the node accepts
       {shellQuote(tmp / "odd.bin") + out + " --config " + shellQuote(tmp / "ros.yaml"), 1, "ros.queue_sise: unknown key"},

@@ -95,13 +95,18 @@ CLI::Validator fileNamePrefix() {
 
 void addSamplingOptions(CLI::App &app, SamplingOptions &o) {
   app.add_option("--config", o.config_file, "YAML config (see config/hpds.yaml); flags override it");
+  // Each flag is checked where it is parsed, so that a bad value is a bad command line (exit 2) naming the flag,
+  // as for every other option: it was exit 1 naming the config key the flag sets (hierarchy.max_depth for
+  // --max-depth 22). The config's own checks still run on the result.
   app.add_option("--cell-size", o.cell_size, "[m] level-0 cell edge, fixed (hierarchy.cell_size; default: derived "
-                                             "from the spacing)");
-  app.add_option("--max-depth", o.max_depth, "finest level 0..21 (hierarchy.max_depth)");
-  auto *lvl = app.add_option("--level", o.level, "write levels 0..D (output.level)");
+                                             "from the spacing)")
+      ->check(finiteIn(0.0, 1e6));
+  app.add_option("--max-depth", o.max_depth, "finest level 0..21 (hierarchy.max_depth)")->check(integerIn(0, 21));
+  auto *lvl = app.add_option("--level", o.level, "write levels 0..D (output.level)")->check(integerIn(0, 21));
   auto *sp = app.add_option("--spacing", o.spacing,
                             "[m] output radius: samples at least S apart; exactly S unless --cell-size fixes the cell, "
-                            "then the coarsest level with r_D <= S (output.spacing)");
+                            "then the coarsest level with r_D <= S (output.spacing)")
+                ->check(positiveUpTo(1e6));
   lvl->excludes(sp);
   // Every occurrence kept, so that the config's value stays unless one of the two is given, and both together are
   // refused (a count would add them up to nothing).
@@ -113,10 +118,11 @@ void addSamplingOptions(CLI::App &app, SamplingOptions &o) {
                "write x y z as float64 (output.float64_xyz): for georeferenced coordinates");
   app.add_flag("--float32-xyz", o.float32_xyz,
                "write x y z as float32 even from float64 input (output.float32_xyz): for float32-only readers");
-  app.add_option("--order", o.order, "random | input | sphericity | surface_variation (order.type)");
+  app.add_option("--order", o.order, "random | input | sphericity | surface_variation (order.type)")
+      ->check(CLI::IsMember({"random", "input", "sphericity", "surface_variation"}));
   app.add_option("--seed", o.seed, "seed of the random order (order.seed)")->check(unsigned64());
-  app.add_option("--mode", o.mode, "scan | map (mode)");
-  app.add_option("--threads", o.threads, "worker threads, 0 = all cores (threads)");
+  app.add_option("--mode", o.mode, "scan | map (mode)")->check(CLI::IsMember({"scan", "map"}));
+  app.add_option("--threads", o.threads, "worker threads, 0 = all cores (threads)")->check(integerIn(0, 1024));
 }
 
 HpdsConfig resolveConfig(const SamplingOptions &o) {
