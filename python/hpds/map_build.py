@@ -107,6 +107,9 @@ def whole_cell_tile_size(tile_size, config_yaml, log=None):
     if not derived or not math.isfinite(tile_size) or not tile_size > 0.0:
         return tile_size
     k = max(1, round(tile_size / cell))
+    if k > 2 ** 20:
+        # Left to the tile grid's refusal: announcing a rounded size just before refusing it contradicted itself.
+        return tile_size
     rounded = k * cell
     if abs(rounded - tile_size) > 1e-9 * rounded and log is not None:
         log("tile size %g m is not a whole number of level-0 cells (%.9g m, derived from output.spacing): "

@@ -95,6 +95,9 @@ def _property_type(vertices, name):
 
 def write(path, vertices):
     """Writes a structured array as binary little-endian PLY, atomically (a temporary beside `path`, renamed)."""
+    if not os.fspath(path).lower().endswith(".ply"):
+        # As `hpds sample -o out.pcd` is refused: a PLY under another format's name is read as that format.
+        raise ValueError("write: '%s' is not a .ply name, and this writes PLY: name the output e.g. map.ply" % (path,))
     vertices = np.ascontiguousarray(vertices)
     if vertices.dtype.names is None or vertices.ndim != 1:
         raise ValueError("write: expects a 1-D structured array (fields x, y, z, ...), got shape %s and dtype %s"
@@ -139,6 +142,9 @@ def merge(paths, out_path):
 
     paths: an iterable of paths (a list, a generator, glob's result); a single path is taken as one file."""
     paths = [paths] if isinstance(paths, (str, bytes, os.PathLike)) else list(paths)
+    if not paths:
+        # An empty glob is a mistake upstream; an empty PLY in its place would pass for a build with no points.
+        raise ValueError("merge: no input files (an empty list of paths): nothing written to '%s'" % (out_path,))
     for p in paths:
         if _same_file(p, out_path):
             raise ValueError("merge: the output '%s' is the input '%s'" % (out_path, p))
@@ -146,4 +152,4 @@ def merge(paths, out_path):
     for p, part in zip(paths[1:], parts[1:]):
         if part.dtype != parts[0].dtype:
             raise ValueError("merge: '%s' has other fields than '%s'" % (p, paths[0]))
-    write(out_path, np.concatenate(parts) if parts else np.zeros(0, [("x", "<f4"), ("y", "<f4"), ("z", "<f4")]))
+    write(out_path, np.concatenate(parts))

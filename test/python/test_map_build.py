@@ -275,6 +275,11 @@ class MapBuild(unittest.TestCase):
         with contextlib.redirect_stderr(io.StringIO()) as err:
             self.assertEqual(map_build.main(base + ["-o", self.out("d2"), "--tile-size", repr(3 * cell)]), 0)
         self.assertNotIn("instead", err.getvalue())
+        # Beyond 2^20 cells: refused, and not first announced as rounded (the two lines contradicted each other).
+        with contextlib.redirect_stderr(io.StringIO()) as err:
+            self.assertNotEqual(map_build.main(base + ["-o", self.out("d3"), "--tile-size", "1e9"]), 0)
+        self.assertIn("tile size: must be a whole multiple (>= 1, <= 2^20)", err.getvalue())
+        self.assertNotIn("instead", err.getvalue())
 
     def two_poses(self, name, dx=0.0):
         """The drive's first two poses, moved by dx along x."""

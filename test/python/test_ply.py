@@ -132,6 +132,20 @@ class Merge(support.ScratchCase):
         self.assertIn("nodir", str(e.exception))
         self.assertNotIn(".tmp.", str(e.exception))
 
+    def test_an_empty_list_or_another_formats_name_is_refused(self):
+        # merge([]) wrote an empty PLY (a build of no points, to whoever reads it), and a .pcd name got PLY bytes.
+        with self.assertRaises(ValueError) as e:
+            hpds.ply.merge([], self.path("none.ply"))
+        self.assertIn("no input files", str(e.exception))
+        self.assertFalse(os.path.exists(self.path("none.ply")))
+        for name in ("all.pcd", "all.bin", "all"):
+            with self.assertRaises(ValueError) as e:
+                hpds.ply.merge(self.inputs, self.path(name))
+            self.assertIn("not a .ply name", str(e.exception))
+            self.assertFalse(os.path.exists(self.path(name)))
+        hpds.ply.merge(self.inputs, self.path("upper.PLY"))
+        self.assert_inputs_untouched()
+
     def test_merges(self):
         hpds.ply.merge(self.inputs, self.path("all.ply"))
         self.assertEqual(len(hpds.ply.read(self.path("all.ply"))), 8)
