@@ -16,6 +16,8 @@
 // - Throws std::invalid_argument for an invalid config (the message names the key, as the CLI does), a viewpoint
 //   that is not finite, or more than 2^32 - 1 points.
 // - Thread-safe: calls share no state; each call may use config.threads worker threads.
+// - Memory: the call holds the whole cloud and its hierarchy at once, about 190 bytes per input point with the
+//   shipped normals (measured: 4 M points peaked at 0.76 GB on one thread, 1.1 GB on two).
 #pragma once
 
 #include <Eigen/Core>
