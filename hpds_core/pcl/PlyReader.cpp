@@ -514,6 +514,15 @@ PointBuffer readPlyVertices(const std::string &path, const FileBytes &file, cons
   return cloud;
 }
 
+// The same bytes under `layout` (same point_step and offsets, other names or types), organisation kept.
+void relayout(PointBuffer &cloud, PointLayout layout) {
+  const std::uint32_t width = cloud.width(), height = cloud.height();
+  PointBuffer out(std::move(layout), 0);
+  out.bytes() = std::move(cloud.bytes());
+  out.setOrganization(width, height);
+  cloud = std::move(out);
+}
+
 // PCL's PLY reader widens a uchar "intensity" to float32; put the declared type back (in place: the offsets PCL
 // chose stay, the freed bytes become padding) so that PLY round trips keep datatypes.
 void restorePlyTypes(PointBuffer &cloud, const PlyHeader &h) {
@@ -536,12 +545,7 @@ void restorePlyTypes(PointBuffer &cloud, const PlyHeader &h) {
       changed = true;
     }
   }
-  if (!changed) return;
-  const std::uint32_t width = cloud.width(), height = cloud.height();
-  PointBuffer out(layout, 0);
-  out.bytes() = std::move(cloud.bytes());
-  out.setOrganization(width, height);
-  cloud = std::move(out);
+  if (changed) relayout(cloud, std::move(layout));
 }
 
 // PCL's PLY reader names the properties nx ny nz normal_x normal_y normal_z. The file's own names are put back: a
@@ -566,12 +570,7 @@ void restorePlyNames(PointBuffer &cloud, const PlyHeader &h) {
         changed = true;
       }
   }
-  if (!changed) return;
-  const std::uint32_t width = cloud.width(), height = cloud.height();
-  PointBuffer out(layout, 0);
-  out.bytes() = std::move(cloud.bytes());
-  out.setOrganization(width, height);
-  cloud = std::move(out);
+  if (changed) relayout(cloud, std::move(layout));
 }
 
 }  // namespace
