@@ -146,7 +146,8 @@ void addVerifyCommand(CLI::App &app) {
                   << (several ? " in frame " + std::to_string(frame) : std::string())
                   << ": the sampling may stop short of that spacing; give --input to check its coverage\n";
       if (report.levels.empty() || report.levels.back().union_count == 0)
-        std::cout << "note: " << (several ? "frame " + std::to_string(frame) + " of " : std::string()) << "the sampling holds no sample"
+        std::cout << "note: " << (several ? "frame " + std::to_string(frame) + " of " : std::string())
+                  << "the sampling holds no sample"
                   << (a->input.empty() ? ": give --input to check it against the input" : "") << "\n";
     }
     if (frames.size() > 1)

@@ -134,9 +134,9 @@ std::string KeepUpCheck::warning(bool on_drop) const {
   if (waitsMatter()) {
     const double wait = median(waits_);
     text += ". Frames also wait " + format("%.0f ms", 1e3 * wait) +
-              " each for their transforms (up to ros/tf_timeout, now " + format("%.3g s", tf_timeout_) +
-              "): check that tf has the sensor's frame in the fixed frame at the frames' stamps (frames without one "
-              "are counted as no_transform), or lower ros/tf_timeout; no sampling setting shortens that wait";
+            " each for their transforms (up to ros/tf_timeout, now " + format("%.3g s", tf_timeout_) +
+            "): check that tf has the sensor's frame in the fixed frame at the frames' stamps (frames without one "
+            "are counted as no_transform), or lower ros/tf_timeout; no sampling setting shortens that wait";
   }
   const hpds::OutputResolution out = hpds::resolveOutput(config_);
   text += ". Dropped frames are counted in /diagnostics. To keep up, lower the cost of a frame: a larger output.spacing (now " +
