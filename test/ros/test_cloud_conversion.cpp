@@ -2,6 +2,8 @@
 // row padding, and every malformed case refused without touching the output. No ROS master needed.
 #include <gtest/gtest.h>
 
+#include <array>
+
 #include <cmath>
 #include <cstring>
 #include <limits>
@@ -226,6 +228,26 @@ TEST(CloudConversion, ZeroSizeCloudIsEmptyNotAnError) {
     ASSERT_EQ(hpds_node::fromRosCloud(msg, buf), CloudError::None);
     EXPECT_TRUE(buf.empty());
   }
+  // No fields at all and no points (a default-constructed message, or one with only width or height set): an
+  // empty x y z cloud, whatever point_step and row_step say; with points it is still a cloud without x.
+  for (const auto &[w, h, step, row] : {std::array<std::uint32_t, 4>{0, 0, 0, 0}, {5, 0, 7, 40}, {0, 3, 0, 0}}) {
+    PointCloud2 msg;
+    msg.width = w;
+    msg.height = h;
+    msg.point_step = step;
+    msg.row_step = row;
+    hpds::PointBuffer buf;
+    ASSERT_EQ(hpds_node::fromRosCloud(msg, buf), CloudError::None) << w << " x " << h;
+    EXPECT_TRUE(buf.empty());
+    for (const char *axis : {"x", "y", "z"}) EXPECT_NE(buf.layout().find(axis), nullptr) << axis;
+    EXPECT_NO_THROW(buf.layout().validate());
+  }
+  PointCloud2 points_without_fields;
+  points_without_fields.width = points_without_fields.height = 1;
+  points_without_fields.point_step = points_without_fields.row_step = 4;
+  points_without_fields.data.resize(4);
+  hpds::PointBuffer untouched;
+  EXPECT_EQ(hpds_node::fromRosCloud(points_without_fields, untouched), CloudError::MissingXyz);
 }
 
 struct MalformedCase {
