@@ -210,5 +210,37 @@ if "$work/example/downsample_pcd" "$work/out.pcd" "$work/out.pcd" 2> /dev/null; 
 # A project that asks for hpds::core alone: C++ only (no C for VTK's MPI), and PCL is not looked up for it.
 "$src/test/package/use_core_only.sh" "$src" "$prefix" "$work/core_example" "${example_flags[@]}" ||
   fail "the core-only example failed against the prefix"
+# A catkin package that asks for hpds as a component (find_package(catkin REQUIRED COMPONENTS hpds)): catkin takes the
+# config CMake finds first, lib/cmake/hpds, whose hpds_INCLUDE_DIRS / hpds_LIBRARIES were unset, so a package
+# built against an install space did not compile (hpds/hpds.hpp not found).
+if [ "$node" = ON ]; then
+  mkdir -p "$work/catkin_user"
+  cat > "$work/catkin_user/CMakeLists.txt" <<'CMAKE'
+cmake_minimum_required(VERSION 3.16)
+project(catkin_user C CXX)
+set(CMAKE_CXX_STANDARD 17)
+find_package(catkin REQUIRED COMPONENTS hpds)
+message(STATUS "catkin_INCLUDE_DIRS=${catkin_INCLUDE_DIRS}")
+message(STATUS "catkin_LIBRARIES=${catkin_LIBRARIES}")
+include_directories(${catkin_INCLUDE_DIRS})
+add_executable(use_hpds use_hpds.cpp)
+target_link_libraries(use_hpds ${catkin_LIBRARIES})
+CMAKE
+  cp "$work/core_pc.cpp" "$work/catkin_user/use_hpds.cpp" 2> /dev/null || cat > "$work/catkin_user/use_hpds.cpp" <<'CPP'
+#include <hpds/hpds.hpp>
+int main() { return hpds::downsample(std::vector<Eigen::Vector3f>(3, Eigen::Vector3f(1, 2, 3))).size() == 1 ? 0 : 1; }
+CPP
+  # catkin's scripts need Debian's Python (with the ROS modules), as a catkin workspace's build does.
+  PATH=/usr/bin:$PATH cmake -S "$work/catkin_user" -B "$work/catkin_user/build" -DCMAKE_PREFIX_PATH="$prefix" \
+    -DPYTHON_EXECUTABLE=/usr/bin/python3 "${example_flags[@]}" \
+    > "$work/catkin_user.log" 2>&1 || { cat "$work/catkin_user.log"; fail "a catkin package asking for hpds does not configure"; }
+  grep -q "catkin_INCLUDE_DIRS=$prefix/include" "$work/catkin_user.log" ||
+    { cat "$work/catkin_user.log"; fail "catkin_INCLUDE_DIRS lacks $prefix/include"; }
+  grep -q "catkin_LIBRARIES=.*hpds::core" "$work/catkin_user.log" ||
+    { cat "$work/catkin_user.log"; fail "catkin_LIBRARIES lacks hpds::core"; }
+  cmake --build "$work/catkin_user/build" > "$work/catkin_user-build.log" 2>&1 ||
+    { cat "$work/catkin_user-build.log"; fail "a catkin package asking for hpds does not build"; }
+  "$work/catkin_user/build/use_hpds" > /dev/null || fail "a catkin package's program using hpds fails"
+fi
 echo "install_and_use: OK ($samples samples of $points points)"
 rm -rf "$work"
