@@ -2,10 +2,12 @@
 
 #include <rosbag/bag.h>
 #include <rosbag/view.h>
+#include <sensor_msgs/point_cloud2_iterator.h>
 #include <tf2/buffer_core.h>
 #include <tf2_msgs/TFMessage.h>
 
 #include <chrono>
+#include <cmath>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -29,6 +31,21 @@
 namespace hpds::cli {
 
 namespace {
+
+// countInvalidNormals of an output message, read in place: the output's normal_x is float32 (OutputCloud), and
+// converting each message back to a PointBuffer only to count would copy every frame's output once more.
+std::uint64_t invalidNormalsOf(const sensor_msgs::PointCloud2 &cloud) {
+  for (const sensor_msgs::PointField &f : cloud.fields) {
+    if (f.name != "normal_x") continue;
+    if (f.datatype != sensor_msgs::PointField::FLOAT32)
+      throw std::logic_error("replay: an output's normal_x is not float32");
+    std::uint64_t n = 0;
+    for (sensor_msgs::PointCloud2ConstIterator<float> it(cloud, "normal_x"); it != it.end(); ++it)
+      n += std::isnan(*it) ? 1 : 0;
+    return n;
+  }
+  return 0;
+}
 
 struct ReplayArgs {
   std::string bag;
@@ -228,11 +245,8 @@ int runReplay(const ReplayArgs &a) {
       };
       if (frame.has_output) {
         // What --stats reports for a bag: the points of every ~output message, as the PLY's are counted.
-        PointBuffer part;
-        if (hpds_node::fromRosCloud(frame.output, part) != hpds_node::CloudError::None)
-          throw std::logic_error("replay: an output cloud does not convert back");
-        report.output_points += part.size();
-        report.invalid_normals += countInvalidNormals(part);
+        report.output_points += std::uint64_t(frame.output.width) * frame.output.height;
+        report.invalid_normals += invalidNormalsOf(frame.output);
         write(a.ns + "/output", frame.output);
       }
       if (frame.has_new_samples) write(a.ns + "/new_samples", frame.new_samples);

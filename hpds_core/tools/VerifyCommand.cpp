@@ -121,8 +121,8 @@ void addVerifyCommand(CLI::App &app) {
     for (const auto &[frame, sampling] : frames) {
       VerifyReport report;
       try {
-        report = verifySampling(sampling, cell_size, a->input.empty() ? nullptr : &input, a->threads,
-                                std::max(key_depth, through), through);
+        report = verifySampling(sampling, cell_size, a->input.empty() ? nullptr : &input, a->threads, key_depth,
+                                through);
       } catch (const std::invalid_argument &e) {
         // The verifier knows no file names; its complaints are about the sampling's content.
         std::string why = e.what();

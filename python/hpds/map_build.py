@@ -42,8 +42,9 @@ def parse_args(argv):
     s.add_argument("--max-depth", type=int, help="finest level 0..21 (hierarchy.max_depth)")
     lvl = s.add_mutually_exclusive_group()
     lvl.add_argument("--level", type=int, help="write levels 0..D (output.level)")
-    lvl.add_argument("--spacing", type=float, help="[m] output radius: samples at least S apart; exactly S (the cell derived from it) unless "
-                     "--cell-size fixes the cell, then the coarsest level with r_D <= S (output.spacing)")
+    lvl.add_argument("--spacing", type=float,
+                     help="[m] output radius: samples at least S apart; exactly S (the cell derived from it) unless "
+                          "--cell-size fixes the cell, then the coarsest level with r_D <= S (output.spacing)")
     s.add_argument("--normals", action=argparse.BooleanOptionalAction, default=None,
                    help="estimate PCA normals and curvature, or not (normals.enabled; default: the config's, on)")
     s.add_argument("--covariances", action="store_true",

@@ -33,7 +33,8 @@
 // - shutdown() (also called by the destructor) stops the input, answers pending service calls, stops the workers
 //   after their current frame (queued frames are discarded and logged) and then, with ros.save_map_on_shutdown,
 //   saves the map to ros.map_file, logging the outcome (ROS_ERROR on failure), unless no frame was processed since
-//   the start or the last load or save (the file is then left as it is). It returns false when that save failed. Call it while roscpp's logging still works (before ros::shutdown()), or the outcome goes unseen.
+//   the start or the last load or save (the file is then left as it is). It returns false when that save failed.
+//   Call it while roscpp's logging still works (before ros::shutdown()), or the outcome goes unseen.
 #pragma once
 
 #include <diagnostic_updater/diagnostic_updater.h>
@@ -121,7 +122,7 @@ class HpdsServer {
   std::string tag_;  // "hpds <node or nodelet name>": begins every log line, so that each instance is told apart
 
   tf2_ros::Buffer tf_buffer_;
-  std::unique_ptr<tf2_ros::TransformListener> tf_listener_;
+  std::unique_ptr<tf2_ros::TransformListener> tf_listener_;  // set exactly when frames need a transform lookup
   ros::Publisher pub_output_, pub_new_samples_, pub_local_map_;
   std::vector<ros::Publisher> pub_levels_;
   ros::Subscriber sub_;

@@ -393,8 +393,9 @@ void HpdsServer::handle(const sensor_msgs::PointCloud2::ConstPtr &msg, std::size
     // 3. Sensor pose in the target frame at the message stamp.
     Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
     Eigen::Vector3d viewpoint = Eigen::Vector3d::Zero();
-    // Timed only when a transform is looked up: scan mode without output frame has no wait to report.
-    const bool looked_up = !(target_frame_.empty() && config_.ros.sensor_frame.empty());
+    // Timed only when a transform is looked up (the node listens to tf exactly then): scan mode without output
+    // frame has no wait to report.
+    const bool looked_up = tf_listener_ != nullptr;
     const ros::WallTime wait_start = ros::WallTime::now();
     const bool posed = !looked_up || waitForPose(target_frame_, msg->header, pose, viewpoint, &why);
     if (looked_up) waited = (ros::WallTime::now() - wait_start).toSec();

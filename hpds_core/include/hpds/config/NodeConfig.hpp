@@ -62,9 +62,10 @@ void applyNodeConfigYaml(const std::string &yaml_text, NodeConfig &config, const
 /// and a non-empty map_file.
 void validateRosConfig(const RosConfig &ros, const HpdsConfig &config);
 
-/// A warning (empty when there is none; no "hpds: warning:" prefix) naming the `ros:` settings that `mode` does not use although they differ
-/// from their defaults (scan mode: fixed_frame, local_map_*, map_file; map mode: output_frame): a user who set
-/// fixed_frame: odom and left mode at scan got scan-mode output in the sensor frame, without a word.
+/// A warning (empty when there is none; no "hpds: warning:" prefix) naming the `ros:` settings that `mode` does not
+/// use although they differ from their defaults (scan mode: fixed_frame, local_map_*, map_file; map mode:
+/// output_frame): a user who set fixed_frame: odom and left mode at scan got scan-mode output in the sensor frame,
+/// without a word.
 [[nodiscard]] std::string ignoredRosKeysWarning(const RosConfig &ros, Mode mode);
 
 /// `period` if it is a valid diagnostic_period ([s], in (0, 3600]); else std::invalid_argument "diagnostic_period: ...".
