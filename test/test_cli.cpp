@@ -476,6 +476,14 @@ TEST(Cli, VerifyLeavesInputPointsBeyondTheKeyRangeOutOfCoverage) {
   std::string log;
   ASSERT_EQ(runHpds("sample " + in + " --no-normals -o " + shellQuote(tmp / "s.ply"), &log), 0) << log;
   ASSERT_NE(log.find("2 points lie beyond the exact key range"), std::string::npos) << log;
+  // The advice names what helps at a derived cell (the spacing, or depth below the output), not hierarchy.cell_size,
+  // and following it brings the points in.
+  EXPECT_NE(log.find("reach 1.54981e+07 m from the origin"), std::string::npos) << log;
+  EXPECT_NE(log.find("or lower hierarchy.max_depth toward the output level 5\n"), std::string::npos) << log;
+  EXPECT_EQ(log.find("raise hierarchy.cell_size"), std::string::npos) << log;
+  ASSERT_EQ(runHpds("sample " + in + " --no-normals --max-depth 5 -o " + shellQuote(tmp / "s5.ply"), &log), 0) << log;
+  EXPECT_NE(log.find("0 beyond exact key range"), std::string::npos) << log;
+  EXPECT_EQ(log.find("lie beyond the exact key range"), std::string::npos) << log;
   EXPECT_EQ(runHpds("verify " + shellQuote(tmp / "s.ply") + " --spacing 0.1 --input " + in, &log), 0) << log;
   EXPECT_NE(log.find("2 of the 5 input points lie beyond the exact key range of level 8"), std::string::npos) << log;
   EXPECT_NE(log.find("OK: no violations"), std::string::npos) << log;

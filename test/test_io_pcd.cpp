@@ -239,6 +239,12 @@ TEST(BadInput, PcdAsciiAndCompressedBodies) {
   check("ascii_long_line.pcd", xyzPcdHeader(1, "ascii") + "1 2 3 4\n", {"4 values, expected 3"});
   check("ascii_few_lines.pcd", xyzPcdHeader(3, "ascii") + "1 2 3\n4 5 6\n", {"truncated", "3 points", "holds 2"});
   check("ascii_blank_line.pcd", xyzPcdHeader(2, "ascii") + "1 2 3\n \n4 5 6\n", {"0 values"});
+  // A header that under-states the count: PCL read the first POINTS lines and dropped the rest with a warning only.
+  check("ascii_extra_lines.pcd", xyzPcdHeader(2, "ascii") + "1 2 3\n4 5 6\n\n7 8 9\n",
+        {"line 4", "beyond the header's POINTS 2", "under-states"});
+  check("ascii_points_0.pcd", xyzPcdHeader(0, "ascii") + "1 2 3\n", {"line 1", "beyond the header's POINTS 0"});
+  writeBytes(dir / "ascii_trailing_blank.pcd", xyzPcdHeader(2, "ascii") + "1 2 3\n4 5 6\n\n \t\r\n");
+  EXPECT_EQ(readPointCloud((dir / "ascii_trailing_blank.pcd").string()).size(), 2u) << "blank lines are no points";
   // Integer fields take plain integers of their type's range: PCL read "1e2" as 1 on the first line and 100 later
   // (its stream keeps its state), and wrapped values beyond the type.
   const std::string ring = "VERSION 0.7\nFIELDS x y z ring\nSIZE 4 4 4 2\nTYPE F F F U\nCOUNT 1 1 1 1\nWIDTH 2\n"
@@ -277,6 +283,64 @@ TEST(BadInput, PcdAsciiAndCompressedBodies) {
   check("lzf_bad_stream.pcd",
         head + u32le(std::uint32_t(bad_stream.size())) + u32le(std::uint32_t(raw.size())) + bad_stream,
         {"corrupt binary_compressed data", "LZF stream", "does not decode"});
+}
+
+// binary_compressed with "_" padding fields: some writers store the padding's columns, others (PCL's header with
+// another writer's body) leave them out. PCL decoded the first into shifted garbage (x = -2.7e-153 among the samples
+// of a real frame) and copied past its buffer on the second; both read as the same points here.
+TEST(PcdRead, CompressedWithPaddingFieldsDecodesEitherLayout) {
+  const ScratchDir scratch("io_pcd_padded_compressed");
+  const std::size_t n = 7;
+  std::vector<float> xs, ys, zs, intensity;
+  std::vector<std::uint16_t> ring;
+  for (std::size_t i = 0; i < n; ++i) {
+    xs.push_back(float(i) + 0.5f);
+    ys.push_back(-float(i));
+    zs.push_back(float(i * i));
+    intensity.push_back(float(100 + i));
+    ring.push_back(static_cast<std::uint16_t>(3 * i));
+  }
+  const std::string pad4(4 * n, '\x5a'), pad6(6 * n, '\xa5');
+  const std::string head = pcdHeader("x y z _ intensity ring _", "4 4 4 1 4 2 1", "F F F U F U U", "1 1 1 4 1 1 6",
+                                     std::to_string(n), "1", std::to_string(n), "binary_compressed");
+  const std::string stored = bytesOf(xs) + bytesOf(ys) + bytesOf(zs) + pad4 + bytesOf(intensity) + bytesOf(ring) + pad6;
+  const std::string omitted = bytesOf(xs) + bytesOf(ys) + bytesOf(zs) + bytesOf(intensity) + bytesOf(ring);
+  for (const auto &[name, raw] : {std::pair{"stored.pcd", stored}, std::pair{"omitted.pcd", omitted}}) {
+    SCOPED_TRACE(name);
+    const std::string packed = lzfLiterals(raw);
+    const fs::path file = scratch.path / name;
+    writeBytes(file, head + u32le(std::uint32_t(packed.size())) + u32le(std::uint32_t(raw.size())) + packed);
+    const PointBuffer c = readPointCloud(file.string());
+    ASSERT_EQ(c.size(), n);
+    EXPECT_EQ(c.layout().point_step, 28u) << "the padding keeps its bytes in the record";
+    ASSERT_EQ(c.layout().fields.size(), 5u) << "padding is no field";
+    EXPECT_EQ(c.layout().find("intensity")->offset, 16u);
+    EXPECT_EQ(c.layout().find("ring")->offset, 20u);
+    for (std::size_t i = 0; i < n; ++i) {
+      EXPECT_EQ(readAsDouble(c.record(i), *c.layout().find("x")), double(xs[i]));
+      EXPECT_EQ(readAsDouble(c.record(i), *c.layout().find("y")), double(ys[i]));
+      EXPECT_EQ(readAsDouble(c.record(i), *c.layout().find("z")), double(zs[i]));
+      EXPECT_EQ(readAsDouble(c.record(i), *c.layout().find("intensity")), double(intensity[i]));
+      EXPECT_EQ(readAsDouble(c.record(i), *c.layout().find("ring")), double(ring[i]));
+    }
+  }
+  // Any other size is still refused, and so is a stream that does not decode.
+  const std::string packed = lzfLiterals(stored);
+  expectError(
+      [&] {
+        writeBytes(scratch.path / "odd.pcd", head + u32le(std::uint32_t(packed.size())) +
+                                                 u32le(std::uint32_t(stored.size() - 2)) + packed);
+        (void)readPointCloud((scratch.path / "odd.pcd").string());
+      },
+      "odd.pcd", {"uncompressed size"});
+  const std::string bad(packed.size(), '\xff');
+  expectError(
+      [&] {
+        writeBytes(scratch.path / "bad.pcd",
+                   head + u32le(std::uint32_t(bad.size())) + u32le(std::uint32_t(omitted.size())) + bad);
+        (void)readPointCloud((scratch.path / "bad.pcd").string());
+      },
+      "bad.pcd", {"LZF stream", "does not decode"});
 }
 
 // fuzz_pcd found x with COUNT 2 accepted by the reader (the pipeline sampled its first element and the PLY written

@@ -297,7 +297,7 @@ TEST(PlyRead, OwnVertexReaderFormatsAndBadInput) {
   check("red_twice.ply",
         "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\n"
         "property uchar red\nproperty uchar red\nend_header\n1 2 3 4 5\n",
-        {"invalid point layout"});
+        {"line 8", "property 'red' declared twice"});
 }
 
 // ---------------------------------------------------------------------------------------------------------------------
@@ -436,6 +436,27 @@ TEST(BadInput, PlyProblems) {
   EXPECT_EQ(readAsDouble(a.record(1), *a.layout().find("x")), -1.5);
   EXPECT_TRUE(std::isnan(readAsDouble(a.record(1), *a.layout().find("y"))));
   EXPECT_EQ(readAsDouble(a.record(1), *a.layout().find("ring")), 255.0);
+
+  // A header that under-states the vertex count: PCL read the declared vertices and dropped the rest silently.
+  const std::string three = "ply\nformat ascii 1.0\nelement vertex 3\n" + xyz_props + "end_header\n";
+  check("extra_vertices.ply", three + "1 1 1\n2 2 2\n3 3 3\n4 4 4\n5 5 5\n",
+        {"more than the header's 3 vertices", "line 1 after", "under-states"});
+  writeBytes(dir / "trailing_blank.ply", three + "1 1 1\n2 2 2\n3 3 3\n\n \r\n");
+  EXPECT_EQ(readPointCloud((dir / "trailing_blank.ply").string()).size(), 3u) << "blank lines are no vertices";
+  // What follows the vertices may be faces: not vertices, and not refused.
+  writeBytes(dir / "faces_after.ply", "ply\nformat ascii 1.0\nelement vertex 3\n" + xyz_props +
+                                          "element face 1\nproperty list uchar int vertex_indices\nend_header\n"
+                                          "1 1 1\n2 2 2\n3 3 3\n3 0 1 2\n");
+  EXPECT_EQ(readPointCloud((dir / "faces_after.ply").string()).size(), 3u);
+  // A property named twice: PCL said only "error -1".
+  check("duplicate_property.ply",
+        "ply\nformat ascii 1.0\nelement vertex 1\n" + xyz_props +
+            "property float intensity\nproperty float intensity\nend_header\n1 2 3 4 5\n",
+        {"line 8", "property 'intensity' declared twice in element 'vertex'"});
+  check("duplicate_x.ply",
+        "ply\nformat binary_little_endian 1.0\nelement vertex 1\n" + xyz_props + "property float x\nend_header\n" +
+            std::string(16, '\0'),
+        {"property 'x' declared twice"});
 }
 
 // ---------------------------------------------------------------------------------------------------------------------

@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <random>
 
 #include "TestData.hpp"
@@ -12,6 +13,7 @@
 #include "hpds/eval/SyntheticLidar.hpp"
 #include "hpds/pcl/PointCloudFile.hpp"
 #include "hpds/pipeline/Pipeline.hpp"
+#include "hpds/sampling/CellKey.hpp"
 
 namespace hpds {
 namespace {
@@ -143,6 +145,40 @@ TEST(OutputResolution, ValidationOfTheDerivedCell) {
   HpdsConfig negative;
   negative.hierarchy.cell_size = -1.0;
   EXPECT_THROW(validateConfig(negative), std::invalid_argument);
+}
+
+// The warning for points beyond the exact keys names only settings that widen the reach, and every one it names does.
+TEST(OutputResolution, KeyRangeAdviceNamesExactlyTheSettingsThatWidenTheReach) {
+  const auto reach = [](const HpdsConfig &c) {
+    return (kMaxCellCoord - 8.0) * cellEdge(resolveOutput(c).cell_size, c.hierarchy.max_depth);
+  };
+  for (const HpdsConfig &c : {bySpacing(0.1), bySpacing(0.0001), bySpacing(0.1, 4.0), bySpacing(0.1, 4.0, 3),
+                              bySpacing(0.02, 0.0, 4), bySpacing(5.0)}) {
+    const std::string advice = keyRangeAdvice(c);
+    SCOPED_TRACE(advice);
+    EXPECT_TRUE(contains(advice, "local frame"));
+    char reach_text[32];
+    std::snprintf(reach_text, sizeof reach_text, "reach %.6g m", reach(c));
+    EXPECT_TRUE(contains(advice, reach_text)) << reach_text;
+
+    HpdsConfig shallower = c;
+    shallower.hierarchy.max_depth = resolveOutput(c).level;
+    EXPECT_EQ(contains(advice, "lower hierarchy.max_depth"), reach(shallower) > reach(c));
+    HpdsConfig coarser = c;
+    if (c.hierarchy.cell_size == 0.0) {
+      coarser.output.spacing *= 2.0;
+      EXPECT_FALSE(contains(advice, "hierarchy.cell_size"));
+    } else {
+      coarser.hierarchy.cell_size *= 2.0;
+      EXPECT_TRUE(contains(advice, "raise hierarchy.cell_size"));
+    }
+    // Named exactly when it widens the reach (a derived cell keeps its level-0 edge within (2, 4] m: a coarser
+    // spacing moves the output level, not the keys, unless the output is at max_depth).
+    EXPECT_EQ(contains(advice, "raise output.spacing") || contains(advice, "raise hierarchy.cell_size"),
+              reach(coarser) > reach(c));
+    // Some setting always helps besides a local frame.
+    EXPECT_TRUE(reach(coarser) > reach(c) || reach(shallower) > reach(c));
+  }
 }
 
 // Smallest distance between two points, by brute force.

@@ -298,7 +298,22 @@ void checkPcdAscii(const std::string &path, const PcdHeader &h) {
   if (found < h.points)
     fail(path, "truncated: header says " + std::to_string(h.points) + " points but ascii data holds " +
                    std::to_string(found));
+  // PCL reads the first POINTS lines and only warns about the rest: a header that under-states the count would lose
+  // the points after it without a word.
+  if (const auto extra = nextNonBlankLine(in))
+    fail(path, "ascii data line " + std::to_string(line_no + *extra) + " holds a point beyond the header's POINTS " +
+                   std::to_string(h.points) + ": the header under-states the count (fix POINTS, WIDTH and HEIGHT)");
 }
+
+// Bytes of a point without its "_" padding fields.
+std::uint64_t unpaddedStep(const PcdHeader &h) {
+  std::uint64_t step = 0;
+  for (std::size_t f = 0; f < h.names.size(); ++f)
+    if (h.names[f] != "_") step += std::uint64_t(h.sizes[f]) * h.counts[f];
+  return step;
+}
+
+bool hasPadding(const PcdHeader &h) { return unpaddedStep(h) != h.point_step; }
 
 void checkPcdBody(const std::string &path, const FileBytes &file, const PcdHeader &h) {
   const std::uint64_t data_bytes = file.size - std::min(file.size, h.data_offset);
@@ -318,7 +333,8 @@ void checkPcdBody(const std::string &path, const FileBytes &file, const PcdHeade
       std::uint32_t compressed = 0, uncompressed = 0;
       std::memcpy(&compressed, sizes.data(), 4);
       std::memcpy(&uncompressed, sizes.data() + 4, 4);
-      if (uncompressed != need)
+      // With "_" padding fields writers differ: the columns hold the padding or leave it out (readPaddedCompressed).
+      if (uncompressed != need && uncompressed != h.points * unpaddedStep(h))
         fail(path, "corrupt binary_compressed data: uncompressed size " + std::to_string(uncompressed) +
                        " does not match the header's " + std::to_string(h.points) + " points of " +
                        std::to_string(h.point_step) + " bytes");
@@ -352,6 +368,49 @@ void checkLzfStream(const std::string &path, const PcdHeader &h) {
                    std::to_string(h.points) + " points");
 }
 
+// binary_compressed with "_" padding fields. PCL's decoder skips the padding's columns but takes the size stored
+// in the file: columns written with the padding (as some writers do) came out shifted into garbage, and columns
+// without it made PCL shrink its buffer and copy past it. Both layouts are told apart by that size (checkPcdBody
+// accepted only these two) and decoded here, each field's column into its place in the records.
+PointBuffer readPaddedCompressed(const std::string &path, const PcdHeader &h) {
+  PointLayout layout;
+  layout.point_step = static_cast<std::uint32_t>(h.point_step);
+  std::vector<std::uint32_t> offsets;
+  for (std::size_t f = 0; f < h.names.size(); ++f) {
+    offsets.push_back(static_cast<std::uint32_t>(
+        f == 0 ? 0 : offsets.back() + std::uint64_t(h.sizes[f - 1]) * h.counts[f - 1]));
+    if (h.names[f] != "_") layout.fields.push_back({h.names[f], offsets.back(), h.types[f], h.counts[f]});
+  }
+  checkCloudLayout(path, layout);
+
+  std::ifstream in(path, std::ios::binary);
+  in.seekg(static_cast<std::streamoff>(h.data_offset));
+  std::uint32_t sizes[2] = {0, 0};
+  if (!in.read(reinterpret_cast<char *>(sizes), sizeof sizes)) fail(path, "cannot read the binary_compressed sizes");
+  std::vector<char> packed(sizes[0]), unpacked(sizes[1]);
+  if (!in.read(packed.data(), static_cast<std::streamsize>(packed.size())))
+    fail(path, "truncated: binary_compressed block of " + std::to_string(sizes[0]) + " bytes");
+  if (!unpacked.empty() && pcl::lzfDecompress(packed.data(), sizes[0], unpacked.data(), sizes[1]) != sizes[1])
+    fail(path, "corrupt binary_compressed data: its LZF stream of " + std::to_string(sizes[0]) +
+                   " bytes does not decode to the " + std::to_string(sizes[1]) + " bytes of the header's " +
+                   std::to_string(h.points) + " points");
+  const bool padding_stored = sizes[1] == h.points * h.point_step;
+
+  PointBuffer cloud(layout, static_cast<std::size_t>(h.points));
+  const char *column = unpacked.data();
+  for (std::size_t f = 0; f < h.names.size(); ++f) {
+    const bool padding = h.names[f] == "_";
+    if (padding && !padding_stored) continue;
+    const std::size_t bytes = std::size_t(h.sizes[f]) * h.counts[f];
+    if (!padding)
+      for (std::size_t i = 0; i < cloud.size(); ++i)
+        std::memcpy(cloud.record(i) + offsets[f], column + i * bytes, bytes);
+    column += bytes * cloud.size();
+  }
+  cloud.setOrganization(static_cast<std::uint32_t>(h.width), static_cast<std::uint32_t>(h.height));
+  return cloud;
+}
+
 }  // namespace
 
 PointBuffer readPcd(const std::string &path, Eigen::Vector3d *viewpoint) {
@@ -360,6 +419,7 @@ PointBuffer readPcd(const std::string &path, Eigen::Vector3d *viewpoint) {
   if (viewpoint) *viewpoint = Eigen::Vector3d(header.viewpoint[0], header.viewpoint[1], header.viewpoint[2]);
   checkPcdBody(path, file, header);
   if (header.data != PcdData::BinaryCompressed) return readWithPcl(path, PclFormat::Pcd);
+  if (hasPadding(header)) return readPaddedCompressed(path, header);
   try {
     return readWithPcl(path, PclFormat::Pcd);
   } catch (const std::runtime_error &) {

@@ -193,6 +193,11 @@ PlyHeader parsePlyHeader(const std::string &path, const FileBytes &file) {
       } else {
         lineError("expected 'property <type> <name>' or 'property list <size type> <type> <name>'");
       }
+      // PCL refuses a repeated name with only "error -1"; "_" is padding and may repeat.
+      if (prop.name != "_")
+        for (const PlyProperty &p : h.elements.back().properties)
+          if (p.name == prop.name)
+            lineError("property '" + prop.name + "' declared twice in element '" + h.elements.back().name + "'");
       h.elements.back().properties.push_back(std::move(prop));
     } else if (key == "end_header") {
       h.data_offset = complete ? lines.pos() : file.size;
@@ -377,7 +382,15 @@ void checkPlyAscii(const std::string &path, const FileBytes &file, const PlyHead
         fail(path, "ascii " + e.name + " " + std::to_string(i) + ": its line holds more values than the header's " +
                        declared(e) + " (" + quote(token) + " is one too many): " + quote(line));
     }
-    if (is_vertex) break;
+    if (!is_vertex) continue;
+    // PCL reads the declared count and ignores the rest: with nothing declared after the vertices, more data means a
+    // header that under-states the count, whose last points would be lost without a word.
+    if (&e == &h.elements.back())
+      if (const auto extra = nextNonBlankLine(in))
+        fail(path, "ascii data holds more than the header's " + std::to_string(e.count) + " vertices (line " +
+                       std::to_string(*extra) + " after the last one is not blank): the header under-states the "
+                       "count (fix 'element vertex')");
+    break;
   }
 }
 

@@ -33,6 +33,13 @@ std::string quote(std::string_view text) {
 
 bool isSpace(char c) { return c == ' ' || c == '\t' || c == '\r' || c == '\n' || c == '\v' || c == '\f'; }
 
+std::optional<std::uint64_t> nextNonBlankLine(std::istream &in) {
+  std::string line;
+  for (std::uint64_t n = 1; std::getline(in, line); ++n)
+    if (std::any_of(line.begin(), line.end(), [](char c) { return !isSpace(c); })) return n;
+  return std::nullopt;
+}
+
 // Tokens separated by runs of spaces and tabs, as boost::split(..., is_any_of("\t "), token_compress_on) gives them
 // for a line that does not start with a separator.
 std::vector<std::string_view> splitSpaceTab(std::string_view line) {

@@ -14,6 +14,7 @@
 
 #include <charconv>
 #include <cstdint>
+#include <istream>
 #include <optional>
 #include <string>
 #include <string_view>
@@ -36,6 +37,9 @@ using io_detail::kMaxHeaderBytes;
 /// Quotes text taken from a possibly binary file so that messages stay printable and short.
 [[nodiscard]] std::string quote(std::string_view text);
 [[nodiscard]] bool isSpace(char c);
+/// Reads `in` on to the first line holding more than white space and returns its number counted from where `in`
+/// stood (1 = the next line), or nothing at the end of the file: what ascii data holds beyond its header's count.
+[[nodiscard]] std::optional<std::uint64_t> nextNonBlankLine(std::istream &in);
 /// Tokens separated by runs of spaces and tabs, as boost::split(..., is_any_of("\t "), token_compress_on) gives them
 /// for a line that does not start with a separator.
 [[nodiscard]] std::vector<std::string_view> splitSpaceTab(std::string_view line);

@@ -226,8 +226,7 @@ int runSample(const SampleArgs &a) {
     std::cerr << w << "\n";
   if (report.totals.out_of_range > 0)
     std::cerr << "hpds: warning: " << report.totals.out_of_range
-              << " points lie beyond the exact key range of the finest level (|coordinate| / cell edge >= 2^30) and "
-                 "were not inserted; lower hierarchy.max_depth or raise hierarchy.cell_size\n";
+              << " points lie beyond the exact key range and were not inserted: " << keyRangeAdvice(config) << "\n";
   return 0;
 }
 

@@ -242,6 +242,29 @@ OutputResolution resolveOutput(const HpdsConfig &c) {
   return r;
 }
 
+std::string keyRangeAdvice(const HpdsConfig &c) {
+  const auto reach = [](const HpdsConfig &x) {
+    return (kMaxCellCoord - 8.0) * cellEdge(resolveOutput(x).cell_size, x.hierarchy.max_depth);
+  };
+  const OutputResolution r = resolveOutput(c);
+  const int depth = c.hierarchy.max_depth;
+  std::string s = "the exact keys of level " + std::to_string(depth) + " (hierarchy.max_depth; cells of " +
+                  metres(cellEdge(r.cell_size, depth)) + ") reach " + metres(reach(c)) +
+                  " from the origin: give the points in a local frame (subtract an offset)";
+  // Keys are made at max_depth even where fewer levels are built, so levels below the output widen the reach only by
+  // being dropped. A derived level-0 cell stays within (2, 4] m for most spacings: a coarser spacing then moves the
+  // output level, not the keys' cells, so it is named only where it does widen the reach.
+  if (depth > r.level) s += ", or lower hierarchy.max_depth toward the output level " + std::to_string(r.level);
+  HpdsConfig coarser = c;
+  if (c.hierarchy.cell_size == 0.0) {
+    coarser.output.spacing *= 2.0;
+    if (reach(coarser) > reach(c)) s += ", or raise output.spacing";
+  } else {
+    s += ", or raise hierarchy.cell_size";
+  }
+  return s;
+}
+
 int resolveOutputLevel(const HpdsConfig &c) { return resolveOutput(c).level; }
 
 int normalsAveragingLevel(const HpdsConfig &c, int output_level) {

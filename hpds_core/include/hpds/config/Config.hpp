@@ -105,6 +105,11 @@ struct OutputResolution {
 };
 [[nodiscard]] OutputResolution resolveOutput(const HpdsConfig &config);
 
+/// What to do about points counted as out of key range under `config` (as the user gave it, before resolvedConfig):
+/// how far from the origin the exact keys of level hierarchy.max_depth reach, and which settings widen that reach.
+/// For warnings of the CLI, the node and the bindings, which must not advise a setting that cannot help.
+[[nodiscard]] std::string keyRangeAdvice(const HpdsConfig &config);
+
 /// resolveOutput(config).level.
 [[nodiscard]] int resolveOutputLevel(const HpdsConfig &config);
 
