@@ -234,8 +234,14 @@ ProcessedFrame FrameProcessor::process(const sensor_msgs::PointCloud2 &msg, cons
   if (map_mode && config_.ros.local_map_rate > 0.0) {
     // Driven by frame stamps, not a wall/ROS timer, so that the replay emits exactly what the node does; the map
     // only changes when a frame arrives anyway.
-    const bool due = !local_map_sent_ || frame.stamp < last_local_map_stamp_ ||
-                     frame.stamp - last_local_map_stamp_ >= 1.0 / config_.ros.local_map_rate - 1e-9;
+    // Clouds stamped 0 (a broken driver) never advance the stamp: they are scheduled by the steady clock instead,
+    // or ~local_map would come out once and never again.
+    const double now = frame.stamp != 0.0 ? frame.stamp
+                                          : std::chrono::duration<double>(
+                                                std::chrono::steady_clock::now().time_since_epoch())
+                                                .count();
+    const bool due = !local_map_sent_ || now < last_local_map_stamp_ ||
+                     now - last_local_map_stamp_ >= 1.0 / config_.ros.local_map_rate - 1e-9;
     if (due && wants.local_map) {
       const Eigen::Vector3d c = frame.sensor_to_fixed * frame.viewpoint;  // the sensor, in the map
       const double center[3] = {c.x(), c.y(), c.z()};
@@ -245,7 +251,7 @@ ProcessedFrame FrameProcessor::process(const sensor_msgs::PointCloud2 &msg, cons
     }
     if (due) {
       local_map_sent_ = true;
-      last_local_map_stamp_ = frame.stamp;
+      last_local_map_stamp_ = now;
     }
   }
 

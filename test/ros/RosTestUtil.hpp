@@ -145,15 +145,18 @@ class LogCollector {
   LogCollector(const LogCollector &) = delete;
   LogCollector &operator=(const LogCollector &) = delete;
   /// True when a line of `level` holding every one of `parts` has arrived.
-  bool has(std::uint8_t level, const std::vector<std::string> &parts) const {
+  bool has(std::uint8_t level, const std::vector<std::string> &parts) const { return count(level, parts) > 0; }
+  /// How many lines of `level` holding every one of `parts` have arrived.
+  std::size_t count(std::uint8_t level, const std::vector<std::string> &parts) const {
     std::lock_guard<std::mutex> lock(mutex_);
+    std::size_t n = 0;
     for (const rosgraph_msgs::Log &l : lines_) {
       if (l.level != level) continue;
       bool all = true;
       for (const std::string &p : parts) all = all && l.msg.find(p) != std::string::npos;
-      if (all) return true;
+      n += all;
     }
-    return false;
+    return n;
   }
   std::string dump() const {
     std::lock_guard<std::mutex> lock(mutex_);

@@ -2,6 +2,8 @@
 // core pipeline's, map-mode ~output is the set of samples hit by the frame, local-map timing, drops.
 #include <gtest/gtest.h>
 
+#include <chrono>
+
 #include <Eigen/Eigenvalues>
 
 #include <unistd.h>
@@ -399,6 +401,32 @@ TEST(FrameProcessor, MapOutputIsTheSampleSetHitByTheFrame) {
   // A stamp going back (a looped bag) restarts the local-map clock.
   const auto again = processor.process(toMsg(lidar.frame(0).frame.points, 9.0), lidar.pose(0), OutputRequest::all());
   EXPECT_TRUE(again.has_local_map);
+}
+
+// Clouds stamped 0 never advance the stamp: the local map came out for the first of them and never again. They go
+// by the steady clock now: at 20 Hz, one at once and another after at least 1 / rate seconds.
+TEST(FrameProcessor, ZeroStampedCloudsStillGetALocalMapAtItsRate) {
+  const hpds::SyntheticLidar lidar(smallLidar());
+  NodeConfig config;
+  config.hpds.mode = hpds::Mode::Map;
+  config.hpds.output.level = 3;
+  config.hpds.hierarchy.cell_size = 4.0;
+  config.hpds.hierarchy.max_depth = 4;
+  config.hpds.normals.enabled = false;
+  config.ros.fixed_frame = "odom";
+  config.ros.local_map_rate = 20.0;
+  FrameProcessor processor(config);
+  const hpds::SyntheticFrame f = lidar.frame(0);
+  const auto msg = toMsg(f.frame.points, 0.0);
+  ASSERT_TRUE(msg.header.stamp.isZero());
+  const auto start = std::chrono::steady_clock::now();  // before the first local map's clock reading
+  EXPECT_TRUE(processor.process(msg, f.frame.sensor_to_fixed, OutputRequest::all()).has_local_map);
+  int local_maps = 0;
+  while (local_maps == 0) {
+    ASSERT_LT(std::chrono::steady_clock::now() - start, std::chrono::seconds(30)) << "no second local map";
+    local_maps += processor.process(msg, f.frame.sensor_to_fixed, OutputRequest::all()).has_local_map;
+  }
+  EXPECT_GE(std::chrono::steady_clock::now() - start, std::chrono::milliseconds(50));
 }
 
 TEST(FrameProcessor, DropsAreCountedByReason) {

@@ -29,6 +29,20 @@ TEST(NodeConfig, DefaultsAreValid) {
   EXPECT_EQ(c.ros.queue_size, 1);
 }
 
+// A frame can wait queue_size frames of processing and then tf_timeout before its pose is looked up: tf must still
+// hold the transforms of its stamp then (with tf's 10 s, a queue of 1000 behind a bag played at 5x lost its oldest
+// third as no_transform).
+TEST(NodeConfig, TfCacheCoversTheLongestWaitOfAQueuedFrame) {
+  hpds::RosConfig ros;
+  EXPECT_EQ(hpds::tfCacheSeconds(ros), 10.0) << "the default queue keeps tf's default";
+  ros.queue_size = 1000;
+  ros.tf_timeout = 0.5;
+  EXPECT_GE(hpds::tfCacheSeconds(ros), 1000 * 1.0 + 0.5);
+  ros.queue_size = 30;
+  EXPECT_GE(hpds::tfCacheSeconds(ros), 30.5);
+  EXPECT_LE(hpds::tfCacheSeconds(ros), 60.0) << "no more than the wait needs";
+}
+
 TEST(NodeConfig, ConfigKeysAndRosSectionTogether) {
   NodeConfig c;
   hpds_node::applyNodeConfigYaml(R"(

@@ -336,6 +336,32 @@ TEST_F(HostileTest, DropsAreLoggedNotOnlyCounted) {
       << logs.dump();
 }
 
+// A zero header.stamp makes tf hand out its latest transform instead of the one of the capture: the frame is
+// processed, and said once to have a stamp the driver must fix.
+TEST_F(HostileTest, ZeroStampsAreProcessedAndWarnedAboutOnce) {
+  const std::string target = ros::NodeHandle("~").param<std::string>("slash_target", "/hpds_slash");
+  LogCollector logs(nh_, target);
+  hpds_test::DiagnosticsReader diag(nh_, target.substr(1));
+  ros::Publisher pub = nh_.advertise<PointCloud2>(target + "/input", 10);
+  ASSERT_TRUE(
+      hpds_test::waitFor([&] { return pub.getNumSubscribers() > 0 && logs.connected() && diag.updates() > 0; }, 30.0));
+  const double before = diag.value("frames processed");
+  for (int i = 0; i < 2; ++i) {
+    auto m = validCloud(500, 950 + std::uint32_t(i), ros::Time(0, 0));
+    m->header.frame_id = "odom";
+    pub.publish(m);
+    ros::WallDuration(0.05).sleep();
+  }
+  ASSERT_TRUE(hpds_test::waitFor([&] { return diag.value("frames processed") == before + 2; }, 30.0))
+      << "processed " << diag.value("frames processed") << " after " << before;
+  EXPECT_TRUE(hpds_test::waitFor(
+      [&] { return logs.has(rosgraph_msgs::Log::WARN, {"zero header.stamp", "latest transform", "driver's stamps"}); },
+      10.0))
+      << logs.dump();
+  ros::WallDuration(0.5).sleep();
+  EXPECT_EQ(logs.count(rosgraph_msgs::Log::WARN, {"zero header.stamp"}), 1u) << logs.dump();
+}
+
 }  // namespace
 
 int main(int argc, char **argv) { return hpds_test::runRosTests(argc, argv, "test_node_hostile"); }

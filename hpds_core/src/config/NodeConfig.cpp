@@ -198,6 +198,12 @@ std::string ignoredRosKeysWarning(const RosConfig &ros, Mode mode) {
          ros.fixed_frame + "')";
 }
 
+double tfCacheSeconds(const RosConfig &ros) {
+  constexpr double kTfDefaultCache = 10.0;    // tf2::BufferCore::DEFAULT_CACHE_TIME
+  constexpr double kLongestFrameSeconds = 1.0;  // five times the densest shared frame at the defaults
+  return std::max(kTfDefaultCache, ros.tf_timeout + ros.queue_size * kLongestFrameSeconds);
+}
+
 double checkDiagnosticPeriod(double period) {
   if (!(std::isfinite(period) && period > 0.0 && period <= 3600.0))
     fail("diagnostic_period", "must be a number of seconds in (0, 3600], got " + formatDouble(period));

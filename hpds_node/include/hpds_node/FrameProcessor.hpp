@@ -16,7 +16,8 @@
 //     levels      one cloud per ros.publish_levels entry D: samples of exactly level D (scan: all of them; map:
 //                 those hit by the frame with radius 2 r_D).
 //     local_map   map: samples of levels 0..L within ros.local_map_radius of the sensor, when the frame's stamp is
-//                 at least 1 / ros.local_map_rate after the last local map (or went backwards: a looped bag).
+//                 at least 1 / ros.local_map_rate after the last local map (or went backwards: a looped bag);
+//                 clouds stamped 0 go by the steady clock.
 //   Clouds use the OutputCloud layout: x y z float32 first, [normal_x/y/z curvature], level uint8 and the input
 //   fields, every field aligned to its element size and point_step a multiple of 4 (OutputCloud.hpp).
 // - Drops: a message whose fields differ from the map's (map mode) is dropped and counted (LayoutChanged).

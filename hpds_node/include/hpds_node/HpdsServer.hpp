@@ -121,7 +121,7 @@ class HpdsServer {
   diagnostic_updater::Updater updater_;
   std::string tag_;  // "hpds <node or nodelet name>": begins every log line, so that each instance is told apart
 
-  tf2_ros::Buffer tf_buffer_;
+  tf2_ros::Buffer tf_buffer_;  // holds tfCacheSeconds(config_.ros) of transforms
   std::unique_ptr<tf2_ros::TransformListener> tf_listener_;  // set exactly when frames need a transform lookup
   ros::Publisher pub_output_, pub_new_samples_, pub_local_map_;
   std::vector<ros::Publisher> pub_levels_;
@@ -134,7 +134,8 @@ class HpdsServer {
   SequenceGaps sequence_gaps_;
   std::set<std::string> fields_not_carried_;  // already warned about
   // Said once per instance (not ROS_*_ONCE, whose flag is shared by every nodelet of the process).
-  std::atomic<bool> warned_sensor_at_origin_{false}, warned_rounding_{false}, warned_empty_frame_id_{false};
+  std::atomic<bool> warned_sensor_at_origin_{false}, warned_rounding_{false}, warned_empty_frame_id_{false},
+      warned_zero_stamp_{false};
   std::mutex log_mutex_;
   std::map<std::string, double> last_logged_;  // logAllowed: wall time [s] of the last line per key
   static constexpr double kLogThrottleSeconds = 5.0;

@@ -43,7 +43,8 @@ HpdsServer::HpdsServer(ros::NodeHandle nh, ros::NodeHandle private_nh, const std
       config_(loadNodeConfigFromParams(private_nh)),
       diagnostic_period_(diagnosticPeriod(private_nh)),
       updater_(nh, private_nh, name),
-      tag_("hpds " + name) {
+      tag_("hpds " + name),
+      tf_buffer_(ros::Duration(tfCacheSeconds(config_.ros))) {
   // Scan mode: frames are independent, so `threads` workers take one frame each, each processor on one thread.
   const std::size_t workers =
       config_.hpds.mode == hpds::Mode::Scan ? static_cast<std::size_t>(hpds::resolveThreads(config_.hpds.threads)) : 1;
@@ -421,6 +422,14 @@ void HpdsServer::handle(const sensor_msgs::PointCloud2::ConstPtr &msg, std::size
                         << "' itself, so where the sensor was is unknown: it is taken as that frame's origin, which "
                            "normals face and map/evict_distance and input ranges measure from (far from it, each "
                            "frame evicts the last). Set ros/sensor_frame to the sensor's tf frame");
+      // Processed all the same: tf reads a zero stamp as "latest", which only a sensor at rest gets right.
+      if (msg->header.stamp.isZero() && !warned_zero_stamp_.exchange(true))
+        ROS_WARN_STREAM_NAMED("hpds", tag_ << ": input clouds have a zero header.stamp, which the outputs keep"
+                                          << (looked_up ? std::string(", and tf gives them its latest transform, not "
+                                                                      "the one of their capture (a moving sensor's "
+                                                                      "map smears)")
+                                                        : std::string())
+                                          << ". Fix the driver's stamps");
       // Processed all the same (the output keeps the input's frame), but tf, RViz and PCL's tools cannot place it.
       if (msg->header.frame_id.empty() && target_frame_.empty() && !warned_empty_frame_id_.exchange(true))
         ROS_WARN_STREAM_NAMED("hpds", tag_ << ": input clouds have an empty header.frame_id, which the outputs "
@@ -434,11 +443,10 @@ void HpdsServer::handle(const sensor_msgs::PointCloud2::ConstPtr &msg, std::size
         if (frame.counters.out_of_range > 0 && logAllowed("out_of_range"))
           ROS_WARN_STREAM_NAMED("hpds", tag_ << ": " << frame.counters.out_of_range << " of the frame's "
                                                                 << frame.counters.input
-                                                                << " points lie beyond the exact key range of the "
-                                                                   "finest level (|coordinate| / cell edge >= 2^30) "
-                                                                   "and were not inserted (counted as 'points out of "
-                                                                   "key range'); lower hierarchy.max_depth or raise "
-                                                                   "the spacing or hierarchy.cell_size");
+                                                                << " points lie beyond the exact key range and were "
+                                                                   "not inserted (counted as 'points out of key "
+                                                                   "range'): "
+                                                                << hpds::keyRangeAdvice(config_.hpds));
         for (const std::string &name : frame.fields_not_carried) warnFieldNotCarriedOnce(name);
         const double radius = processor.pipeline().outputResolution().radius;
         // The two parameters cannot both be true: advising float64 alone would stop the node at its next start.

@@ -68,6 +68,12 @@ void validateRosConfig(const RosConfig &ros, const HpdsConfig &config);
 /// without a word.
 [[nodiscard]] std::string ignoredRosKeysWarning(const RosConfig &ros, Mode mode);
 
+/// [s] How long the node's tf buffer keeps transforms: tf's default 10 s, or more when a frame can wait longer than
+/// that before its pose is looked up (queue_size frames of up to a second each, then tf_timeout). With the default
+/// a long queue behind a bag replayed faster than the node lost its oldest frames as no_transform, though their
+/// transforms had arrived before them.
+[[nodiscard]] double tfCacheSeconds(const RosConfig &ros);
+
 /// `period` if it is a valid diagnostic_period ([s], in (0, 3600]); else std::invalid_argument "diagnostic_period: ...".
 double checkDiagnosticPeriod(double period);
 
