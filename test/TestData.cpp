@@ -6,10 +6,14 @@
 #include <unistd.h>
 
 #include <array>
+#include <cstdlib>
 #include <cstdio>
 #include <fstream>
 #include <iterator>
 #include <random>
+#include <vector>
+
+#include <gtest/gtest.h>
 
 namespace hpds::test {
 
@@ -20,12 +24,29 @@ std::filesystem::path sharedLidarDir() {
   return {};
 }
 
+namespace {
+
+// The scratch folders of this test process, removed when it exits unless a test failed (they are then what there is
+// to look at) or HPDS_KEEP_TEST_SCRATCH is set: every `make test` left some 200 MB in /tmp.
+struct ScratchRegistry {
+  std::vector<std::filesystem::path> dirs;
+  ~ScratchRegistry() {
+    if (std::getenv("HPDS_KEEP_TEST_SCRATCH") || ::testing::UnitTest::GetInstance()->Failed()) return;
+    std::error_code ec;
+    for (const auto &d : dirs) std::filesystem::remove_all(d, ec);
+  }
+};
+
+}  // namespace
+
 std::filesystem::path scratchDir(const std::string &tag) {
+  static ScratchRegistry registry;  // constructed after gtest's UnitTest, so destroyed before it
   static std::mt19937_64 rng(std::random_device{}());
   const auto dir = std::filesystem::temp_directory_path() /
                    ("hpds_test_" + tag + "_" + std::to_string(::getpid()) + "_" + std::to_string(rng() % 1000000));
   std::filesystem::remove_all(dir);
   std::filesystem::create_directories(dir);
+  registry.dirs.push_back(dir);
   return dir;
 }
 

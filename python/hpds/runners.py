@@ -50,13 +50,40 @@ class DaskRunner:
     one can share its fate every time. Once nothing else of the build is in flight, each suspect runs once more on
     its own; one that completes goes on (with what waits on it), and one whose workers die while it runs alone is the
     one that crashes them: it stops the build with its own name.
+
+    A cluster left without workers (their nannies could not replace the ones that died, or they were shut down)
+    would leave the build waiting for ever: after `no_worker_timeout` seconds without a worker it stops, saying so.
     """
 
-    def __init__(self, client, wrap=None, retries=2):
+    def __init__(self, client, wrap=None, retries=2, no_worker_timeout=120.0):
         self.client = client
         self.wrap = wrap
         self.retries = retries
+        self.no_worker_timeout = no_worker_timeout
         self.workers = len(client.scheduler_info().get("workers", {}))
+
+    def _completed(self, pending):
+        """The futures of `pending` as they complete (its set may grow meanwhile), as iterating it would give them,
+        but watching that the cluster still has a worker to run them."""
+        alone_since, checked = None, 0.0
+        while not pending.is_empty():
+            batch = pending.next_batch(block=False)
+            if batch:
+                alone_since = None
+                yield from batch
+                continue
+            now = time.monotonic()
+            if now - checked >= 1.0:
+                checked = now
+                if self.client.scheduler_info().get("workers"):
+                    alone_since = None
+                elif alone_since is None:
+                    alone_since = now
+                elif now - alone_since > self.no_worker_timeout:
+                    raise BuildError("the Dask cluster has had no workers for %.0f s with %d tasks of the build "
+                                     "unfinished (workers that died were not replaced): give it workers or restart "
+                                     "it, and run the build again" % (now - alone_since, pending.count()))
+            time.sleep(0.05)
 
     def run(self, tasks):
         from distributed import as_completed
@@ -93,7 +120,7 @@ class DaskRunner:
         pending = as_completed([submit(t) for t in tasks])
         try:
             while True:
-                for future in pending:
+                for future in self._completed(pending):
                     t = task_of[future.key]
                     if current.get(t.key) is not future:
                         continue  # superseded by a resubmission
