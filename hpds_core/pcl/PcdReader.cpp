@@ -352,20 +352,23 @@ void checkPcdBody(const std::string &path, const FileBytes &file, const PcdHeade
   }
 }
 
-// Called only after PCL refused a binary_compressed file whose sizes checkPcdBody accepted: PCL then reports just
-// "error -1", and the cause left is the LZF stream itself. Decoding it here names that cause.
-void checkLzfStream(const std::string &path, const PcdHeader &h) {
+// The decoded body of a binary_compressed file whose sizes checkPcdBody accepted; fails naming the cause when the
+// LZF stream does not decode to the stored size. Also run after PCL refused such a file, which it reports only as
+// "error -1": the cause left then is the stream itself.
+std::vector<char> decodeLzfBody(const std::string &path, const PcdHeader &h) {
   std::ifstream in(path, std::ios::binary);
   in.seekg(static_cast<std::streamoff>(h.data_offset));
   std::uint32_t sizes[2] = {0, 0};
-  if (!in.read(reinterpret_cast<char *>(sizes), sizeof sizes)) return;
+  if (!in.read(reinterpret_cast<char *>(sizes), sizeof sizes)) fail(path, "cannot read the binary_compressed sizes");
   std::vector<char> packed(sizes[0]), unpacked(sizes[1]);
-  if (!in.read(packed.data(), static_cast<std::streamsize>(packed.size()))) return;
+  if (!in.read(packed.data(), static_cast<std::streamsize>(packed.size())))
+    fail(path, "truncated: binary_compressed block of " + std::to_string(sizes[0]) + " bytes");
   const unsigned got = packed.empty() ? 0u : pcl::lzfDecompress(packed.data(), sizes[0], unpacked.data(), sizes[1]);
   if (got != sizes[1])
     fail(path, "corrupt binary_compressed data: its LZF stream of " + std::to_string(sizes[0]) +
                    " bytes does not decode to the " + std::to_string(sizes[1]) + " bytes of the header's " +
                    std::to_string(h.points) + " points");
+  return unpacked;
 }
 
 // binary_compressed with "_" padding fields. PCL's decoder skips the padding's columns but takes the size stored
@@ -383,18 +386,8 @@ PointBuffer readPaddedCompressed(const std::string &path, const PcdHeader &h) {
   }
   checkCloudLayout(path, layout);
 
-  std::ifstream in(path, std::ios::binary);
-  in.seekg(static_cast<std::streamoff>(h.data_offset));
-  std::uint32_t sizes[2] = {0, 0};
-  if (!in.read(reinterpret_cast<char *>(sizes), sizeof sizes)) fail(path, "cannot read the binary_compressed sizes");
-  std::vector<char> packed(sizes[0]), unpacked(sizes[1]);
-  if (!in.read(packed.data(), static_cast<std::streamsize>(packed.size())))
-    fail(path, "truncated: binary_compressed block of " + std::to_string(sizes[0]) + " bytes");
-  if (!unpacked.empty() && pcl::lzfDecompress(packed.data(), sizes[0], unpacked.data(), sizes[1]) != sizes[1])
-    fail(path, "corrupt binary_compressed data: its LZF stream of " + std::to_string(sizes[0]) +
-                   " bytes does not decode to the " + std::to_string(sizes[1]) + " bytes of the header's " +
-                   std::to_string(h.points) + " points");
-  const bool padding_stored = sizes[1] == h.points * h.point_step;
+  const std::vector<char> unpacked = decodeLzfBody(path, h);
+  const bool padding_stored = unpacked.size() == h.points * h.point_step;
 
   PointBuffer cloud(layout, static_cast<std::size_t>(h.points));
   const char *column = unpacked.data();
@@ -423,7 +416,7 @@ PointBuffer readPcd(const std::string &path, Eigen::Vector3d *viewpoint) {
   try {
     return readWithPcl(path, PclFormat::Pcd);
   } catch (const std::runtime_error &) {
-    checkLzfStream(path, header);
+    (void)decodeLzfBody(path, header);
     throw;
   }
 }

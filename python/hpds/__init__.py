@@ -80,9 +80,8 @@ def downsample(points, config=None, viewpoint=None):
     result = Samples(arrays)
     result.skipped = skipped
     if skipped["out_of_range"]:
-        warnings.warn("hpds.downsample: %d points lie beyond the exact key range of the finest level and were not "
-                      "sampled (see samples.skipped); sample georeferenced points relative to a local origin, or "
-                      "use a coarser output.spacing or a smaller hierarchy.max_depth" % skipped["out_of_range"],
+        warnings.warn("hpds.downsample: %d points lie beyond the exact key range and were not sampled (see "
+                      "samples.skipped): %s" % (skipped["out_of_range"], _hpds.key_range_advice(text, path)),
                       RuntimeWarning, stacklevel=2)
     return result
 

@@ -67,6 +67,11 @@ void bindConfig(py::module_ &m) {
         return toPython(YAML::Load(dump), "");
       },
       py::arg("config_yaml"), py::arg("config_path"), "The same config as a dict of sections.");
+  m.def(
+      "key_range_advice",
+      [](const std::string &yaml_text, const std::string &path) { return keyRangeAdvice(configFrom(yaml_text, path)); },
+      py::arg("config_yaml"), py::arg("config_path"),
+      "How far the config's exact keys reach and which settings widen that reach (hpds::keyRangeAdvice).");
 }
 
 }  // namespace hpds::python

@@ -205,6 +205,15 @@ class Arguments(support.ScratchCase):
         self.assertEqual(len(caught), 1)
         self.assertIs(caught[0].category, RuntimeWarning)
         self.assertIn("2 points lie beyond the exact key range", str(caught[0].message))
+        # What helps at the defaults (a derived cell): fewer levels below the output, not a coarser spacing.
+        self.assertIn("reach 1.54981e+07 m", str(caught[0].message))
+        self.assertIn("lower hierarchy.max_depth toward the output level 5", str(caught[0].message))
+        self.assertNotIn("output.spacing", str(caught[0].message))
+        with warnings.catch_warnings(record=True) as shallow:
+            warnings.simplefilter("always")
+            s = hpds.downsample(pts, {"hierarchy": {"max_depth": 5}})
+        self.assertEqual(s.skipped["out_of_range"], 0)
+        self.assertEqual(shallow, [])
         with warnings.catch_warnings(record=True) as quiet:
             warnings.simplefilter("always")
             hpds.downsample(pts[[0, 2]])
