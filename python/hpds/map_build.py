@@ -10,6 +10,7 @@ the insertion order does). --workers N starts a local Dask cluster of N processe
 process without Dask.
 """
 import argparse
+import glob
 import logging
 import math
 import os
@@ -136,6 +137,16 @@ def _stop_on_sigterm(signum, frame):
     raise SystemExit(128 + signum)
 
 
+def _left_behind(outdir):
+    """What a stopped build left in OUTDIR, for its last message: the build removes a folder it made and wrote no
+    tile into, and keeps complete tiles otherwise."""
+    tiles = glob.glob(os.path.join(glob.escape(outdir), "tile_*_*.ply"))
+    if tiles:
+        return " (%d tile%s written so far stay%s in %s, an incomplete build)" % (
+            len(tiles), "" if len(tiles) == 1 else "s", "s" if len(tiles) == 1 else "", outdir)
+    return " (nothing of this build is left%s)" % (" in " + outdir if os.path.isdir(outdir) else "")
+
+
 def main(argv=None):
     a = parse_args(sys.argv[1:] if argv is None else argv)
     closers = []
@@ -156,11 +167,11 @@ def main(argv=None):
         print("hpds.map_build: error: %s" % e, file=sys.stderr)
         return 1
     except KeyboardInterrupt:
-        print("hpds.map_build: interrupted: no manifest was written (the tiles written so far are incomplete)",
-              file=sys.stderr)
+        print("hpds.map_build: interrupted: no manifest was written%s" % _left_behind(a.output), file=sys.stderr)
         return 130
     except SystemExit as e:
-        print("hpds.map_build: stopped by a signal: no manifest was written", file=sys.stderr)
+        print("hpds.map_build: stopped by a signal: no manifest was written%s" % _left_behind(a.output),
+              file=sys.stderr)
         return e.code
     finally:
         for c in closers:

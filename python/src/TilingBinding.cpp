@@ -8,6 +8,7 @@
 #include <tuple>
 
 #include "Bindings.hpp"
+#include "hpds/util/FrameMemory.hpp"
 #include "hpds/config/ConfigYaml.hpp"
 #include "hpds/pipeline/OutputCloud.hpp"
 #include "hpds/tiling/TileBucket.hpp"
@@ -205,6 +206,9 @@ void bindTiling(py::module_ &m) {
       py::arg("config_yaml"), py::arg("tile_size"), py::arg("i"), py::arg("j"), py::arg("map_path"),
       py::arg("borders"), py::arg("ply_path"),
       "Output task: writes tile (i, j)'s PLY (normals read across its neighbours' border files).");
+  m.def("keep_freed_frame_memory", &keepFreedFrameMemory,
+        "Process-wide: glibc's malloc keeps freed memory for the next task (hpds::keepFreedFrameMemory). For the "
+        "processes that run map_build's tasks; True when the setting took.");
   m.def("rounding_warning", &positionRoundingWarning, py::arg("rounding"), py::arg("output_radius"), py::arg("key"),
         py::arg("input_rounding") = 0.0,
         "The warning `hpds sample` prints when float32 x y z round positions by more than 1 % of the output radius, "
