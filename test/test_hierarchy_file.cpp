@@ -706,7 +706,7 @@ TEST(MapFileCli, SaveThenLoadContinuesTheMap) {
       << log;
   ASSERT_EQ(runHpds("sample " + frame(2) + " " + frame(3) + " --poses " + posesFile(tmp / "p23.txt", 2, 4) + common +
                      " -o " + shellQuote(tmp / "cont.ply") + " --load-map " + shellQuote(tmp / "m.hpdsmap") + " --save-map " +
-                     shellQuote(tmp / "m.hpdsmap"),
+                     shellQuote(tmp / "m2.hpdsmap"),
                  &log),
             0)
       << log;

@@ -383,16 +383,26 @@ TEST_F(OutputSafety, NoOutputIsAnInputOrAnotherOutput) {
   EXPECT_FALSE(fs::exists(dir_ / "out.ply"));
   EXPECT_FALSE(fs::exists(dir_ / "o.ply"));
 
-  // The same outputs are fine once they are distinct files; a map may be updated in place (it is read completely
-  // before the atomic write), and an existing output file is replaced.
+  // The same outputs are fine once they are distinct files, and an existing output file is replaced.
   std::string log;
   EXPECT_EQ(test::runHpds("sample" + q("b.ply") + " --mode map -o" + q("out.ply") + " --save-map" + q("m.hpdsmap") +
                               " --stats" + q("s.json") + " --config" + q("c.yaml"),
                           &log),
             0)
       << log;
+  // A map is not updated in place either: its outputs are renamed into place one after another, so a run killed
+  // after the map's rename and run again inserted its frames twice into the map it had already updated.
+  const std::string map_before = test::readText(dir_ / "m.hpdsmap");
   EXPECT_EQ(test::runHpds("sample" + q("a.ply") + " --mode map -o" + q("out.ply") + " --load-map" + q("m.hpdsmap") +
                               " --save-map" + q("m.hpdsmap"),
+                          &log),
+            1)
+      << log;
+  EXPECT_NE(log.find("--save-map: '" + (dir_ / "m.hpdsmap").string() + "' is the --load-map file"), std::string::npos)
+      << log;
+  EXPECT_EQ(test::readText(dir_ / "m.hpdsmap"), map_before);
+  EXPECT_EQ(test::runHpds("sample" + q("a.ply") + " --mode map -o" + q("out.ply") + " --load-map" + q("m.hpdsmap") +
+                              " --save-map" + q("m2.hpdsmap"),
                           &log),
             0)
       << log;

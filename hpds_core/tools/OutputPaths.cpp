@@ -90,7 +90,7 @@ std::string specialFileProblem(const struct stat &st) {
 }
 
 struct Planned {
-  std::string flag, path, updates;
+  std::string flag, path;
   std::optional<Identity> id;
 };
 
@@ -113,7 +113,7 @@ void checkPaths(const std::vector<InputPath> &inputs, const std::vector<OutputPa
       if (exists && ::access(o.path.c_str(), W_OK) != 0)
         refuse(o.flag, o.path, "exists and is read-only; hpds does not replace files it may not write");
     }
-    planned.push_back({o.flag, o.path, o.updates, identify(o.path)});
+    planned.push_back({o.flag, o.path, identify(o.path)});
   }
   for (const OutputFolder &f : folders) {
     if (f.path.empty()) continue;
@@ -134,7 +134,7 @@ void checkPaths(const std::vector<InputPath> &inputs, const std::vector<OutputPa
       const std::string path = (fs::path(f.path) / name).string();
       if (struct stat file {}; ::stat(path.c_str(), &file) == 0)
         if (const std::string why = specialFileProblem(file); !why.empty()) refuse(f.flag, path, why);
-      planned.push_back({f.flag, path, "", identify(path)});
+      planned.push_back({f.flag, path, identify(path)});
     }
   }
 
@@ -145,7 +145,7 @@ void checkPaths(const std::vector<InputPath> &inputs, const std::vector<OutputPa
       if (in.path.empty()) continue;
       struct stat st {};
       if (::stat(in.path.c_str(), &st) != 0) continue;  // a missing input is the reader's error
-      if (!(Identity{st.st_dev, st.st_ino, ""} == *o.id) || (!o.updates.empty() && o.updates == in.flag)) continue;
+      if (!(Identity{st.st_dev, st.st_ino, ""} == *o.id)) continue;
       refuse(o.flag, o.path,
              "is the " + (in.flag == "input" ? std::string("input ") : in.flag + " file ") + inQuotes(in.path) +
                  "; hpds never writes over what it reads");

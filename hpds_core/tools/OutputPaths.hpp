@@ -9,8 +9,6 @@
 //   - is the same file as an input or as another output. "Same" is the file system's identity (device and inode),
 //     not the spelling: `./a.ply`, `dir/../a.ply`, a hard link and a symbolic link to the input are all the input;
 //     an output that does not exist yet is identified by its folder's identity and its name.
-// - An output may be declared as an update of one input (`--save-map` of the `--load-map` file): that input is read
-//   completely before the output is written, and the write is atomic (AtomicFile), so nothing is lost.
 // - An existing output that is not a regular file is refused: a pipe (a FIFO, /dev/stdout into a pipe), a terminal
 //   or other device, a socket. Outputs are written whole under a temporary name and renamed into place (AtomicFile),
 //   which such a file cannot take; written into directly, a pipe would hold the run after its work until read. The
@@ -35,7 +33,6 @@ struct OutputPath {
   std::string path;
   std::vector<std::string> extensions;  ///< accepted, lower case with the dot; empty: any but another format's
   std::string format;                   ///< what is written, for the message ("PLY", "JSON", "an hpds map")
-  std::string updates;                  ///< flag of the one input this output may replace (see contract), or ""
 };
 
 /// Outputs that are folders: the folder (created when missing, so its parent must exist and be writable) and the

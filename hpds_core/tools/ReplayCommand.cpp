@@ -147,7 +147,7 @@ std::string messageSummary(std::size_t messages, const std::string &topic, const
 int runReplay(const ReplayArgs &a) {
   // Before anything is read or opened: the bag is never its own output, and a run never ends on an unwritable path.
   checkPaths({{"input", a.bag}, {"--config", a.sampling.config_file}},
-             {{"-o", a.output, {".bag", ".ply"}, "a bag or a PLY", ""}, {"--stats", a.stats, {".json"}, "JSON", ""}});
+             {{"-o", a.output, {".bag", ".ply"}, "a bag or a PLY"}, {"--stats", a.stats, {".json"}, "JSON"}});
   const hpds_node::NodeConfig config = resolveNodeConfig(a);
   const bool to_bag = endsWith(a.output, ".bag");
   const bool scan = config.hpds.mode == Mode::Scan;

@@ -63,9 +63,9 @@ void checkSamplePaths(const SampleArgs &a) {
   inputs.push_back({"--poses", a.poses});
   inputs.push_back({"--config", a.sampling.config_file});
   inputs.push_back({"--load-map", a.load_map});
-  checkPaths(inputs, {{"-o", a.output, {".ply"}, "PLY", ""},
-                      {"--stats", a.stats, {".json"}, "JSON", ""},
-                      {"--save-map", a.save_map, {}, "an hpds map", "--load-map"}});
+  checkPaths(inputs, {{"-o", a.output, {".ply"}, "PLY"},
+                      {"--stats", a.stats, {".json"}, "JSON"},
+                      {"--save-map", a.save_map, {}, "an hpds map"}});
 }
 
 int runSample(const SampleArgs &a) {

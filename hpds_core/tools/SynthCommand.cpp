@@ -90,7 +90,7 @@ void runSynth(SynthArgs a, SynthBagOpener open_bag) {
   for (int i = 0; i < a.lidar.frames; ++i) files.push_back(frameName(i, a.format));
   files.push_back("poses.txt");
   // The bag is one more output: never one of the folder's files, whatever links lead there.
-  checkPaths({}, {{"--bag", a.bag.path, {".bag"}, "a bag", ""}}, {{"-o", a.out_dir, files}});
+  checkPaths({}, {{"--bag", a.bag.path, {".bag"}, "a bag"}}, {{"-o", a.out_dir, files}});
   refuseStaleFrames(a.out_dir, files);
   const SyntheticLidar lidar(a.lidar);
   RunFolder folder(a.out_dir);
