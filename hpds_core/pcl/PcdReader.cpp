@@ -378,11 +378,12 @@ std::vector<char> decodeLzfBody(const std::string &path, const PcdHeader &h) {
 PointBuffer readPaddedCompressed(const std::string &path, const PcdHeader &h) {
   PointLayout layout;
   layout.point_step = static_cast<std::uint32_t>(h.point_step);
-  std::vector<std::uint32_t> offsets;
+  std::vector<std::uint32_t> offsets;  // of every field, padding included
+  std::uint32_t offset = 0;
   for (std::size_t f = 0; f < h.names.size(); ++f) {
-    offsets.push_back(static_cast<std::uint32_t>(
-        f == 0 ? 0 : offsets.back() + std::uint64_t(h.sizes[f - 1]) * h.counts[f - 1]));
-    if (h.names[f] != "_") layout.fields.push_back({h.names[f], offsets.back(), h.types[f], h.counts[f]});
+    offsets.push_back(offset);
+    if (h.names[f] != "_") layout.fields.push_back({h.names[f], offset, h.types[f], h.counts[f]});
+    offset += h.sizes[f] * h.counts[f];
   }
   checkCloudLayout(path, layout);
 

@@ -10,7 +10,6 @@ the insertion order does). --workers N starts a local Dask cluster of N processe
 process without Dask.
 """
 import argparse
-import glob
 import logging
 import math
 import os
@@ -20,7 +19,7 @@ import sys
 from . import _hpds
 from .config import to_yaml
 from .runners import BuildError, DaskRunner, SerialRunner
-from .tiled_build import MANIFEST, build, remove_scratch_unless_building
+from .tiled_build import MANIFEST, build, remove_scratch_unless_building, tile_plys
 
 
 def parse_args(argv):
@@ -140,7 +139,7 @@ def _stop_on_sigterm(signum, frame):
 def _left_behind(outdir):
     """What a stopped build left in OUTDIR, for its last message: the build removes a folder it made and wrote no
     tile into, and keeps complete tiles otherwise."""
-    tiles = glob.glob(os.path.join(glob.escape(outdir), "tile_*_*.ply"))
+    tiles = tile_plys(outdir)
     if tiles:
         return " (%d tile%s written so far stay%s in %s, an incomplete build)" % (
             len(tiles), "" if len(tiles) == 1 else "s", "s" if len(tiles) == 1 else "", outdir)

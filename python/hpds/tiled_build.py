@@ -85,6 +85,12 @@ def tile_ply_name(key):
     return "tile_%d_%d.ply" % key
 
 
+def tile_plys(outdir):
+    """The names of the tile PLYs in OUTDIR (a build's own or an earlier one's), sorted."""
+    return sorted(os.path.basename(p) for p in glob.glob(os.path.join(glob.escape(outdir), "tile_*_*.ply"))
+                  if _TILE_PLY.match(os.path.basename(p)))
+
+
 def check_paths(inputs, outdir):
     """Refuses a build that would overwrite an input or an earlier build's output (hpds never destroys data)."""
     if os.path.exists(outdir) and not os.path.isdir(outdir):
@@ -98,8 +104,7 @@ def check_paths(inputs, outdir):
             raise BuildError("input '%s' has the name of an output of the build in %s" % (p, outdir))
         if real == work or real.startswith(work + os.sep):
             raise BuildError("input '%s' lies in the build's work folder %s" % (p, work))
-    earlier = sorted(os.path.basename(p) for p in glob.glob(os.path.join(glob.escape(outdir), "tile_*_*.ply"))
-                     if _TILE_PLY.match(os.path.basename(p)))
+    earlier = tile_plys(outdir)
     if os.path.exists(os.path.join(outdir, MANIFEST)):
         earlier.insert(0, MANIFEST)
     if earlier:

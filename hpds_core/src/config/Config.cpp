@@ -248,8 +248,9 @@ std::string keyRangeAdvice(const HpdsConfig &c) {
   };
   const OutputResolution r = resolveOutput(c);
   const int depth = c.hierarchy.max_depth;
+  const double here = reach(c);
   std::string s = "the exact keys of level " + std::to_string(depth) + " (hierarchy.max_depth; cells of " +
-                  metres(cellEdge(r.cell_size, depth)) + ") reach " + metres(reach(c)) +
+                  metres(cellEdge(r.cell_size, depth)) + ") reach " + metres(here) +
                   " from the origin: give the points in a local frame (subtract an offset)";
   // Keys are made at max_depth even where fewer levels are built, so levels below the output widen the reach only by
   // being dropped. A derived level-0 cell stays within (2, 4] m for most spacings: a coarser spacing then moves the
@@ -258,7 +259,7 @@ std::string keyRangeAdvice(const HpdsConfig &c) {
   HpdsConfig coarser = c;
   if (c.hierarchy.cell_size == 0.0) {
     coarser.output.spacing *= 2.0;
-    if (reach(coarser) > reach(c)) s += ", or raise output.spacing";
+    if (reach(coarser) > here) s += ", or raise output.spacing";
   } else {
     s += ", or raise hierarchy.cell_size";
   }
