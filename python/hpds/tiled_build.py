@@ -29,6 +29,7 @@ _TILE_PLY = re.compile(r"tile_-?\d+_-?\d+\.ply$")
 # Task bodies: module-level functions, so that Dask ships them to workers by reference. Each result carries the
 # task's thread CPU time (the C++ work runs in the calling thread with threads: 1), for the run statistics.
 _memory_kept = False
+_memory_asked = False
 
 
 def keep_freed_memory_in_workers():
@@ -36,14 +37,15 @@ def keep_freed_memory_in_workers():
     starts workers with MALLOC_TRIM_THRESHOLD_ set, which turns off glibc's adaptive thresholds: every task then
     mapped and unmapped its scratch (sys time 0.85 -> 7.9 s on a 40-frame drive), and a 1-worker build took 2.8x the
     time of --workers 0. A worker runs nothing but these tasks, as the CLI and the node run nothing but frames."""
-    global _memory_kept
-    if _memory_kept:
-        return True
+    global _memory_kept, _memory_asked
+    if _memory_asked:
+        return _memory_kept
     try:
         from distributed import get_worker
         get_worker()
     except (ImportError, ValueError):
         return False  # not in a Dask worker: the caller's process keeps its own policy
+    _memory_asked = True
     _memory_kept = _hpds.keep_freed_frame_memory()
     return _memory_kept
 
