@@ -49,17 +49,11 @@ pcl::PointCloud<pcl::PointNormal>::Ptr withNormals(const SampledCloud &cloud, in
 
 using Matrices = pcl::GeneralizedIterativeClosestPoint<pcl::PointXYZ, pcl::PointXYZ>::MatricesVector;
 
+/// The covariances as given (never NaN: SampleCovariance.hpp); `fallback` counts the samples without a normal,
+/// whose covariance is the identity.
 std::shared_ptr<Matrices> givenCovariances(const SampledCloud &cloud, std::size_t &fallback) {
-  auto out = std::make_shared<Matrices>();
-  out->reserve(cloud.covariance.size());
-  for (const Eigen::Matrix3d &c : cloud.covariance) {
-    if (c.allFinite()) {
-      out->push_back(c);
-    } else {
-      out->push_back(Eigen::Matrix3d::Identity());
-      ++fallback;
-    }
-  }
+  auto out = std::make_shared<Matrices>(cloud.covariance.begin(), cloud.covariance.end());
+  for (const Eigen::Vector3d &n : cloud.normal) fallback += n.allFinite() ? 0 : 1;
   return out;
 }
 

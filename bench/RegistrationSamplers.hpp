@@ -8,7 +8,7 @@
 //   same samples in every run: levels 0..d do not depend on how deep a hierarchy is built) with the normals and
 //   covariances the pipeline gives for output level d (Pipeline::normals: scan mode averages the frame's own points
 //   per cell of level d + offset; SampleCovariance.hpp). Samples whose normal could not be estimated keep NaN
-//   normals and an invalid covariance.
+//   normals and get the identity covariance.
 // - voxelCentroidsAtCount / randomPerVoxelAtCount bisect the cell edge until the count is within `tolerance` of
 //   the target (EqualCount.hpp); the grid is anchored at `shift` * cell (zero: at the origin as PCL's VoxelGrid, same
 //   cells, same centroids, without VoxelGrid's 32-bit index limit that small leaves on 100 m frames exceed).
@@ -32,7 +32,7 @@ namespace hpds::bench {
 struct SampledCloud {
   std::vector<Eigen::Vector3d> xyz;
   std::vector<Eigen::Vector3d> normal;      ///< NaN where not estimated
-  std::vector<Eigen::Matrix3d> covariance;  ///< NaN where not estimated
+  std::vector<Eigen::Matrix3d> covariance;  ///< the identity where no plane is known
   std::vector<std::uint8_t> plane_like;     ///< hpds: 1 where the covariance is a plane (the normal is pinned)
   double cell = 0.0;                        ///< grid baselines: the cell edge that gave this count
   bool count_matched = true;                ///< grid baselines: within the tolerance of the target count

@@ -2,6 +2,7 @@
 // skipped points, normals, determinism, config errors. Core only: runs in a build without PCL.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <fstream>
 #include <limits>
@@ -170,6 +171,36 @@ TEST(Downsample, PointsLeftOutAreCountedByReason) {
   EXPECT_EQ(s.skipped_invalid + s.skipped_zero, 0u);
   const std::set<std::uint32_t> got(s.index.begin(), s.index.end());
   EXPECT_EQ(got, (std::set<std::uint32_t>{0, 4}));
+}
+
+// Found in a user trial: a map-mode call over more points than map.max_samples keeps returned the capped map without a
+// word (the CLI counts and warns). The samples given up are counted; the rest is what the cap leaves.
+TEST(Downsample, SamplesAMapModeCapGivesUpAreCounted) {
+  std::vector<Eigen::Vector3f> points;
+  for (int i = 0; i < 40; ++i)
+    for (int j = 0; j < 40; ++j) points.emplace_back(0.5f * float(i) + 1.f, 0.5f * float(j) - 10.f, -1.f);
+  HpdsConfig config;
+  config.normals.enabled = false;
+  config.mode = Mode::Map;
+  const Samples all = downsample(points, config);
+  EXPECT_EQ(all.evicted, 0u);
+  ASSERT_GT(all.size(), 200u);
+  config.map.max_samples = 100;
+  const Samples capped = downsample(points, config);
+  EXPECT_EQ(capped.size(), 100u);
+  EXPECT_EQ(capped.evicted, all.size() - 100u);
+  // The farthest from the sensor went: every kept sample is at most as far as every one given up.
+  auto range = [&](std::uint32_t k) { return points[k].norm(); };
+  const std::set<std::uint32_t> kept(capped.index.begin(), capped.index.end());
+  float kept_max = 0.f, dropped_min = 1e9f;
+  for (std::uint32_t k : all.index) {
+    if (kept.count(k))
+      kept_max = std::max(kept_max, range(k));
+    else
+      dropped_min = std::min(dropped_min, range(k));
+  }
+  for (std::uint32_t k : capped.index) EXPECT_EQ(std::count(all.index.begin(), all.index.end(), k), 1) << k;
+  EXPECT_LE(kept_max, dropped_min);
 }
 
 TEST(Downsample, NormalsFaceTheOriginAndAreNanWhereNotEstimable) {

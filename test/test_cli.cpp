@@ -327,6 +327,13 @@ TEST(Cli, VerifyCatchesABrokenSampling) {
   EXPECT_EQ(log.find("[0, 1e"), std::string::npos) << log;
 }
 
+// Found in a user trial: no way to tell which hpds a script runs. One version, from package.xml via CMake.
+TEST(Cli, VersionIsTheProjectsAndExitsZero) {
+  std::string log;
+  EXPECT_EQ(runHpds("--version", &log), 0);
+  EXPECT_NE(log.find("hpds " HPDS_TEST_VERSION), std::string::npos) << log;
+}
+
 // A --spacing with another --max-depth than the sampling's derives another cell, under which every radius shrinks
 // and any sampling passes: `verify --spacing 0.1 --max-depth 0` passed a sampling of levels 0..5 whatever it held.
 TEST(Cli, VerifyRefusesLevelsDeeperThanItsSpacingMakes) {

@@ -320,6 +320,8 @@ TEST(ConfigYaml, InvalidDocumentsNameTheKey) {
       {"hierachy: {max_depth: 3}", "hierachy", "did you mean 'hierarchy'"},
       {"cell_size: 2.0", "cell_size", "did you mean 'hierarchy.cell_size'"},
       {"output: {colour: red}", "output.colour", "unknown key"},
+      // a dotted name as one key (found in a user trial: it was told "did you mean 'output.spacing'?")
+      {"output.spacing: 0.2", "output.spacing", "write it nested, as key 'spacing' under section 'output'"},
       // wrong types
       {"hierarchy: {max_depth: abc}", "hierarchy.max_depth", "expected an integer, got 'abc'"},
       {"hierarchy: {max_depth: 3.5}", "hierarchy.max_depth", "expected an integer, got '3.5'"},

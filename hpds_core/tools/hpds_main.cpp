@@ -14,6 +14,7 @@ int main(int argc, char **argv) {
   hpds::keepFreedFrameMemory();
   CLI::App app{"hpds: hierarchical additive Poisson-disk sampling of lidar point clouds"};
   app.require_subcommand(1);
+  app.set_version_flag("--version", "hpds " HPDS_VERSION);
   // A bad command line is said like every other error (README: "hpds: error: ..."), with exit code 2.
   app.failure_message([](const CLI::App *, const CLI::Error &e) {
     return std::string("hpds: error: ") + e.what() + "\nRun with --help for more information.\n";

@@ -18,14 +18,21 @@ from . import ply
 from .config import to_yaml
 
 __all__ = ["Samples", "downsample", "load_config", "ply", "read_points", "read_poses"]
+__version__ = _hpds.__version__
 
 
 class Samples(dict):
     """What downsample returns: a dict of per-sample arrays, plus `skipped`, the input points left out by reason
     ({"invalid": NaN/Inf, "zero": (0,0,0) no-returns, "range": outside input.min_range/max_range, "out_of_range":
-    beyond the exact key range of the finest level})."""
+    beyond the exact key range of the finest level}) and, in map mode, "evicted": samples given up to stay within
+    map.max_samples. A copy is a Samples too."""
 
     skipped = None
+
+    def copy(self):
+        out = Samples(self)
+        out.skipped = dict(self.skipped) if self.skipped is not None else None
+        return out
 
 
 def _refuse_unreadable(path, what):
@@ -63,10 +70,13 @@ def downsample(points, config=None, viewpoint=None):
     Returns a dict of NumPy arrays, one entry per sample: "index" (uint32, position in `points`), "level" (uint8,
         0..D of the output level D) and, with normals.enabled, "normal" ((n, 3) float32, facing the sensor; NaN where
         no normal could be estimated) and "curvature" (float32); with normals.covariances also "covariance"
-        ((n, 3, 3) float32: the sample's covariance for generalized ICP, NaN where the normal is).
+        ((n, 3, 3) float32: the sample's covariance for generalized ICP; the identity where no plane is known, the
+        normal's NaN samples included: every one can go to GICP as it is).
         The dict is a Samples: its `skipped` attribute counts the input points left out, by reason. Points beyond
         the exact key range of the finest level (|coordinate| of about 1.5e7 m at the defaults: georeferenced
-        coordinates) are left out too; when there are any, a RuntimeWarning says how many.
+        coordinates) are left out too; when there are any, a RuntimeWarning says how many. So does one when map mode
+        gives samples up to stay within map.max_samples, and one when float32 points are rounded by more than 1 % of
+        the output radius (georeferenced coordinates: pass float64, or coordinates relative to a local origin).
     Raises ValueError naming the key for an invalid config, TypeError for a points array of another type.
     """
     text, path = _config_source(config)
@@ -76,13 +86,20 @@ def downsample(points, config=None, viewpoint=None):
         viewpoint = [float(v) for v in viewpoint]
     except (TypeError, ValueError):
         raise ValueError("viewpoint: expected 3 numbers (x, y, z), got %r" % (viewpoint,)) from None
-    arrays, skipped = _hpds.downsample(points, text, path, viewpoint)
+    arrays, skipped, rounding = _hpds.downsample(points, text, path, viewpoint)
     result = Samples(arrays)
     result.skipped = skipped
     if skipped["out_of_range"]:
         warnings.warn("hpds.downsample: %d points lie beyond the exact key range and were not sampled (see "
                       "samples.skipped): %s" % (skipped["out_of_range"], _hpds.key_range_advice(text, path)),
                       RuntimeWarning, stacklevel=2)
+    if skipped["evicted"]:
+        warnings.warn("hpds.downsample: map mode gave up %d samples, the farthest from the viewpoint, to stay within "
+                      "map.max_samples (see samples.skipped): the result no longer covers the cloud; raise "
+                      "map.max_samples (0 = no cap), or use mode: scan for one cloud" % skipped["evicted"],
+                      RuntimeWarning, stacklevel=2)
+    if rounding:
+        warnings.warn("hpds.downsample: " + rounding, RuntimeWarning, stacklevel=2)
     return result
 
 

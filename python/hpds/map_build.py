@@ -114,7 +114,7 @@ def whole_cell_tile_size(tile_size, config_yaml, log=None):
     rounded = k * cell
     if abs(rounded - tile_size) > 1e-9 * rounded and log is not None:
         log("tile size %g m is not a whole number of level-0 cells (%.9g m, derived from output.spacing): "
-            "tiles of %.9g m (%d cells) instead" % (tile_size, cell, rounded, k))
+            "tiles of %.9g m (%d cell%s) instead" % (tile_size, cell, rounded, k, "" if k == 1 else "s"))
     return rounded
 
 

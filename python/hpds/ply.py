@@ -4,7 +4,8 @@
     tile = hpds.ply.read("out/tile_0_1.ply")        # fields x, y, z, level, [normal_x ... curvature], input fields
     hpds.ply.merge(["out/tile_0_1.ply", "out/tile_1_1.ply"], "map.ply")
 
-Every problem with a file is a ValueError that names it; nothing is allocated beyond what the file holds.
+Every problem with a file's contents is a ValueError that names it (a missing file or a folder is the OSError
+open() raises); nothing is allocated beyond what the file holds.
 """
 import os
 import re
@@ -145,9 +146,20 @@ def merge(paths, out_path):
     if not paths:
         # An empty glob is a mistake upstream; an empty PLY in its place would pass for a build with no points.
         raise ValueError("merge: no input files (an empty list of paths): nothing written to '%s'" % (out_path,))
+    seen = {}
     for p in paths:
         if _same_file(p, out_path):
             raise ValueError("merge: the output '%s' is the input '%s'" % (out_path, p))
+        # A tile given twice would put every one of its samples into the output twice.
+        try:
+            st = os.stat(p)
+            key = (st.st_dev, st.st_ino)
+        except OSError:
+            key = os.path.realpath(p)  # read() says what is wrong with it
+        if key in seen:
+            raise ValueError("merge: '%s' is given twice ('%s' is the same file): nothing written to '%s'"
+                             % (p, seen[key], out_path))
+        seen[key] = p
     parts = [read(p) for p in paths]
     for p, part in zip(paths[1:], parts[1:]):
         if part.dtype != parts[0].dtype:

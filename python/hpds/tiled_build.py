@@ -6,7 +6,8 @@ after what and where the files go. The tiling rule, why it is exact, memory and 
     OUTDIR/manifest.json        tiles, bounds, counts, config; written last: the build is complete when it exists
     OUTDIR/.hpds_work/          buckets, tile maps and border files while the build runs (removed at the end, and
                                 when the build fails or is interrupted)
-    OUTDIR/.hpds_build.lock     held while a build runs: a second build into the same folder is refused
+    OUTDIR/.hpds_build.lock     held while a build runs (removed at its end): a second build into the same folder
+                                is refused
 """
 import fcntl
 import glob
@@ -97,6 +98,10 @@ def check_paths(inputs, outdir):
     """Refuses a build that would overwrite an input or an earlier build's output (hpds never destroys data)."""
     if os.path.exists(outdir) and not os.path.isdir(outdir):
         raise BuildError("output folder '%s' is a file: choose a folder (it is made when missing)" % outdir)
+    # Only the folder itself is made: a mistyped path on a shared file system must not become a tree of folders.
+    parent = os.path.dirname(os.path.abspath(outdir))
+    if not os.path.isdir(parent):
+        raise BuildError("output folder '%s': the folder that would hold it, '%s', does not exist" % (outdir, parent))
     out = os.path.realpath(outdir)
     work = os.path.join(out, WORK_DIR)
     for p in inputs:
@@ -137,20 +142,43 @@ def remove_scratch_unless_building(outdir):
     try:
         remove_scratch(outdir)
     finally:
-        lock.close()
+        _unlock(lock, outdir)
 
 
 def _lock(outdir):
     """An exclusive lock on OUTDIR/.hpds_build.lock for the build's duration (released when the file is closed, also
-    when the process dies), so that a second build into the same folder cannot remove the first one's scratch."""
-    f = open(os.path.join(outdir, LOCK), "a")
-    try:
-        fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
-    except BlockingIOError:
+    when the process dies), so that a second build into the same folder cannot remove the first one's scratch.
+    A build removes the file when it ends (_unlock): a lock taken on a file that was removed meanwhile is no lock,
+    so it is taken again on the file at the path."""
+    path = os.path.join(outdir, LOCK)
+    while True:
+        f = open(path, "a")
+        try:
+            fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            f.close()
+            raise BuildError("another tiled build is writing to %s (it holds %s): wait for it, or choose another "
+                             "output folder" % (outdir, LOCK))
+        try:
+            if os.stat(path).st_ino == os.fstat(f.fileno()).st_ino:
+                return f
+        except FileNotFoundError:
+            pass
         f.close()
-        raise BuildError("another tiled build is writing to %s (it holds %s): wait for it, or choose another output "
-                         "folder" % (outdir, LOCK))
-    return f
+
+
+def _unlock(lock, outdir):
+    """Removes the lock file, still held, then lets it go: a finished or failed build leaves no file of its own.
+    Once only: after the release the file at the path may be another build's."""
+    if lock.closed:
+        return
+    path = os.path.join(outdir, LOCK)
+    try:
+        if os.stat(path).st_ino == os.fstat(lock.fileno()).st_ino:
+            os.remove(path)
+    except OSError:
+        pass
+    lock.close()
 
 
 def _refuse_if_building(outdir):
@@ -236,14 +264,14 @@ def build(inputs, poses_path, outdir, tile_size, config_yaml, runner, chunk_fram
             remove_scratch(outdir)
             # A folder this build made and left with nothing but its lock goes too.
             if made and os.listdir(outdir) == [LOCK]:
+                _unlock(lock, outdir)
                 try:
-                    os.remove(os.path.join(outdir, LOCK))
                     os.rmdir(outdir)
                 except OSError:
                     pass
             raise
     finally:
-        lock.close()
+        _unlock(lock, outdir)
 
 
 def _run(inputs, poses, poses_path, outdir, plan, tile_size, config_yaml, runner, chunk_frames, log, t_start):

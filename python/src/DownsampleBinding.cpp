@@ -9,6 +9,7 @@
 
 #include "Bindings.hpp"
 #include "hpds/hpds.hpp"
+#include "hpds/pipeline/OutputCloud.hpp"
 
 namespace py = pybind11;
 
@@ -59,6 +60,17 @@ ApiPoints pointsFrom(const py::handle &object) {
   return out;
 }
 
+/// The warning for float32 points whose own rounding (half an ulp at their largest |coordinate|) is over 1 % of the
+/// output radius (positionRoundingWarning, as the CLI gives it for a file): empty for float64 or small coordinates.
+std::string inputRoundingWarning(const ApiPoints &points, const HpdsConfig &config) {
+  if (points.is_f64) return {};
+  double largest = 0.0;
+  for (const Eigen::Vector3f &p : points.f32)
+    for (int a = 0; a < 3; ++a)
+      if (std::isfinite(p[a])) largest = std::max(largest, static_cast<double>(std::fabs(p[a])));
+  return positionRoundingWarning(0.0, resolveOutput(config).radius, "", std::ldexp(largest, -24));
+}
+
 template <typename T>
 py::array_t<T> arrayOf(const std::vector<T> &v) {
   py::array_t<T> a(static_cast<py::ssize_t>(v.size()));
@@ -80,10 +92,12 @@ void bindDownsample(py::module_ &m) {
         if (viewpoint.size() != 3)
           throw py::value_error("viewpoint: expected 3 coordinates (x, y, z), got " + std::to_string(viewpoint.size()));
         Samples s;
+        std::string rounding;
         {
           py::gil_scoped_release unlocked;
           const Eigen::Vector3d at(viewpoint[0], viewpoint[1], viewpoint[2]);
           s = points.is_f64 ? downsampleDoubles(points.f64, config, at) : downsample(points.f32, config, at);
+          rounding = inputRoundingWarning(points, config);
         }
         py::dict out;
         out["index"] = arrayOf(s.index);
@@ -106,12 +120,14 @@ void bindDownsample(py::module_ &m) {
         skipped["zero"] = s.skipped_zero;
         skipped["range"] = s.skipped_range;
         skipped["out_of_range"] = s.out_of_range;
-        return py::make_tuple(out, skipped);
+        skipped["evicted"] = s.evicted;
+        return py::make_tuple(out, skipped, rounding);
       },
       py::arg("points"), py::arg("config_yaml"), py::arg("config_path"), py::arg("viewpoint"),
       "Samples of `points` ((N, 3) float32/float64) with the config (file `config_path` if not empty, else "
       "`config_yaml`) and normals facing `viewpoint` (x, y, z in the points' frame): (dict of index, level and, with "
-      "normals, normal and curvature, with covariances covariance; dict of the points left out by reason).");
+      "normals, normal and curvature, with covariances covariance; dict of the points left out by reason; the "
+      "warning for float32 points rounded by more than 1 % of the output radius, or '').");
 }
 
 }  // namespace hpds::python

@@ -3,6 +3,7 @@
 
 PYBIND11_MODULE(_hpds, m) {
   m.doc() = "C++ core of the hpds package (use the wrappers in hpds)";
+  m.attr("__version__") = HPDS_VERSION;
   hpds::python::bindConfig(m);
   hpds::python::bindDownsample(m);
   hpds::python::bindIo(m);

@@ -83,7 +83,10 @@ class MatchesTheCppApi(support.ScratchCase):
             self.assertEqual(s["covariance"].shape, (n, 3, 3))
             self.assertEqual(s["covariance"].dtype, np.float32)
             valid = np.isfinite(s["normal"]).all(axis=1)
-            self.assertTrue(np.isnan(s["covariance"][~valid]).all())
+            # No NaN for GICP to choke on: the identity where there is no normal.
+            self.assertFalse(np.isnan(s["covariance"]).any())
+            self.assertTrue((s["covariance"][~valid] == np.eye(3, dtype=np.float32)).all())
+            self.assertGreater((~valid).sum(), 0)
             cov, normal = s["covariance"][valid].astype(np.float64), s["normal"][valid].astype(np.float64)
             np.testing.assert_allclose(cov, np.transpose(cov, (0, 2, 1)))
             identity = np.all(np.isclose(cov, np.eye(3)), axis=(1, 2))  # a neighbourhood on one scan line
@@ -218,6 +221,63 @@ class Arguments(support.ScratchCase):
             warnings.simplefilter("always")
             hpds.downsample(pts[[0, 2]])
         self.assertEqual(quiet, [])
+
+    def test_samples_a_map_mode_cap_gives_up_are_counted_and_warned(self):
+        # Found in a user trial: map mode over more samples than map.max_samples returned the capped map without a
+        # word (the CLI counts and warns).
+        config = {"mode": "map", "normals": {"enabled": False}}
+        with warnings.catch_warnings(record=True) as quiet:
+            warnings.simplefilter("always")
+            full = hpds.downsample(self.points, config)
+        self.assertEqual(quiet, [])
+        self.assertEqual(full.skipped["evicted"], 0)
+        capped_config = dict(config, map={"max_samples": 1000})
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            capped = hpds.downsample(self.points, capped_config)
+        self.assertEqual(len(capped["index"]), 1000)
+        self.assertEqual(capped.skipped["evicted"], len(full["index"]) - 1000)
+        self.assertEqual(len(caught), 1)
+        self.assertIs(caught[0].category, RuntimeWarning)
+        self.assertIn("gave up %d samples" % capped.skipped["evicted"], str(caught[0].message))
+        self.assertIn("map.max_samples", str(caught[0].message))
+        # The farthest from the sensor went.
+        kept = np.linalg.norm(self.points[capped["index"]], axis=1).max()
+        gone = np.setdiff1d(full["index"], capped["index"])
+        self.assertLessEqual(kept, np.linalg.norm(self.points[gone], axis=1).min())
+        # A copy keeps the counts.
+        c = capped.copy()
+        self.assertIsInstance(c, hpds.Samples)
+        self.assertEqual(c.skipped, capped.skipped)
+        self.assertIsNot(c.skipped, capped.skipped)
+
+    def test_float32_points_rounded_beyond_the_radius_are_warned(self):
+        # Found in a user trial: a float32 cloud in UTM coordinates (5e6 m: float32 steps of 0.5 m) lost a third of
+        # its samples to the rounding without a word; the CLI warns for such a file.
+        utm = self.points.astype(np.float64) + np.array([5.0e5, 5.0e6, 0.0])
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            hpds.downsample(utm.astype(np.float32), {"normals": {"enabled": False}})
+        self.assertEqual(len(caught), 1)
+        self.assertIs(caught[0].category, RuntimeWarning)
+        self.assertIn("the input's own float32 x y z round positions by up to 0.29", str(caught[0].message))
+        self.assertIn("local frame", str(caught[0].message))
+        # float64, and float32 near the origin, say nothing.
+        for quiet_points in (utm, self.points):
+            with warnings.catch_warnings(record=True) as quiet:
+                warnings.simplefilter("always")
+                hpds.downsample(quiet_points, {"normals": {"enabled": False}})
+            self.assertEqual(quiet, [])
+        # The threshold is 1 % of the output radius: 0.5 mm at a 5 cm spacing is reached at about 8400 m.
+        for x, warned in ((8000.0, False), (9000.0, True)):
+            with warnings.catch_warnings(record=True) as w:
+                warnings.simplefilter("always")
+                hpds.downsample((self.points + np.float32(x)).astype(np.float32),
+                                {"output": {"spacing": 0.05}, "normals": {"enabled": False}})
+            self.assertEqual(len(w), int(warned), x)
+
+    def test_version(self):
+        self.assertRegex(hpds.__version__, r"^\d+\.\d+\.\d+$")
 
     def test_empty_input(self):
         s = hpds.downsample(np.zeros((0, 3), np.float32), NORMALS)

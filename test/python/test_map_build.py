@@ -442,6 +442,33 @@ class MapBuild(unittest.TestCase):
             self.assertEqual(map_build.main(base + ["-o", self.out("flags_bad"), "--covariances", "--no-normals"]), 1)
         self.assertIn("--covariances", err.getvalue())
 
+    def test_only_the_output_folder_is_made_and_no_lock_file_stays(self):
+        # Found in a user trial: a mistyped -o on a shared file system became a tree of folders holding a whole map,
+        # and every finished build left its empty lock file.
+        self.assertEqual(sorted(os.listdir(self.reference)), sorted(tile_files(self.reference) + ["manifest.json"]))
+        deep = os.path.join(self.out("no_such_parent"), "out")
+        with self.assertRaises(BuildError) as e:
+            build(self.frames[:2], self.two_poses("poses_parent.txt"), deep, TILE, self.config_yaml, SerialRunner(),
+                  log=lambda m: None)
+        self.assertIn("does not exist", str(e.exception))
+        self.assertIn("no_such_parent", str(e.exception))
+        self.assertFalse(os.path.exists(self.out("no_such_parent")))
+        with contextlib.redirect_stderr(io.StringIO()) as err:
+            self.assertEqual(map_build.main(self.frames[:2] + ["--poses", self.two_poses("poses_parent.txt"),
+                                                               "-o", deep, "--tile-size", str(TILE),
+                                                               "--workers", "0"] + SAMPLING), 1)
+        self.assertIn("does not exist", err.getvalue())
+        self.assertFalse(os.path.exists(self.out("no_such_parent")))
+        # A lock file a killed build left (the lock itself went with its process) does not stop a build, which
+        # removes it at its end.
+        out = self.out("stale_lock")
+        os.makedirs(out)
+        open(os.path.join(out, ".hpds_build.lock"), "w").close()
+        build(self.frames[:2], self.two_poses("poses_stale.txt"), out, TILE, self.config_yaml, SerialRunner(),
+              log=lambda m: None)
+        self.assertFalse(os.path.exists(os.path.join(out, ".hpds_build.lock")))
+        self.assertTrue(os.path.exists(os.path.join(out, "manifest.json")))
+
     def test_a_second_build_into_a_folder_in_use_is_refused(self):
         out = self.out("locked")
         os.makedirs(os.path.join(out, ".hpds_work", "buckets"))  # the running build's scratch

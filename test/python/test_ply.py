@@ -146,6 +146,17 @@ class Merge(support.ScratchCase):
         hpds.ply.merge(self.inputs, self.path("upper.PLY"))
         self.assert_inputs_untouched()
 
+    def test_a_file_given_twice_is_refused(self):
+        # Found in a user trial: merge([t, t]) wrote every sample of t twice, two samples at distance 0.
+        link = self.path("again.ply")
+        os.symlink(self.inputs[0], link)
+        for twice in ([self.inputs[0], self.inputs[1], self.inputs[0]], [self.inputs[0], link]):
+            with self.assertRaises(ValueError) as e:
+                hpds.ply.merge(twice, self.path("twice.ply"))
+            self.assertIn("is given twice", str(e.exception))
+            self.assertFalse(os.path.exists(self.path("twice.ply")))
+        self.assert_inputs_untouched()
+
     def test_merges(self):
         hpds.ply.merge(self.inputs, self.path("all.ply"))
         self.assertEqual(len(hpds.ply.read(self.path("all.ply"))), 8)

@@ -41,13 +41,17 @@ struct Samples {
   std::vector<float> curvature;
   /// With config.normals.covariances (else empty): the sample's covariance for generalized ICP
   /// (hpds/normals/SampleCovariance.hpp: dimensionless, a plane's; at the default normals.covariance_k its small
-  /// axis is the normal of the 30 nearest output samples, not `normal`; the identity on one scan line), NaN where
-  /// the normal is.
+  /// axis is the normal of the 30 nearest output samples, not `normal`; the identity on one scan line and where
+  /// `normal` is NaN): never NaN, so that every one can go to GICP as it is.
   std::vector<Eigen::Matrix3f> covariance;
   /// Input points left out, by reason (see the contract): NaN/Inf coordinates, exact (0,0,0) no-returns, outside
   /// input.min_range/max_range, and beyond the exact key range of the finest level. The last is the one a caller
   /// may not expect (georeferenced coordinates): when it is not 0, part of the cloud was not sampled.
   std::uint64_t skipped_invalid = 0, skipped_zero = 0, skipped_range = 0, out_of_range = 0;
+  /// mode: map only: samples the map gave up to stay within map.max_samples (the farthest from the viewpoint go
+  /// first; the map's other rule, map.evict_distance, acts before a frame and so never in one call). Not 0: the
+  /// result no longer covers the cloud; raise map.max_samples (0 = no cap) or use scan mode for one cloud.
+  std::uint64_t evicted = 0;
 
   [[nodiscard]] std::size_t size() const { return index.size(); }
 };

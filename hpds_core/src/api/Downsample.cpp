@@ -52,6 +52,7 @@ Samples downsampleFrame(const std::vector<Eigen::Matrix<Scalar, 3, 1>> &points, 
   out.skipped_zero = counters.skipped_zero;
   out.skipped_range = counters.skipped_range;
   out.out_of_range = counters.out_of_range;
+  out.evicted = counters.evicted;
   out.index.resize(ids.size());
   out.level.resize(ids.size());
   for (std::size_t i = 0; i < ids.size(); ++i) {

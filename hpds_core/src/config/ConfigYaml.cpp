@@ -186,6 +186,12 @@ std::size_t editDistance(std::string_view a, std::string_view b) {
         break;
       }
   }
+  // A dotted name written as one key ({"output.spacing": 0.2}, a ROS-parameter habit) matches a key exactly.
+  if (best_distance == 0 && best.find('.') != std::string::npos) {
+    const std::size_t dot = best.find('.');
+    fail(dotted, "unknown key: a dotted name is not a key; write it nested, as key '" + best.substr(dot + 1) +
+                     "' under section '" + best.substr(0, dot) + "'");
+  }
   fail(dotted, best.empty() ? "unknown key" : "unknown key (did you mean '" + best + "'?)");
 }
 

@@ -36,8 +36,8 @@ std::vector<SampleCovariance> planeCovariances(const std::vector<SampleNormal> &
 }
 
 namespace {
-/// The one rule behind both overloads: no normal, NaN; a line-like neighbourhood, the identity; else the plane of
-/// `plane` when it is given and valid, of the normal otherwise.
+/// The one rule behind both overloads: no normal or a line-like neighbourhood, the identity (no plane known); else
+/// the plane of `plane` when it is given and valid, of the normal otherwise.
 std::vector<SampleCovariance> covariancesFor(const std::vector<SampleNormal> &normals,
                                              const std::vector<LocalPca> &neighbourhoods,
                                              const std::vector<SampleNormal> *plane, double epsilon,
@@ -50,9 +50,11 @@ std::vector<SampleCovariance> covariancesFor(const std::vector<SampleNormal> &no
   out.reserve(normals.size());
   for (std::size_t i = 0; i < normals.size(); ++i) {
     const LocalPca &pca = neighbourhoods[i];
-    if (normals[i].valid && pca.l1 < line_ratio * pca.l2)
+    if (!normals[i].valid)
+      out.push_back(SampleCovariance{{1.0f, 0.0f, 0.0f, 1.0f, 0.0f, 1.0f}, false});
+    else if (pca.l1 < line_ratio * pca.l2)
       out.push_back(SampleCovariance{{1.0f, 0.0f, 0.0f, 1.0f, 0.0f, 1.0f}, true});
-    else if (normals[i].valid && plane && (*plane)[i].valid)
+    else if (plane && (*plane)[i].valid)
       out.push_back(planeCovariance((*plane)[i], epsilon));
     else
       out.push_back(planeCovariance(normals[i], epsilon));
