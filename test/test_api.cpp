@@ -203,6 +203,67 @@ TEST(Downsample, SamplesAMapModeCapGivesUpAreCounted) {
   EXPECT_LE(kept_max, dropped_min);
 }
 
+// Found in a user trial: Ctrl-C could not stop a Python call of seconds (the binding sets the flag on a signal).
+TEST(Downsample, AnInterruptStopsTheCallAndAClearFlagChangesNothing) {
+  std::vector<Eigen::Vector3f> points;
+  for (int i = 0; i < 1000; ++i)
+    for (int j = 0; j < 1000; ++j)
+      points.emplace_back(0.05f * float(i) - 25.f, 0.05f * float(j) - 25.f, -1.5f + 0.001f * float((i * 7 + j) % 13));
+  HpdsConfig config;
+  config.normals.covariances = true;
+  const Eigen::Vector3d origin = Eigen::Vector3d::Zero();
+  // A flag that stays clear: the same samples, normals and covariances as without one.
+  std::atomic<bool> clear{false};
+  const Samples plain = downsample(points, config, origin);
+  const Samples watched = downsample(points, config, origin, clear);
+  EXPECT_EQ(watched.index, plain.index);
+  EXPECT_EQ(watched.level, plain.level);
+  ASSERT_EQ(watched.normal.size(), plain.normal.size());
+  for (std::size_t i = 0; i < plain.size(); ++i)
+    EXPECT_TRUE(watched.normal[i].cwiseEqual(plain.normal[i]).all() || !plain.normal[i].allFinite()) << i;
+  // Set before the call, for both point types: nothing is done.
+  std::atomic<bool> set{true};
+  EXPECT_THROW((void)downsample(points, config, origin, set), Interrupted);
+  const std::vector<Eigen::Vector3d> doubles(1, Eigen::Vector3d(1, 2, 3));
+  EXPECT_THROW((void)downsampleDoubles(doubles, config, origin, set), Interrupted);
+  // Set by another thread as the call starts: it stops (a million points take about a second here; the flag is read
+  // before the frame's stages and every 2^18 points of an insertion pass).
+  for (int threads : {1, 2}) {
+    config.threads = threads;
+    std::atomic<bool> flag{false};
+    std::thread stopper([&] { flag = true; });
+    try {
+      (void)downsample(points, config, origin, flag);
+      ADD_FAILURE() << "not interrupted, threads " << threads;
+    } catch (const Interrupted &e) {
+      EXPECT_NE(std::string(e.what()).find("interrupted ("), std::string::npos) << e.what();
+    }
+    stopper.join();
+  }
+}
+
+// The pipeline: addFrame and normals() stop at once when the flag is set.
+TEST(Downsample, APipelineStopsWhenItsInterruptIsSet) {
+  SyntheticLidarConfig lc;
+  lc.beams = 16;
+  lc.azimuth_steps = 360;
+  lc.frames = 2;
+  const SyntheticLidar lidar(lc);
+  HpdsConfig config;
+  Pipeline pipeline(config);
+  std::atomic<bool> flag{false};
+  pipeline.setInterrupt(&flag);
+  (void)pipeline.addFrame(lidar.frame(0).frame);
+  const std::vector<SampleId> ids = pipeline.outputSamples();
+  ASSERT_FALSE(ids.empty());
+  flag = true;
+  EXPECT_THROW((void)pipeline.normals(ids), Interrupted);
+  EXPECT_THROW((void)pipeline.addFrame(lidar.frame(1).frame), Interrupted);
+  EXPECT_EQ(pipeline.framesProcessed(), 1u);
+  pipeline.setInterrupt(nullptr);
+  EXPECT_EQ(pipeline.normals(ids).size(), ids.size());
+}
+
 TEST(Downsample, NormalsFaceTheOriginAndAreNanWhereNotEstimable) {
   // A flat patch 10 m in front of the sensor, plus one isolated point.
   std::vector<Eigen::Vector3f> points;

@@ -77,7 +77,8 @@ def downsample(points, config=None, viewpoint=None):
         coordinates) are left out too; when there are any, a RuntimeWarning says how many. So does one when map mode
         gives samples up to stay within map.max_samples, and one when float32 points are rounded by more than 1 % of
         the output radius (georeferenced coordinates: pass float64, or coordinates relative to a local origin).
-    Raises ValueError naming the key for an invalid config, TypeError for a points array of another type.
+    Raises ValueError naming the key for an invalid config, TypeError for a points array of another type. Ctrl-C
+    (any signal handler that raises) stops the call within about a second, on millions of points too.
     """
     text, path = _config_source(config)
     if viewpoint is None:

@@ -3,9 +3,13 @@
 #include <pybind11/stl.h>
 
 #include <algorithm>
+#include <atomic>
+#include <chrono>
 #include <cmath>
 #include <cstring>
+#include <future>
 #include <string>
+#include <thread>
 
 #include "Bindings.hpp"
 #include "hpds/hpds.hpp"
@@ -60,6 +64,35 @@ ApiPoints pointsFrom(const py::handle &object) {
   return out;
 }
 
+/// Runs `work` on a thread of its own while the calling (Python) thread waits without the GIL, waking every 50 ms
+/// to let Python run its signal handlers: when one raises (Ctrl-C's KeyboardInterrupt), `interrupt` is set, the work
+/// stops at its next stage boundary (hpds/util/Interrupt.hpp) and the handler's exception propagates. A call of
+/// seconds on millions of points could otherwise not be stopped from a terminal or a notebook.
+template <typename Result, typename Work>
+Result runInterruptibly(Work &&work, std::atomic<bool> &interrupt) {
+  std::packaged_task<Result()> task(std::forward<Work>(work));
+  std::future<Result> done = task.get_future();
+  std::thread worker(std::move(task));
+  for (;;) {
+    bool ready;
+    {
+      py::gil_scoped_release unlocked;
+      ready = done.wait_for(std::chrono::milliseconds(50)) == std::future_status::ready;
+    }
+    if (ready) break;
+    if (PyErr_CheckSignals() != 0) {
+      interrupt = true;
+      {
+        py::gil_scoped_release unlocked;
+        worker.join();
+      }
+      throw py::error_already_set();
+    }
+  }
+  worker.join();
+  return done.get();
+}
+
 /// The warning for float32 points whose own rounding (half an ulp at their largest |coordinate|) is over 1 % of the
 /// output radius (positionRoundingWarning, as the CLI gives it for a file): empty for float64 or small coordinates.
 std::string inputRoundingWarning(const ApiPoints &points, const HpdsConfig &config) {
@@ -91,12 +124,17 @@ void bindDownsample(py::module_ &m) {
         const ApiPoints points = pointsFrom(points_object);
         if (viewpoint.size() != 3)
           throw py::value_error("viewpoint: expected 3 coordinates (x, y, z), got " + std::to_string(viewpoint.size()));
-        Samples s;
+        const Eigen::Vector3d at(viewpoint[0], viewpoint[1], viewpoint[2]);
+        std::atomic<bool> interrupt{false};
+        const Samples s = runInterruptibly<Samples>(
+            [&] {
+              return points.is_f64 ? downsampleDoubles(points.f64, config, at, interrupt)
+                                   : downsample(points.f32, config, at, interrupt);
+            },
+            interrupt);
         std::string rounding;
         {
           py::gil_scoped_release unlocked;
-          const Eigen::Vector3d at(viewpoint[0], viewpoint[1], viewpoint[2]);
-          s = points.is_f64 ? downsampleDoubles(points.f64, config, at) : downsample(points.f32, config, at);
           rounding = inputRoundingWarning(points, config);
         }
         py::dict out;

@@ -21,11 +21,13 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <atomic>
 #include <cstdint>
 #include <string>
 #include <vector>
 
 #include "hpds/config/Config.hpp"
+#include "hpds/util/Interrupt.hpp"
 
 namespace hpds {
 
@@ -68,6 +70,12 @@ struct Samples {
                                         const HpdsConfig &config = HpdsConfig{});
 [[nodiscard]] Samples downsampleDoubles(const std::vector<Eigen::Vector3d> &points, const HpdsConfig &config,
                                         const Eigen::Vector3d &viewpoint);
+/// The same, stopped by another thread: once `interrupt` is set they throw hpds::Interrupted (hpds/util/Interrupt.hpp)
+/// at their next stage boundary, within about a second on millions of points (a binding's Ctrl-C, a cancel button).
+[[nodiscard]] Samples downsample(const std::vector<Eigen::Vector3f> &points, const HpdsConfig &config,
+                                 const Eigen::Vector3d &viewpoint, const std::atomic<bool> &interrupt);
+[[nodiscard]] Samples downsampleDoubles(const std::vector<Eigen::Vector3d> &points, const HpdsConfig &config,
+                                        const Eigen::Vector3d &viewpoint, const std::atomic<bool> &interrupt);
 
 /// Reads a config file in config/hpds.yaml's format over the defaults, with the same validation as the CLI and the
 /// node. Throws std::invalid_argument naming the key (or the file, when it cannot be read or parsed).

@@ -35,12 +35,14 @@ Frame frameOf(const std::vector<Eigen::Matrix<Scalar, 3, 1>> &points) {
 
 template <typename Scalar>
 Samples downsampleFrame(const std::vector<Eigen::Matrix<Scalar, 3, 1>> &points, const HpdsConfig &config,
-                        const Eigen::Vector3d &viewpoint) {
+                        const Eigen::Vector3d &viewpoint, const std::atomic<bool> *interrupt = nullptr) {
   if (!viewpoint.allFinite()) throw std::invalid_argument("downsample: viewpoint is not finite");
   if (points.size() > std::numeric_limits<std::uint32_t>::max())
     throw std::invalid_argument("downsample: " + std::to_string(points.size()) +
                                 " points, at most 2^32 - 1 fit the sample index");
   Pipeline pipeline(config);
+  pipeline.setInterrupt(interrupt);
+  throwIfInterrupted(interrupt, "before the frame");
   Frame frame = frameOf(points);
   frame.viewpoint = viewpoint;
   const FrameCounters counters = pipeline.addFrame(frame).counters;
@@ -64,6 +66,7 @@ Samples downsampleFrame(const std::vector<Eigen::Matrix<Scalar, 3, 1>> &points, 
     const std::vector<SampleNormal> normals =
         pipeline.normals(ids, config.normals.covariances ? &neighbourhoods : nullptr);
     if (config.normals.covariances) {
+      throwIfInterrupted(interrupt, "before the covariances");
       const std::vector<SampleCovariance> covs = estimateCovariances(hierarchy, ids, pipeline.outputLevel(), normals,
                                                                      neighbourhoods, pipeline.config());
       out.covariance.resize(ids.size());
@@ -101,6 +104,16 @@ Samples downsampleDoubles(const std::vector<Eigen::Vector3d> &points, const Hpds
 Samples downsampleDoubles(const std::vector<Eigen::Vector3d> &points, const HpdsConfig &config,
                           const Eigen::Vector3d &viewpoint) {
   return downsampleFrame(points, config, viewpoint);
+}
+
+Samples downsample(const std::vector<Eigen::Vector3f> &points, const HpdsConfig &config,
+                   const Eigen::Vector3d &viewpoint, const std::atomic<bool> &interrupt) {
+  return downsampleFrame(points, config, viewpoint, &interrupt);
+}
+
+Samples downsampleDoubles(const std::vector<Eigen::Vector3d> &points, const HpdsConfig &config,
+                          const Eigen::Vector3d &viewpoint, const std::atomic<bool> &interrupt) {
+  return downsampleFrame(points, config, viewpoint, &interrupt);
 }
 
 HpdsConfig loadConfig(const std::string &path) { return loadConfigFile(path); }

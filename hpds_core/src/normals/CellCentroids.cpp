@@ -4,6 +4,7 @@
 #include <cmath>
 #include <limits>
 
+#include "hpds/util/Interrupt.hpp"
 #include "sampling/KeyRadixSort.hpp"
 
 namespace hpds {
@@ -63,7 +64,7 @@ std::vector<double> wideCentroids(const double *xyz, const std::uint32_t *indice
 }  // namespace
 
 std::vector<double> cellCentroids(const double *xyz, const std::uint32_t *indices, std::size_t count, double edge,
-                                  double *box) {
+                                  double *box, const std::atomic<bool> *interrupt) {
   if (box) std::fill(box, box + 6, std::numeric_limits<double>::quiet_NaN());
   if (count == 0 || !(edge > 0.0) || !std::isfinite(edge)) return {};
   const double inv = 1.0 / edge;
@@ -96,6 +97,7 @@ std::vector<double> cellCentroids(const double *xyz, const std::uint32_t *indice
     pos[kept++] = static_cast<std::uint32_t>(i);
   }
   if (kept == 0) return {};
+  throwIfInterrupted(interrupt, "averaging the points per cell");
   const std::int32_t lo[3] = {lo0, lo1, lo2}, hi[3] = {hi0, hi1, hi2};
   if (box)  // a cell of margin on each side absorbs the round-off of p * inv
     for (int a = 0; a < 3; ++a) {
@@ -118,6 +120,7 @@ std::vector<double> cellCentroids(const double *xyz, const std::uint32_t *indice
     std::vector<std::uint64_t> v(kept);
     for (std::size_t t = 0; t < kept; ++t) v[t] = keyOf(t) << pos_bits | t;
     sortByKeyStable(v, key_bits, [&](std::uint64_t x) { return x >> pos_bits; });
+    throwIfInterrupted(interrupt, "averaging the points per cell");
     return runCentroids(
         kept, [&](std::size_t a, std::size_t b) { return (v[a] >> pos_bits) == (v[b] >> pos_bits); },
         [&](std::size_t t) { return pointAt(static_cast<std::uint32_t>(v[t] & ((std::uint64_t(1) << pos_bits) - 1))); });
@@ -126,6 +129,7 @@ std::vector<double> cellCentroids(const double *xyz, const std::uint32_t *indice
     std::vector<KeyedIndex> v(kept);
     for (std::size_t t = 0; t < kept; ++t) v[t] = KeyedIndex{keyOf(t), static_cast<std::uint32_t>(t)};
     sortByKeyStable(v, key_bits);
+    throwIfInterrupted(interrupt, "averaging the points per cell");
     return runCentroids(
         kept, [&](std::size_t a, std::size_t b) { return v[a].key == v[b].key; },
         [&](std::size_t t) { return pointAt(v[t].index); });

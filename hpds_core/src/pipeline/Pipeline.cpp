@@ -112,6 +112,7 @@ void Pipeline::requireLevel(int level) {
 }
 
 FrameResult Pipeline::addFrame(const Frame &frame) {
+  throwIfInterrupted(interrupt_, "before the frame");
   FrameResult result;
   FrameCounters &c = result.counters;
   const PointBuffer &pts = frame.points;
@@ -191,6 +192,7 @@ FrameResult Pipeline::addFrame(const Frame &frame) {
   }
 
   const double seconds_posing = secondsSince(t_order);
+  throwIfInterrupted(interrupt_, "after posing");
 
   // 4. Scan-mode normals average the frame's points per cell of the fine level instead of that many more levels of
   //    the hierarchy: those centroids only need the points, so with a second thread they are made during steps 5 and 6,
@@ -221,8 +223,9 @@ FrameResult Pipeline::addFrame(const Frame &frame) {
       try {
         double box[6];
         fine_points_ = cellCentroids(xyz_.data(), candidates_.data(), candidates_.size(),
-                                     cellEdge(config_.hierarchy.cell_size, fine_level_), box);
+                                     cellEdge(config_.hierarchy.cell_size, fine_level_), box, interrupt_);
         if (!std::isfinite(box[0])) return;
+        throwIfInterrupted(interrupt_, "after the centroids");
         auto grids = std::make_shared<AveragingGrids>();
         grids->radii = std::move(radii);
         for (int a = 0; a < 3; ++a) {
@@ -282,6 +285,7 @@ FrameResult Pipeline::addFrame(const Frame &frame) {
                                     : 2.0 * poissonRadius(config_.hierarchy.cell_size, output_level_);
   std::vector<std::uint32_t> order;
   try {
+    throwIfInterrupted(interrupt_, "before the insertion order");
     order = insertionOrder(xyz_.data(), candidates_, config_.order.type, config_.order.seed + frames_,
                            feature_radius, config_.threads);
   } catch (...) {
@@ -305,6 +309,7 @@ FrameResult Pipeline::addFrame(const Frame &frame) {
   for (int a = 0; a < 3; ++a) batch.viewpoint[a] = viewpoint[a];
   batch.frame_index = frames_;
   batch.max_level = buildDepth();
+  batch.interrupt = interrupt_;
   if (early) {
     batch.published = early_points_.data();
     batch.published_count = &published;
@@ -486,6 +491,7 @@ void Pipeline::requireLiveIds(const std::vector<SampleId> &ids, const char *what
 std::vector<SampleNormal> Pipeline::normals(const std::vector<SampleId> &ids,
                                              std::vector<LocalPca> *neighbourhoods) const {
   requireLiveIds(ids, "normals");
+  throwIfInterrupted(interrupt_, "before the normals");
   return normalsOfLive(ids, neighbourhoods);
 }
 

@@ -6,6 +6,8 @@
 #include <stdexcept>
 #include <string>
 
+#include "hpds/util/Interrupt.hpp"
+
 namespace hpds {
 
 Hierarchy::Hierarchy(double cell_size, int max_depth) : cell_size_(cell_size), max_depth_(max_depth) {
@@ -261,6 +263,7 @@ InsertResult Hierarchy::insert(const InsertBatch &batch) {
 
   const int last_level = batch.max_level < 0 ? max_depth_ : std::min(batch.max_level, max_depth_);
   for (int d = 0; d <= last_level; ++d) {
+    throwIfInterrupted(batch.interrupt, "inserting");
     const double rd2 = radius2_[d];
     // When the batch started on an empty hierarchy (scan mode), the samples of levels < d are exactly those accepted
     // so far: one grid of level d's cells holding them, and the level-d samples as they come, replaces the d + 1
@@ -291,6 +294,8 @@ InsertResult Hierarchy::insert(const InsertBatch &batch) {
     auto pushAhead = [&]() __attribute__((always_inline)) {
       while (ahead_bits == 0) {
         if (++ahead_w >= words) return;
+        // Every 2^18 ranks: a pass over millions of points took 1.4 s, too long for Ctrl-C to wait on.
+        if ((ahead_w & 4095) == 0) throwIfInterrupted(batch.interrupt, "inserting");
         ahead_bits = todo[ahead_w];
       }
       const std::uint32_t r = static_cast<std::uint32_t>(ahead_w * 64 + static_cast<std::size_t>(__builtin_ctzll(ahead_bits)));

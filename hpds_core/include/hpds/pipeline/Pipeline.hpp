@@ -37,9 +37,11 @@
 // - normals() and makeCloud() take ids of live samples (outputSamples(), FrameResult::new_samples of the last frame, ...);
 //   any other id (evicted, from an earlier scan-mode frame, never issued) throws std::invalid_argument.
 // - Not thread-safe: one thread drives a Pipeline. A moved-from Pipeline may only be assigned to or destroyed.
+//   Another thread may stop a long addFrame or normals() through setInterrupt (util/Interrupt.hpp).
 #pragma once
 
 #include <array>
+#include <atomic>
 #include <cstdint>
 #include <memory>
 #include <string>
@@ -50,6 +52,7 @@
 #include "hpds/sampling/Hierarchy.hpp"
 #include "hpds/normals/NormalEstimator.hpp"
 #include "hpds/points/PointBuffer.hpp"
+#include "hpds/util/Interrupt.hpp"
 
 namespace hpds {
 
@@ -131,6 +134,10 @@ class Pipeline {
   /// Index the next frame gets (its `frame` tag and its random-order seed offset). Scan-mode workers that share a
   /// stream set it to the input index, so the output does not depend on which worker took the frame.
   void setNextFrameIndex(std::uint32_t index) { frames_ = index; }
+  /// While `flag` is set (by any thread; it must outlive its use here), addFrame and normals() throw Interrupted
+  /// (util/Interrupt.hpp) at their next stage boundary: before they start, before each level's insertion pass, before
+  /// the normals. An interrupted frame leaves the map unfinished: discard the pipeline. nullptr: never (the default).
+  void setInterrupt(const std::atomic<bool> *flag) { interrupt_ = flag; }
 
   /// Map mode: replaces the map with `map` (e.g. read by loadMap in HierarchyFile.hpp) and numbers the next frame
   /// `next_frame`, as if the frames that built `map` had gone through this pipeline. Throws std::invalid_argument,
@@ -155,6 +162,7 @@ class Pipeline {
                                                         std::vector<LocalPca> *neighbourhoods) const;
 
   OutputResolution resolution_;
+  const std::atomic<bool> *interrupt_ = nullptr;
   HpdsConfig config_;
   int output_level_;
   int build_depth_;

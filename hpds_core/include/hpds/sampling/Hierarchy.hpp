@@ -56,6 +56,9 @@ struct InsertBatch {
   std::uint32_t *published = nullptr;
   std::atomic<std::size_t> *published_count = nullptr;
   int publish_level = -1;
+  /// Optional: read before each level's pass and every 2^18 ranks in it; when set, insert throws Interrupted
+  /// (util/Interrupt.hpp) and the hierarchy holds the samples accepted so far.
+  const std::atomic<bool> *interrupt = nullptr;
 };
 
 struct InsertResult {
