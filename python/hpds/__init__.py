@@ -13,11 +13,13 @@ import errno
 import os
 import warnings
 
+import numpy as np
+
 from . import _hpds
 from . import ply
 from .config import to_yaml
 
-__all__ = ["Samples", "downsample", "load_config", "ply", "read_points", "read_poses"]
+__all__ = ["Samples", "downsample", "load_config", "ply", "read_cloud", "read_points", "read_poses"]
 __version__ = _hpds.__version__
 
 
@@ -56,10 +58,27 @@ def _config_source(config):
     return to_yaml(config), ""
 
 
+def _xyz_of(points):
+    """A structured array's float x y z fields as an (N, 3) array (float64 when any of them is), else `points`."""
+    names = getattr(getattr(points, "dtype", None), "names", None)
+    if not names:
+        return points
+    missing = [a for a in "xyz" if a not in names]
+    if missing:
+        raise TypeError("points: a structured array needs fields x, y and z; it has %s" % ", ".join(names))
+    types = [points.dtype.fields[a][0] for a in "xyz"]
+    if any(t.kind != "f" or t.shape != () for t in types):
+        raise TypeError("points: fields x, y and z must be float32 or float64 scalars, got %s"
+                        % ", ".join(str(t) for t in types))
+    dtype = np.float64 if any(t.itemsize == 8 for t in types) else np.float32
+    return np.stack([points[a].astype(dtype, copy=False) for a in "xyz"], axis=1)
+
+
 def downsample(points, config=None, viewpoint=None):
     """Downsamples one point cloud to an additive Poisson-disk hierarchy.
 
-    points: (N, 3) NumPy array of float32 or float64 (float64 is sampled at full precision, as `hpds sample` samples
+    points: a structured array with fields x, y, z (read_cloud's: cloud[s["index"]] are then the samples with
+        every field), or an (N, 3) NumPy array of float32 or float64 (float64 is sampled at full precision, as `hpds sample` samples
         a file with float64 x y z: georeferenced coordinates keep their guarantees), in the sensor frame (metres;
         normals face the origin, or `viewpoint`). NaN/Inf points, exact (0,0,0) no-returns and points outside
         input.min_range/max_range are skipped.
@@ -87,7 +106,7 @@ def downsample(points, config=None, viewpoint=None):
         viewpoint = [float(v) for v in viewpoint]
     except (TypeError, ValueError):
         raise ValueError("viewpoint: expected 3 numbers (x, y, z), got %r" % (viewpoint,)) from None
-    arrays, skipped, rounding = _hpds.downsample(points, text, path, viewpoint)
+    arrays, skipped, rounding = _hpds.downsample(_xyz_of(points), text, path, viewpoint)
     result = Samples(arrays)
     result.skipped = skipped
     if skipped["out_of_range"]:
@@ -122,6 +141,21 @@ def read_points(path, return_viewpoint=False):
     path = os.fspath(path)
     _refuse_unreadable(path, "point cloud file")
     return _hpds.read_points(path, bool(return_viewpoint))
+
+
+def read_cloud(path, return_viewpoint=False):
+    """Every point of a .pcd, .ply (built with PCL) or KITTI .bin file with all its fields (x, y, z, intensity, ring,
+    time, ...) as a NumPy structured array, the records as stored (little-endian; PCL's packed rgb as a uint32).
+
+        cloud = hpds.read_cloud("frame.pcd")
+        s = hpds.downsample(cloud)
+        samples = cloud[s["index"]]                 # every field of the sampled points
+
+    An organized cloud comes flat (row by row), its no-return points included (downsample skips them). With
+    return_viewpoint, a tuple (cloud, viewpoint) as for read_points. Raises as read_points does."""
+    path = os.fspath(path)
+    _refuse_unreadable(path, "point cloud file")
+    return _hpds.read_cloud(path, bool(return_viewpoint))
 
 
 def read_poses(path):

@@ -38,14 +38,17 @@ struct ApiPoints {
 ApiPoints pointsFrom(const py::handle &object) {
   if (!py::isinstance<py::array>(object))
     throw py::type_error("points: expected an (N, 3) NumPy array of float32 or float64, got " +
-                         std::string(py::str(py::type::of(object).attr("__name__"))));
+                         std::string(py::str(py::type::of(object).attr("__name__"))) +
+                         " (numpy.asarray(points, dtype=numpy.float64) makes one)");
   const auto array = py::reinterpret_borrow<py::array>(object);
   // By kind and size, not dtype identity: byte-swapped ('>f8') and metadata-carrying float dtypes are floats too
   // (forcecast below converts them).
   const py::dtype dtype = array.dtype();
   if (dtype.kind() != 'f' || (dtype.itemsize() != 4 && dtype.itemsize() != 8))
     throw py::type_error("points: expected float32 or float64 coordinates, got dtype " +
-                         std::string(py::str(static_cast<const py::handle &>(dtype))));
+                         std::string(py::str(static_cast<const py::handle &>(dtype))) +
+                         (dtype.kind() == 'V' ? " (hpds.downsample takes a structured array's float fields x, y, z)"
+                                              : " (points.astype(numpy.float64) converts it)"));
   if (array.ndim() != 2 || array.shape(1) != 3)
     throw py::value_error("points: expected shape (N, 3), got " + shapeText(array));
   ApiPoints out;

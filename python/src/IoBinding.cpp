@@ -3,7 +3,9 @@
 
 #include <algorithm>
 #include <cctype>
+#include <cstring>
 #include <stdexcept>
+#include <vector>
 
 #include "Bindings.hpp"
 #include "hpds/io/KittiBin.hpp"
@@ -29,7 +31,70 @@ PointBuffer readCloudFile(const std::string &path, Eigen::Vector3d *viewpoint) {
 #endif
 }
 
+namespace {
+
+/// NumPy's little-endian type string of a field type ('<f4', ...).
+const char *numpyType(FieldType type) {
+  switch (type) {
+    case FieldType::Int8: return "i1";
+    case FieldType::UInt8: return "u1";
+    case FieldType::Int16: return "<i2";
+    case FieldType::UInt16: return "<u2";
+    case FieldType::Int32: return "<i4";
+    case FieldType::UInt32: return "<u4";
+    case FieldType::Float32: return "<f4";
+    case FieldType::Float64: return "<f8";
+  }
+  throw std::logic_error("numpyType: not a field type");
+}
+
+/// The records of `cloud` as a structured array: one field per point field, at its offset, itemsize point_step
+/// (padding kept as such), so the bytes are the file's records as hpds read them.
+py::array structuredArray(const PointBuffer &cloud) {
+  const PointLayout &l = cloud.layout();
+  py::list names, formats, offsets;
+  for (const PointField &f : l.fields) {
+    names.append(f.name);
+    if (f.count == 1)
+      formats.append(numpyType(f.type));
+    else
+      formats.append(py::make_tuple(numpyType(f.type), py::make_tuple(f.count)));
+    offsets.append(f.offset);
+  }
+  py::dict spec;
+  spec["names"] = names;
+  spec["formats"] = formats;
+  spec["offsets"] = offsets;
+  spec["itemsize"] = l.point_step;
+  const py::dtype dtype = py::dtype::from_args(spec);
+  py::array out(dtype, std::vector<py::ssize_t>{static_cast<py::ssize_t>(cloud.size())});
+  if (cloud.size()) std::memcpy(out.mutable_data(), cloud.bytes().data(), cloud.size() * l.point_step);
+  return out;
+}
+
+}  // namespace
+
 void bindIo(py::module_ &m) {
+  m.def(
+      "read_cloud",
+      [](const std::string &path, bool return_viewpoint) -> py::object {
+        PointBuffer cloud;
+        Eigen::Vector3d viewpoint = Eigen::Vector3d::Zero();
+        {
+          py::gil_scoped_release unlocked;
+          cloud = readCloudFile(path, &viewpoint);
+        }
+        const PointLayout &l = cloud.layout();
+        if (!l.find("x") || !l.find("y") || !l.find("z")) throw std::runtime_error(path + ": no x/y/z fields");
+        py::array records = structuredArray(cloud);
+        if (!return_viewpoint) return std::move(records);
+        py::array_t<double> vp(3);
+        for (int a = 0; a < 3; ++a) vp.mutable_data()[a] = viewpoint[a];
+        return py::make_tuple(records, vp);
+      },
+      py::arg("path"), py::arg("return_viewpoint") = false,
+      "Every point of a .pcd/.ply/.bin file with all its fields as a structured array (field names, types and "
+      "offsets as read; PCL's packed rgb as the uint32 it is); with return_viewpoint also the sensor position.");
   m.def(
       "read_points",
       [](const std::string &path, bool return_viewpoint) -> py::object {

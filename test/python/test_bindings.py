@@ -351,10 +351,62 @@ class Arguments(support.ScratchCase):
             hpds.downsample(self.points, {"hierarchy": {"cell_size": object()}})
 
     def test_points_errors(self):
-        with self.assertRaises(TypeError):
+        # Each type error says how to get the array asked for.
+        with self.assertRaises(TypeError) as e:
             hpds.downsample(self.points.astype(np.int32))
-        with self.assertRaises(TypeError):
+        self.assertIn("astype(numpy.float64)", str(e.exception))
+        with self.assertRaises(TypeError) as e:
             hpds.downsample(self.points.tolist())
+        self.assertIn("numpy.asarray", str(e.exception))
+        flat = np.zeros(4, dtype=[("x", "f4"), ("y", "f4"), ("intensity", "f4")])
+        with self.assertRaises(TypeError) as e:
+            hpds.downsample(flat)
+        self.assertIn("needs fields x, y and z; it has x, y, intensity", str(e.exception))
+        ints = np.zeros(4, dtype=[("x", "i4"), ("y", "i4"), ("z", "i4")])
+        with self.assertRaises(TypeError) as e:
+            hpds.downsample(ints)
+        self.assertIn("must be float32 or float64", str(e.exception))
+
+    def test_a_cloud_with_every_field_is_read_and_sampled_as_is(self):
+        # Found in a user trial: from Python only x y z could be read, though every sample is an input point with all
+        # its fields. read_cloud gives the records; downsample takes them; cloud[index] are the samples, every field.
+        support.require_tools(self)
+        n = 3000
+        rng = np.random.default_rng(8)
+        dt = np.dtype({"names": ["x", "y", "z", "intensity", "ring", "time"],
+                       "formats": ["<f4", "<f4", "<f4", "<f4", "<u2", "<f8"],
+                       "offsets": [0, 4, 8, 16, 20, 24], "itemsize": 32})  # PCL-style padding after z
+        cloud = np.zeros(n, dt)
+        cloud["x"], cloud["y"] = rng.uniform(-10, 10, n), rng.uniform(-10, 10, n)
+        cloud["z"] = -1.5
+        cloud["intensity"] = rng.uniform(0, 100, n)
+        cloud["ring"] = np.arange(n) % 32
+        cloud["time"] = np.arange(n) * 1e-5
+        path = self.path("fields.pcd")
+        header = ("VERSION .7\nFIELDS x y z _ intensity ring _ time\nSIZE 4 4 4 4 4 2 2 8\nTYPE F F F U F U U F\n"
+                  "COUNT 1 1 1 1 1 1 1 1\nWIDTH %d\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS %d\nDATA binary\n" % (n, n))
+        with open(path, "wb") as f:
+            f.write(header.encode())
+            f.write(cloud.tobytes())
+        read = hpds.read_cloud(path)
+        for name in dt.names:
+            np.testing.assert_array_equal(read[name], cloud[name], name)
+        self.assertEqual(read.dtype["ring"], np.dtype("<u2"))
+        s = hpds.downsample(read)
+        xyz = hpds.read_points(path)
+        np.testing.assert_array_equal(s["index"], hpds.downsample(xyz.astype(np.float32))["index"])
+        samples = read[s["index"]]
+        np.testing.assert_array_equal(samples["intensity"], cloud["intensity"][s["index"]])
+        np.testing.assert_array_equal(samples["time"], cloud["time"][s["index"]])
+        # The sampled records are what `hpds sample` writes (its PLY holds the same fields, values and order).
+        ply = self.path("fields.ply")
+        support.run([support.CLI, "sample", path, "-o", ply])
+        written = hpds.ply.read(ply)
+        for name in ("x", "y", "z", "intensity", "ring", "time"):
+            np.testing.assert_array_equal(written[name], samples[name], name)
+        with_vp, vp = hpds.read_cloud(path, return_viewpoint=True)
+        self.assertEqual(len(with_vp), n)
+        np.testing.assert_array_equal(vp, np.zeros(3))
         with self.assertRaises(ValueError) as e:
             hpds.downsample(self.points[:, :2])
         self.assertIn("(5000, 2)", str(e.exception))
