@@ -72,49 +72,48 @@ py::array structuredArray(const PointBuffer &cloud) {
   return out;
 }
 
+/// Reads `path` (without the GIL), refuses a cloud without x/y/z, and returns `toArray(cloud)`, with the viewpoint
+/// as a (3,) float64 array beside it when asked.
+template <typename ToArray>
+py::object readXyzCloud(const std::string &path, bool return_viewpoint, ToArray toArray) {
+  PointBuffer cloud;
+  Eigen::Vector3d viewpoint = Eigen::Vector3d::Zero();
+  {
+    py::gil_scoped_release unlocked;
+    cloud = readCloudFile(path, &viewpoint);
+  }
+  const PointLayout &l = cloud.layout();
+  if (!l.find("x") || !l.find("y") || !l.find("z")) throw std::runtime_error(path + ": no x/y/z fields");
+  py::array out = toArray(cloud);
+  if (!return_viewpoint) return std::move(out);
+  py::array_t<double> vp(3);
+  for (int a = 0; a < 3; ++a) vp.mutable_data()[a] = viewpoint[a];
+  return py::make_tuple(out, vp);
+}
+
 }  // namespace
 
 void bindIo(py::module_ &m) {
   m.def(
       "read_cloud",
-      [](const std::string &path, bool return_viewpoint) -> py::object {
-        PointBuffer cloud;
-        Eigen::Vector3d viewpoint = Eigen::Vector3d::Zero();
-        {
-          py::gil_scoped_release unlocked;
-          cloud = readCloudFile(path, &viewpoint);
-        }
-        const PointLayout &l = cloud.layout();
-        if (!l.find("x") || !l.find("y") || !l.find("z")) throw std::runtime_error(path + ": no x/y/z fields");
-        py::array records = structuredArray(cloud);
-        if (!return_viewpoint) return std::move(records);
-        py::array_t<double> vp(3);
-        for (int a = 0; a < 3; ++a) vp.mutable_data()[a] = viewpoint[a];
-        return py::make_tuple(records, vp);
+      [](const std::string &path, bool return_viewpoint) {
+        return readXyzCloud(path, return_viewpoint, [](const PointBuffer &cloud) { return structuredArray(cloud); });
       },
       py::arg("path"), py::arg("return_viewpoint") = false,
       "Every point of a .pcd/.ply/.bin file with all its fields as a structured array (field names, types and "
       "offsets as read; PCL's packed rgb as the uint32 it is); with return_viewpoint also the sensor position.");
   m.def(
       "read_points",
-      [](const std::string &path, bool return_viewpoint) -> py::object {
-        PointBuffer cloud;
-        Eigen::Vector3d viewpoint = Eigen::Vector3d::Zero();
-        {
-          py::gil_scoped_release unlocked;
-          cloud = readCloudFile(path, &viewpoint);
-        }
-        const PointLayout &l = cloud.layout();
-        const PointField *f[3] = {l.find("x"), l.find("y"), l.find("z")};
-        if (!f[0] || !f[1] || !f[2]) throw std::runtime_error(path + ": no x/y/z fields");
-        py::array_t<double> xyz({static_cast<py::ssize_t>(cloud.size()), py::ssize_t(3)});
-        double *out = xyz.mutable_data();
-        for (std::size_t i = 0; i < cloud.size(); ++i)
-          for (int a = 0; a < 3; ++a) out[3 * i + a] = readAsDouble(cloud.record(i), *f[a]);
-        if (!return_viewpoint) return std::move(xyz);
-        py::array_t<double> vp(3);
-        for (int a = 0; a < 3; ++a) vp.mutable_data()[a] = viewpoint[a];
-        return py::make_tuple(xyz, vp);
+      [](const std::string &path, bool return_viewpoint) {
+        return readXyzCloud(path, return_viewpoint, [](const PointBuffer &cloud) {
+          const PointLayout &l = cloud.layout();
+          const PointField *f[3] = {l.find("x"), l.find("y"), l.find("z")};
+          py::array_t<double> xyz({static_cast<py::ssize_t>(cloud.size()), py::ssize_t(3)});
+          double *out = xyz.mutable_data();
+          for (std::size_t i = 0; i < cloud.size(); ++i)
+            for (int a = 0; a < 3; ++a) out[3 * i + a] = readAsDouble(cloud.record(i), *f[a]);
+          return py::array(std::move(xyz));
+        });
       },
       py::arg("path"), py::arg("return_viewpoint") = false,
       "x, y, z of every point of a .pcd/.ply/.bin file as an (N, 3) float64 array (exact); with return_viewpoint "
