@@ -209,12 +209,7 @@ void bindTiling(py::module_ &m) {
   m.def("keep_freed_frame_memory", &keepFreedFrameMemory,
         "Process-wide: glibc's malloc keeps freed memory for the next task (hpds::keepFreedFrameMemory). For the "
         "processes that run map_build's tasks; True when the setting took.");
-  // Sanitizers replace glibc's malloc, so there the setting cannot take (tests check for what this build can do).
-#if defined(__GLIBC__) && !defined(__SANITIZE_ADDRESS__) && !defined(__SANITIZE_THREAD__)
-  m.attr("frame_memory_can_be_kept") = true;
-#else
-  m.attr("frame_memory_can_be_kept") = false;
-#endif
+  m.attr("frame_memory_can_be_kept") = kFreedFrameMemoryCanBeKept;
   m.def("rounding_warning", &positionRoundingWarning, py::arg("rounding"), py::arg("output_radius"), py::arg("key"),
         py::arg("input_rounding") = 0.0,
         "The warning `hpds sample` prints when float32 x y z round positions by more than 1 % of the output radius, "

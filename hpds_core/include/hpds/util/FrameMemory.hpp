@@ -2,7 +2,17 @@
 // frame after frame (the node, the command-line tool, the benchmarks).
 #pragma once
 
+#include <cstddef>  // defines __GLIBC__ (through the C++ library's configuration) where the C library is glibc
+
 namespace hpds {
+
+/// Whether keepFreedFrameMemory can take in this build: glibc's malloc, not a sanitizer's, which replaces it (for
+/// tests and bindings that must say what a build can do).
+#if defined(__GLIBC__) && !defined(__SANITIZE_ADDRESS__) && !defined(__SANITIZE_THREAD__)
+inline constexpr bool kFreedFrameMemoryCanBeKept = true;
+#else
+inline constexpr bool kFreedFrameMemoryCanBeKept = false;
+#endif
 
 /// Makes glibc's malloc keep freed memory inside the process for later allocations instead of returning it to the
 /// kernel (blocks up to 32 MB come from the heap; free memory at its top is given back beyond 64 MB). Without it,
