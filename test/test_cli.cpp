@@ -262,6 +262,15 @@ TEST(Cli, CovariancesAreWrittenAsSixPlyPropertiesAfterTheNormals) {
   // Without the flag the same run writes no covariances.
   ASSERT_EQ(runHpds("sample " + input + " --spacing 0.2 --normals -o " + shellQuote(tmp / "n.ply"), &log), 0) << log;
   EXPECT_EQ(readText(tmp / "n.ply").find("cov_xx"), std::string::npos);
+  // A config whose combination only the flags make valid is judged with them: it was refused before they applied.
+  { std::ofstream y(tmp / "off.yaml"); y << "normals:\n  enabled: false\n  covariances: true\n"; }
+  const std::string with_file = "sample " + input + " --spacing 0.2 --config " + shellQuote(tmp / "off.yaml");
+  EXPECT_EQ(runHpds(with_file + " -o " + shellQuote(tmp / "refused.ply"), &log), 1) << log;
+  EXPECT_NE(log.find("normals.covariances: needs normals.enabled"), std::string::npos) << log;
+  EXPECT_NE(log.find("off.yaml, with the flags over it)"), std::string::npos) << log;
+  EXPECT_FALSE(std::filesystem::exists(tmp / "refused.ply"));
+  ASSERT_EQ(runHpds(with_file + " --normals -o " + shellQuote(tmp / "mended.ply"), &log), 0) << log;
+  EXPECT_EQ(readText(tmp / "mended.ply"), text);
 }
 
 TEST(Cli, ScanModeWithASpacingBuildsAndReportsOnlyTheLevelsItWrites) {
@@ -332,6 +341,91 @@ TEST(Cli, VersionIsTheProjectsAndExitsZero) {
   std::string log;
   EXPECT_EQ(runHpds("--version", &log), 0);
   EXPECT_NE(log.find("hpds " HPDS_TEST_VERSION), std::string::npos) << log;
+}
+
+// A folder stands for its frames in name order; found preprocessing a recorded drive, where `hpds sample frames/`
+// said "not a regular file" and a drive of many frames needed a glob the shell may refuse.
+TEST(Cli, AFolderInputIsItsFramesInNameOrder) {
+  const auto tmp = test::scratchDir("cli_folder");
+  std::string log;
+  ASSERT_EQ(runHpds("synth -o " + shellQuote(tmp / "s") + " --frames 3 --beams 8 --azimuth-steps 600", &log), 0) << log;
+  std::string listed;
+  for (int i = 0; i < 3; ++i) listed += shellQuote(tmp / "s" / ("frame_00000" + std::to_string(i) + ".pcd")) + " ";
+  const std::string map = " --mode map --spacing 0.2 --poses " + shellQuote(tmp / "s" / "poses.txt") + " -o ";
+  ASSERT_EQ(runHpds("sample " + listed + map + shellQuote(tmp / "listed.ply"), &log), 0) << log;
+  // poses.txt beside the frames is not a frame.
+  ASSERT_EQ(runHpds("sample " + shellQuote(tmp / "s") + map + shellQuote(tmp / "folder.ply"), &log), 0) << log;
+  EXPECT_EQ(readText(tmp / "folder.ply"), readText(tmp / "listed.ply"));
+  std::filesystem::create_directories(tmp / "empty");
+  std::ofstream(tmp / "empty" / "notes.txt") << "no frames here\n";
+  EXPECT_EQ(runHpds("sample " + shellQuote(tmp / "empty") + " -o " + shellQuote(tmp / "e.ply"), &log), 1) << log;
+  EXPECT_NE(log.find("holds no .pcd, .ply or .bin file"), std::string::npos) << log;
+  // An output inside the folder becomes one of its inputs on the next run: refused, never overwritten.
+  ASSERT_EQ(runHpds("sample " + shellQuote(tmp / "s") + " --spacing 0.2 -o " + shellQuote(tmp / "s" / "out.ply"), &log),
+            0)
+      << log;
+  const std::string first = readText(tmp / "s" / "out.ply");
+  EXPECT_EQ(runHpds("sample " + shellQuote(tmp / "s") + " --spacing 0.2 -o " + shellQuote(tmp / "s" / "out.ply"), &log),
+            1)
+      << log;
+  EXPECT_EQ(readText(tmp / "s" / "out.ply"), first);
+}
+
+// Found with a frame moved to UTM coordinates as a PLY (no VIEWPOINT): normals faced the origin, 5e6 m away, half of
+// them away from the sensor, without a word, and the CLI had no way to say where the sensor was.
+TEST(Cli, AViewpointFarFromEveryPointIsSaidAndViewpointSetsIt) {
+  const auto tmp = test::scratchDir("cli_viewpoint");
+  std::string log;
+  ASSERT_EQ(runHpds("synth -o " + shellQuote(tmp / "s") + " --frames 1 --beams 16 --azimuth-steps 900", &log), 0)
+      << log;
+  PointBuffer shifted = readPointCloud((tmp / "s" / "frame_000000.pcd").string());
+  const PointField *x = shifted.layout().find("x");
+  ASSERT_TRUE(x && x->type == FieldType::Float32);
+  const double kOffset = 3000.0;
+  for (std::size_t i = 0; i < shifted.size(); ++i) {
+    float v;
+    std::memcpy(&v, shifted.record(i) + x->offset, 4);
+    v = static_cast<float>(v + kOffset);
+    std::memcpy(shifted.record(i) + x->offset, &v, 4);
+  }
+  writePly((tmp / "shifted.ply").string(), shifted);
+  const std::string run = "sample " + shellQuote(tmp / "shifted.ply") + " --spacing 0.2 -o ";
+  // The share of normals facing the sensor (at x = kOffset).
+  auto facing = [&](const std::string &ply) {
+    const PointBuffer c = readPointCloud((tmp / ply).string());
+    const PointLayout &l = c.layout();
+    std::size_t toward = 0, valid = 0;
+    for (std::size_t i = 0; i < c.size(); ++i) {
+      double d = 0.0;
+      for (const auto &[p, n] : {std::pair{"x", "normal_x"}, std::pair{"y", "normal_y"}, std::pair{"z", "normal_z"}}) {
+        const double sensor = std::string(p) == "x" ? kOffset : 0.0;
+        d += (sensor - readAsDouble(c.record(i), *l.find(p))) * readAsDouble(c.record(i), *l.find(n));
+      }
+      if (std::isnan(d)) continue;
+      ++valid;
+      toward += d > 0.0 ? 1 : 0;
+    }
+    return valid ? static_cast<double>(toward) / static_cast<double>(valid) : 0.0;
+  };
+  ASSERT_EQ(runHpds(run + shellQuote(tmp / "origin.ply"), &log), 0) << log;
+  EXPECT_NE(log.find("hpds: warning: the nearest point of"), std::string::npos) << log;
+  EXPECT_NE(log.find("give the sensor's position with --viewpoint X Y Z"), std::string::npos) << log;
+  ASSERT_EQ(runHpds(run + shellQuote(tmp / "sensor.ply") + " --viewpoint 3000 0 0", &log), 0) << log;
+  EXPECT_EQ(log.find("warning"), std::string::npos) << log;
+  const double at_origin = facing("origin.ply"), at_sensor = facing("sensor.ply");
+  EXPECT_GT(at_sensor, 0.9);
+  EXPECT_LT(at_origin, at_sensor - 0.1);
+  EXPECT_EQ(runHpds(run + shellQuote(tmp / "bad.ply") + " --viewpoint 1 2", &log), 2) << log;
+  EXPECT_NE(log.find("--viewpoint"), std::string::npos) << log;
+}
+
+// `hpds smaple x.pcd` was answered "A subcommand is required", as if none had been given.
+TEST(Cli, AnUnknownCommandIsNamedWithTheKnownOnes) {
+  std::string log;
+  EXPECT_EQ(runHpds("smaple x.pcd -o y.ply", &log), 2);
+  EXPECT_NE(log.find("hpds: error: unknown command 'smaple': one of sample, verify, synth"), std::string::npos) << log;
+  EXPECT_EQ(runHpds("", &log), 2);
+  EXPECT_NE(log.find("hpds: error: A subcommand is required"), std::string::npos) << log;
 }
 
 // A --spacing with another --max-depth than the sampling's derives another cell, under which every radius shrinks
@@ -578,6 +672,23 @@ TEST(Cli, MapModeStatsCountEachFramesNormalsNotOnlyTheFinalCloud) {
   const double normals = std::stod(stats.substr(at + 11));
   // Three frames' normals of ~5000 samples each: tens of milliseconds; the final empty lookup: microseconds.
   EXPECT_GT(normals, 2e-3) << stats;
+  // The warning names the flags that keep every sample, and they do (a user's offline map lost half its samples
+  // and only a --config could say so).
+  EXPECT_NE(log.find("samples were evicted from the map"), std::string::npos) << log;
+  EXPECT_NE(log.find("give --evict-distance 0 --max-samples 0 to keep every sample"), std::string::npos) << log;
+  const std::string kept = "sample " + inputs + shellQuote(tmp / "nothing.pcd") + " --mode map --poses " +
+                           shellQuote(tmp / "poses.txt") + " --evict-distance 0 --max-samples 0 -o ";
+  ASSERT_EQ(runHpds(kept + shellQuote(tmp / "all.ply"), &log), 0) << log;
+  EXPECT_EQ(log.find("evicted"), std::string::npos) << log;
+  EXPECT_GT(readPointCloud((tmp / "all.ply").string()).size(), 5000u);
+  // A cap alone evicts down to it.
+  const std::string capped = "sample " + inputs + " --mode map --poses " + shellQuote(tmp / "s" / "poses.txt") +
+                             " --evict-distance 0 --max-samples 1000 -o " + shellQuote(tmp / "capped.ply");
+  ASSERT_EQ(runHpds(capped, &log), 0) << log;
+  EXPECT_LE(readPointCloud((tmp / "capped.ply").string()).size(), 1000u);
+  EXPECT_NE(log.find("samples were evicted from the map"), std::string::npos) << log;
+  EXPECT_EQ(runHpds(capped + " --evict-distance -1", &log), 2) << log;
+  EXPECT_NE(log.find("--evict-distance"), std::string::npos) << log;
 }
 
 }  // namespace

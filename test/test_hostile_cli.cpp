@@ -82,7 +82,7 @@ TEST(HostileCli, TruncatedAndGarbageFilesOfEveryFormat) {
       {"sample " + q(tmp / "garbage_after_magic.ply") + out, 1, "garbage_after_magic.ply: "},
       {"sample " + q(tmp / "garbage_after_header.pcd") + out, 1, "garbage_after_header.pcd: "},
       {"sample " + q(tmp / "odd.bin") + out, 1, "multiple of 16"},
-      {"sample " + q(tmp / "adir.pcd") + out, 1, "not a regular file"},
+      {"sample " + q(tmp / "adir.pcd") + out, 1, "adir.pcd' holds no .pcd, .ply or .bin file"},  // a folder: its frames
       {"sample " + good + " --poses " + q(tmp / "poses_garbage.txt") + out, 1, "poses_garbage.txt:1: "},
       {"sample " + good + " --poses " + q(tmp / "poses_cut.txt") + out, 1, "expected 12 numbers, found 11"},
       {"sample " + good + " --poses " + q(tmp / "poses_inf.txt") + out, 1, "non-finite"},
@@ -169,14 +169,15 @@ TEST(HostileCli, GeoreferencedCoordinatesKeepTheirPrecisionOrAreSaidToLoseIt) {
     ASSERT_TRUE(input.count(p)) << "sample " << i << " is no input point";
   }
   ASSERT_EQ(hpds("verify " + q(tmp / "f8.ply") + " --spacing 0.1 --input " + q(f8), &log), 0) << log;
-  // 2. float32 points posed into UTM coordinates: float32 output is said to round them, and verify refuses to call
-  //    levels it cannot resolve valid; with output.float64_xyz the output is exact again.
+  // 2. float32 points posed into UTM coordinates: float32 output (asked for: by default such poses give float64) is
+  //    said to round them, and verify refuses to call levels it cannot resolve valid; with output.float64_xyz the
+  //    output is exact again.
   std::vector<std::array<double, 3>> local;
   for (const auto &p : pts) local.push_back({p[0] - 5e6, p[1] - 4e6, p[2] - 100.0});
   writePcd(f4.string(), typedCloud(FieldType::Float32, local));
   writeText(poses, "1 0 0 5000000 0 1 0 4000000 0 0 1 100\n");
   const std::string posed = "sample " + q(f4) + " --poses " + q(poses) + " --mode map --spacing 0.1 --no-normals";
-  ASSERT_EQ(hpds(posed + " -o " + q(tmp / "f4.ply"), &log), 0) << log;
+  ASSERT_EQ(hpds(posed + " --float32-xyz -o " + q(tmp / "f4.ply"), &log), 0) << log;
   EXPECT_NE(log.find("set output.float64_xyz: true"), std::string::npos) << log;
   EXPECT_EQ(readPointCloud((tmp / "f4.ply").string()).layout().find("x")->type, FieldType::Float32);
   EXPECT_EQ(hpds("verify " + q(tmp / "f4.ply") + " --spacing 0.1", &log), 1) << log;

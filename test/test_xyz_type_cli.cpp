@@ -93,14 +93,48 @@ TEST(XyzTypeCli, Float32InputAtLargeCoordinatesIsSaidToHaveLostItsDigits) {
   std::vector<std::array<double, 3>> local = patchAt({0.0, 0.0, 0.0});
   writePcd((tmp / "local_f4.pcd").string(), typedCloud(FieldType::Float32, local));
   writeText(tmp / "poses.txt", "1 0 0 5000000 0 1 0 4000000 0 0 1 100\n");
+  // Found by a user's posed UTM drive: the map came out float32, rounded by 0.3 m, and failed verify. Poses that far
+  // out now give float64 x y z, said once; --float32-xyz keeps float32 and gets the warning.
+  const std::string posed = "sample " + q(tmp / "local_f4.pcd") + " --poses " + q(tmp / "poses.txt") +
+                            " --mode map --spacing 0.1 --no-normals -o ";
   std::string log;
-  ASSERT_EQ(hpds("sample " + q(tmp / "local_f4.pcd") + " --poses " + q(tmp / "poses.txt") +
-                     " --mode map --spacing 0.1 --no-normals -o " + q(tmp / "posed.ply"),
+  ASSERT_EQ(hpds(posed + q(tmp / "posed.ply"), &log), 0) << log;
+  EXPECT_EQ(xType(tmp / "posed.ply"), FieldType::Float64);
+  EXPECT_NE(log.find("hpds: note: x y z are written as float64: the poses place sensors up to 5e+06 m"),
+            std::string::npos)
+      << log;
+  EXPECT_NE(log.find("set --float32-xyz for a reader that takes float32 only"), std::string::npos) << log;
+  EXPECT_EQ(log.find("warning"), std::string::npos) << log;
+  EXPECT_EQ(hpds("verify " + q(tmp / "posed.ply") + " --spacing 0.1", &log), 0) << log;
+  ASSERT_EQ(hpds(posed + q(tmp / "posed_f4.ply") + " --float32-xyz", &log), 0) << log;
+  EXPECT_EQ(xType(tmp / "posed_f4.ply"), FieldType::Float32);
+  EXPECT_NE(log.find("set output.float64_xyz: true instead of output.float32_xyz"), std::string::npos) << log;
+  EXPECT_EQ(log.find("the input's own"), std::string::npos) << log;
+  EXPECT_EQ(log.find("note:"), std::string::npos) << log;
+  // Poses near the origin change nothing: the input's type stays.
+  writeText(tmp / "near.txt", "1 0 0 500 0 1 0 400 0 0 1 10\n");
+  ASSERT_EQ(hpds("sample " + q(tmp / "local_f4.pcd") + " --poses " + q(tmp / "near.txt") +
+                     " --spacing 0.1 --no-normals -o " + q(tmp / "near.ply"),
                  &log),
             0)
       << log;
-  EXPECT_NE(log.find("set output.float64_xyz: true (--float64-xyz)"), std::string::npos) << log;
-  EXPECT_EQ(log.find("the input's own"), std::string::npos) << log;
+  EXPECT_EQ(xType(tmp / "near.ply"), FieldType::Float32);
+  EXPECT_EQ(log.find("note:"), std::string::npos) << log;
+}
+
+// Found on a KITTI .bin with a few 3e38 outliers: they were dropped as out of range, yet the warning said the input's
+// float32 rounded positions by up to 1.8e31 m, for an output that was fine.
+TEST(XyzTypeCli, DroppedOutliersDoNotMakeARoundingWarning) {
+  const auto tmp = test::scratchDir("xyz_outliers");
+  std::vector<std::array<double, 3>> pts = patchAt({0.0, 0.0, 1.0});
+  pts.push_back({3e38, 1.0, 1.0});
+  pts.push_back({1.0, -3e38, 1.0});
+  writePcd((tmp / "outliers.pcd").string(), typedCloud(FieldType::Float32, pts));
+  std::string log;
+  ASSERT_EQ(hpds("sample " + q(tmp / "outliers.pcd") + " --spacing 0.1 --no-normals -o " + q(tmp / "o.ply"), &log), 0)
+      << log;
+  EXPECT_EQ(log.find("round positions"), std::string::npos) << log;
+  EXPECT_NE(log.find("beyond the exact key range"), std::string::npos) << log;
 }
 
 }  // namespace

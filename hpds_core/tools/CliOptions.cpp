@@ -122,11 +122,19 @@ void addSamplingOptions(CLI::App &app, SamplingOptions &o) {
       ->check(CLI::IsMember({"random", "input", "sphericity", "surface_variation"}));
   app.add_option("--seed", o.seed, "seed of the random order (order.seed)")->check(unsigned64());
   app.add_option("--mode", o.mode, "scan | map (mode)")->check(CLI::IsMember({"scan", "map"}));
+  app.add_option("--evict-distance", o.evict_distance,
+                 "[m] map mode: drop samples farther than this from the latest sensor, 0 = never (map.evict_distance)")
+      ->check(finiteIn(0.0, 1e9));
+  app.add_option("--max-samples", o.max_samples,
+                 "map mode: cap on stored samples, the farthest from the sensor go first, 0 = none (map.max_samples)")
+      ->check(unsigned64());
   app.add_option("--threads", o.threads, "worker threads, 0 = all cores (threads)")->check(integerIn(0, 1024));
 }
 
 HpdsConfig resolveConfig(const SamplingOptions &o) {
-  HpdsConfig c = o.config_file.empty() ? HpdsConfig{} : loadConfigFile(o.config_file);
+  // The file's values are judged with the flags over them: `--normals` mends a file's normals.enabled: false
+  // beside its covariances: true, which the file alone could not take.
+  HpdsConfig c = o.config_file.empty() ? HpdsConfig{} : loadConfigFile(o.config_file, ConfigValidation::kByCaller);
   if (o.cell_size) c.hierarchy.cell_size = *o.cell_size;
   if (o.max_depth) c.hierarchy.max_depth = *o.max_depth;
   if (o.level) {
@@ -163,8 +171,15 @@ HpdsConfig resolveConfig(const SamplingOptions &o) {
   if (o.order) c.order.type = parseInsertionOrder(*o.order, "--order");
   if (o.seed) c.order.seed = *o.seed;
   if (o.mode) c.mode = parseMode(*o.mode, "--mode");
+  if (o.evict_distance) c.map.evict_distance = *o.evict_distance;
+  if (o.max_samples) c.map.max_samples = *o.max_samples;
   if (o.threads) c.threads = *o.threads;
-  validateConfig(c);
+  try {
+    validateConfig(c);
+  } catch (const std::invalid_argument &e) {
+    if (o.config_file.empty()) throw;
+    throw std::invalid_argument(std::string(e.what()) + " (in " + o.config_file + ", with the flags over it)");
+  }
   return c;
 }
 

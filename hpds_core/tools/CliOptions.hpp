@@ -24,6 +24,8 @@ struct SamplingOptions {
   std::optional<std::string> order;
   std::optional<std::uint64_t> seed;
   std::optional<std::string> mode;
+  std::optional<double> evict_distance;
+  std::optional<std::uint64_t> max_samples;
   std::optional<int> threads;
 };
 
@@ -42,7 +44,7 @@ struct SamplingOptions {
 [[nodiscard]] CLI::Validator fileNamePrefix();
 
 /// Registers --config, --cell-size, --max-depth, --level, --spacing, --normals/--no-normals, --covariances,
-/// --float64-xyz, --float32-xyz, --order, --seed, --mode, --threads.
+/// --float64-xyz, --float32-xyz, --order, --seed, --mode, --evict-distance, --max-samples, --threads.
 void addSamplingOptions(CLI::App &app, SamplingOptions &options);
 
 /// Defaults, then --config FILE, then the flags; throws std::invalid_argument naming the key on a bad value, and

@@ -74,7 +74,9 @@ bool endsWith(const std::string &s, const std::string &suffix) {
 // `hpds sample` (the core loader skips `ros:`); then the ROS flags.
 hpds_node::NodeConfig resolveNodeConfig(const ReplayArgs &a) {
   hpds_node::NodeConfig config;
-  if (!a.sampling.config_file.empty()) config = hpds_node::loadNodeConfigFile(a.sampling.config_file);
+  // Validated below with the flags over it, as `hpds sample` does.
+  if (!a.sampling.config_file.empty())
+    config = hpds_node::loadNodeConfigFile(a.sampling.config_file, hpds::ConfigValidation::kByCaller);
   config.hpds = resolveConfig(a.sampling);
   if (a.fixed_frame) config.ros.fixed_frame = *a.fixed_frame;
   if (a.output_frame) config.ros.output_frame = *a.output_frame;
@@ -85,7 +87,12 @@ hpds_node::NodeConfig resolveNodeConfig(const ReplayArgs &a) {
   // The flags bypass the YAML parser, which is where leading slashes are dropped.
   for (std::string *id : {&config.ros.fixed_frame, &config.ros.output_frame, &config.ros.sensor_frame})
     while (!id->empty() && id->front() == '/') id->erase(id->begin());
-  hpds_node::validateRosConfig(config.ros, config.hpds);
+  try {
+    hpds_node::validateRosConfig(config.ros, config.hpds);
+  } catch (const std::invalid_argument &e) {
+    if (a.sampling.config_file.empty()) throw;
+    throw std::invalid_argument(std::string(e.what()) + " (in " + a.sampling.config_file + ", with the flags over it)");
+  }
   return config;
 }
 

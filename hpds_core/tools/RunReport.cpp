@@ -32,10 +32,10 @@ std::string evictionWarning(const HpdsConfig &config, std::uint64_t evicted, std
     << " remain): map.evict_distance (" << config.map.evict_distance
     << " m, 0 = off) drops those farther from the latest sensor position and map.max_samples ("
     << config.map.max_samples << ", 0 = no cap) caps the count, so the map written is what was left around the last "
-    << "frame; set both to 0 in a --config to keep every sample";
+    << "frame; give --evict-distance 0 --max-samples 0 to keep every sample";
   if (sensor_at_origin)
     w << " (no --poses: every frame's sensor was taken at the origin, so frames farther than map.evict_distance from "
-         "it evicted each other; give --poses, or set map.evict_distance: 0 for clouds already in one frame)";
+         "it evicted each other; give --poses, or --evict-distance 0 for clouds already in one frame)";
   return w.str();
 }
 

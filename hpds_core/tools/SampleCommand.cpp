@@ -2,11 +2,15 @@
 #include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <cctype>
 #include <cmath>
+#include <filesystem>
 #include <iostream>
+#include <limits>
 #include <map>
 #include <mutex>
 #include <optional>
+#include <sstream>
 #include <stdexcept>
 
 #include "CliOptions.hpp"
@@ -34,8 +38,26 @@ struct SampleArgs {
   std::string stats;
   std::string load_map;
   std::string save_map;
+  std::vector<double> viewpoint;  // empty: each input's own (a PCD's VIEWPOINT), else the origin
   SamplingOptions sampling;
 };
+
+// A sensor is never a kilometre from every point it measured: where the viewpoint is, the input is not in its
+// sensor's frame (a georeferenced PLY), and normals would face a point far off instead of the sensor.
+constexpr double kFarViewpoint = 1000.0;
+
+// [m] The distance from `viewpoint` to the nearest finite point of `points` (infinity when there is none).
+double nearestPointDistance(const PointBuffer &points, const Eigen::Vector3d &viewpoint) {
+  const PointField *f[3] = {points.layout().find("x"), points.layout().find("y"), points.layout().find("z")};
+  if (!f[0] || !f[1] || !f[2]) return std::numeric_limits<double>::infinity();
+  double nearest = std::numeric_limits<double>::infinity();
+  for (std::size_t i = 0; i < points.size(); ++i) {
+    const std::uint8_t *r = points.record(i);
+    const Eigen::Vector3d p(readAsDouble(r, *f[0]), readAsDouble(r, *f[1]), readAsDouble(r, *f[2]));
+    if (p.allFinite()) nearest = std::min(nearest, (p - viewpoint).squaredNorm());
+  }
+  return std::sqrt(nearest);
+}
 
 double since(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
@@ -56,6 +78,33 @@ void appendCloud(PointBuffer &all, const PointBuffer &part, const std::string &i
   all.setOrganization(static_cast<std::uint32_t>(all.size()), 1);
 }
 
+// A folder given as an input stands for its point-cloud files (.pcd, .ply, .bin, any case), in name order: a
+// recorded drive of 10 000 frames no longer needs a glob the shell may refuse as too long. Other files in it are
+// left alone; a folder with no such file is an error, not an empty run.
+std::vector<std::string> expandInputs(const std::vector<std::string> &given) {
+  namespace fs = std::filesystem;
+  std::vector<std::string> inputs;
+  for (const std::string &in : given) {
+    std::error_code ec;
+    if (!fs::is_directory(in, ec)) {
+      inputs.push_back(in);
+      continue;
+    }
+    std::vector<std::string> files;
+    for (const fs::directory_entry &e : fs::directory_iterator(in, ec)) {
+      std::string ext = e.path().extension().string();
+      std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return std::tolower(c); });
+      if ((ext == ".pcd" || ext == ".ply" || ext == ".bin") && e.is_regular_file(ec)) files.push_back(e.path().string());
+    }
+    if (ec) throw std::invalid_argument("input folder '" + in + "': " + ec.message());
+    if (files.empty())
+      throw std::invalid_argument("input folder '" + in + "' holds no .pcd, .ply or .bin file");
+    std::sort(files.begin(), files.end());
+    inputs.insert(inputs.end(), files.begin(), files.end());
+  }
+  return inputs;
+}
+
 // Every path this run reads or writes, checked before any work (OutputPaths.hpp).
 void checkSamplePaths(const SampleArgs &a) {
   std::vector<InputPath> inputs;
@@ -70,13 +119,18 @@ void checkSamplePaths(const SampleArgs &a) {
 
 int runSample(const SampleArgs &a) {
   checkSamplePaths(a);
-  const HpdsConfig config = resolveConfig(a.sampling);
+  HpdsConfig config = resolveConfig(a.sampling);
   std::vector<Eigen::Isometry3d> poses;
   if (!a.poses.empty()) {
     poses = readKittiPoses(a.poses);
     if (poses.size() != a.inputs.size())
       throw std::invalid_argument("--poses: '" + a.poses + "' has " + std::to_string(poses.size()) + " poses for " +
                                   std::to_string(a.inputs.size()) + " inputs (one pose per input is required)");
+    double largest_translation = 0.0;
+    for (const Eigen::Isometry3d &pose : poses)
+      largest_translation = std::max(largest_translation, pose.translation().cwiseAbs().maxCoeff());
+    if (const std::string note = widenXyzForPoses(config, largest_translation, "--float32-xyz"); !note.empty())
+      std::cerr << "hpds: note: " << note << "\n";
   }
 
   if ((!a.load_map.empty() || !a.save_map.empty()) && config.mode != Mode::Map)
@@ -103,11 +157,25 @@ int runSample(const SampleArgs &a) {
   // The inputs' own float32 rounding: when it is what rounds the output, float64 output would not help.
   double input_rounding = 0.0;
   std::mutex input_rounding_mutex;
+  std::string far_viewpoint;  // the first input whose viewpoint lies far from all its points, said once
+  std::mutex far_viewpoint_mutex;
   auto runFrame = [&](Pipeline &p, std::size_t i, StageSeconds &seconds, PointBuffer *cloud) {
     auto t0 = std::chrono::steady_clock::now();
     Frame frame;
     frame.points = readPointCloud(a.inputs[i], &frame.viewpoint);
+    if (!a.viewpoint.empty()) frame.viewpoint = Eigen::Vector3d(a.viewpoint[0], a.viewpoint[1], a.viewpoint[2]);
     if (!frame.viewpoint.isZero(0.0)) any_viewpoint = true;
+    if (const double d = nearestPointDistance(frame.points, frame.viewpoint); d > kFarViewpoint && std::isfinite(d)) {
+      const std::lock_guard<std::mutex> lock(far_viewpoint_mutex);
+      if (far_viewpoint.empty()) {
+        std::ostringstream w;
+        w << "the nearest point of '" << a.inputs[i] << "' is " << d << " m from its viewpoint ("
+          << frame.viewpoint.transpose() << "), where normals are made to face and input.min_range/max_range measure "
+          << "from: the input seems not to be in its sensor's frame; give the sensor's position with --viewpoint X Y Z"
+          << (poses.empty() ? " (or the frames' sensor poses with --poses)" : "");
+        far_viewpoint = w.str();
+      }
+    }
     if (const double rounding = positionRounding(frame.points); rounding > 0.0) {
       const std::lock_guard<std::mutex> lock(input_rounding_mutex);
       input_rounding = std::max(input_rounding, rounding);
@@ -172,6 +240,7 @@ int runSample(const SampleArgs &a) {
     totals = pipeline.totals();
   }
   progress.finish();
+  if (!far_viewpoint.empty()) std::cerr << "hpds: warning: " << far_viewpoint << "\n";
   for (const auto &[name, input] : not_carried)
     std::cerr << "hpds: warning: input field '" << name << "' (of '" << input
               << "' and maybe others) is not in the output: " << fieldNotCarriedReason(name)
@@ -215,6 +284,9 @@ int runSample(const SampleArgs &a) {
   std::cout << "wrote " << output.size() << " samples (levels 0.." << report.output_level << ") to " << a.output;
   if (config.normals.enabled) std::cout << ", " << report.invalid_normals << " without a valid normal";
   std::cout << "\n";
+  // The input's own rounding counts only as far as the samples reach: points dropped as out of range (a 3e38
+  // outlier) made it huge once, and the warning blamed the input for an output that was fine.
+  input_rounding = std::min(input_rounding, std::ldexp(largestCoordinate(output), -24));
   if (const std::string w = roundingWarning(output, report.output_radius, config.output, input_rounding); !w.empty())
     std::cerr << w << "\n";
   if (!a.save_map.empty())
@@ -235,17 +307,25 @@ int runSample(const SampleArgs &a) {
 void addSampleCommand(CLI::App &app) {
   auto args = std::make_shared<SampleArgs>();
   CLI::App *cmd = app.add_subcommand("sample", "sample point clouds into an additive Poisson-disk hierarchy");
-  cmd->add_option("inputs", args->inputs, "input clouds: .pcd, .ply, KITTI .bin (several = a stream of frames)")
+  cmd->add_option("inputs", args->inputs,
+                  "input clouds: .pcd, .ply, KITTI .bin (several = a stream of frames); a folder stands for its "
+                  ".pcd/.ply/.bin files in name order")
       ->required();
   cmd->add_option("-o,--output", args->output, "output PLY (binary little-endian)")
       ->required()
       ->check(nonEmptyPath());
   cmd->add_option("--poses", args->poses, "KITTI pose file: one 3x4 sensor-to-world matrix per line, one per input");
+  cmd->add_option("--viewpoint", args->viewpoint,
+                  "[m] X Y Z: the sensor's position in the inputs' own coordinates, for every input (normals face it, "
+                  "input.min_range/max_range measure from it); default: a PCD's VIEWPOINT, else the origin")
+      ->expected(3)
+      ->check(finiteIn(-1e9, 1e9));
   cmd->add_option("--stats", args->stats, "write run statistics as JSON");
   cmd->add_option("--load-map", args->load_map, "map mode: start from a map saved by --save-map (same cell size and depth)");
   cmd->add_option("--save-map", args->save_map, "map mode: save the final map (written atomically) for a later --load-map");
   addSamplingOptions(*cmd, args->sampling);
   cmd->callback([args] {
+    args->inputs = expandInputs(args->inputs);
     const int rc = runSample(*args);
     if (rc != 0) throw CLI::RuntimeError(rc);
   });

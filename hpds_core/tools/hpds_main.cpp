@@ -31,6 +31,18 @@ int main(int argc, char **argv) {
 #ifdef HPDS_WITH_ROS
   hpds::cli::addReplayCommand(app);
 #endif
+  // CLI11 answers a mistyped command with "A subcommand is required"; say which word was not one.
+  std::string names;
+  bool known = false;
+  for (const CLI::App *sub : app.get_subcommands([](const CLI::App *) { return true; })) {
+    names += (names.empty() ? "" : ", ") + sub->get_name();
+    known = known || (argc > 1 && sub->check_name(argv[1]));
+  }
+  if (argc > 1 && argv[1][0] != '-' && !known) {
+    std::cerr << "hpds: error: unknown command '" << argv[1] << "': one of " << names
+              << "\nRun with --help for more information.\n";
+    return 2;
+  }
   try {
     app.parse(argc, argv);
   } catch (const CLI::RuntimeError &e) {

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <sstream>
 #include <stdexcept>
 
 #include "hpds/io/HierarchyFile.hpp"
@@ -159,6 +160,14 @@ bool lookupViewpoint(const tf2::BufferCore &buffer, const std::string &cloud_fra
   if (!lookupSensorPose(buffer, tfFrameId(cloud_frame), sensor_frame, stamp, pose, why)) return false;
   viewpoint = pose.translation();
   return true;
+}
+
+std::string noTransformAdvice(const std::string &why, double tf_timeout) {
+  if (why.find("into the future") == std::string::npos) return {};
+  std::ostringstream s;
+  s << "; the transform at the cloud's stamp had not arrived when ros/tf_timeout (" << tf_timeout
+    << " s) ran out: if the odometry lags the clouds, raise ros/tf_timeout above that lag";
+  return s.str();
 }
 
 bool sensorAtMapOrigin(const NodeConfig &config, const std::string &cloud_frame) {

@@ -18,6 +18,8 @@ import shutil
 import sys
 import time
 
+import numpy as np
+
 from . import _hpds
 from .runners import BuildError, Task
 
@@ -245,6 +247,12 @@ def build(inputs, poses_path, outdir, tile_size, config_yaml, runner, chunk_fram
     if len(poses) != len(inputs):
         raise BuildError("--poses: '%s' has %d poses for %d inputs (one pose per input is required)"
                          % (poses_path, len(poses), len(inputs)))
+    if len(poses):
+        # Georeferenced poses: float64 x y z unless the config chose a type, as `hpds sample` does.
+        config_yaml, note = _hpds.widen_xyz_for_poses(config_yaml, float(np.abs(poses[:, :3, 3]).max()),
+                                                      "--float32-xyz (output.float32_xyz: true)")
+        if note:
+            log(note)
     read = inputs + [os.fspath(poses_path)] + [os.fspath(p) for p in other_inputs]
     _refuse_if_building(outdir)  # before check_paths, which would call a running build's files leftovers
     check_paths(read, outdir)  # before the folder is made, so that a refused build leaves nothing behind

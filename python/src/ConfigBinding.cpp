@@ -8,6 +8,7 @@
 #include "Bindings.hpp"
 #include "hpds/config/ConfigYaml.hpp"
 #include "hpds/config/YamlScalar.hpp"
+#include "hpds/pipeline/OutputCloud.hpp"
 
 namespace py = pybind11;
 
@@ -53,13 +54,33 @@ void bindConfig(py::module_ &m) {
   m.def(
       "config_yaml",
       [](const std::string &yaml_text, const std::string &path, const std::string &overlay) {
-        HpdsConfig config = configFrom(yaml_text, path);
-        if (!overlay.empty()) applyConfigYaml(overlay, config);
+        if (overlay.empty()) return dumpConfigYaml(configFrom(yaml_text, path));
+        // The file's values are judged with the overlay over them, as the CLI judges a --config with its flags.
+        HpdsConfig config;
+        applyConfigYaml(path.empty() ? yaml_text : readConfigFile(path), config, path, ConfigValidation::kByCaller);
+        applyConfigYaml(overlay, config, "", ConfigValidation::kByCaller);
+        try {
+          validateConfig(config);
+        } catch (const std::invalid_argument &e) {
+          throw std::invalid_argument(std::string(e.what()) +
+                                      (path.empty() ? std::string() : " (in " + path + ", with the flags over it)"));
+        }
         return dumpConfigYaml(config);
       },
       py::arg("config_yaml"), py::arg("config_path"), py::arg("overlay") = std::string(),
       "Every key of the config (YAML file `config_path` if not empty, else `config_yaml` over the defaults, then the "
       "keys of `overlay` over it), validated, as complete YAML text.");
+  m.def(
+      "widen_xyz_for_poses",
+      [](const std::string &yaml_text, double largest_translation, const std::string &float32_key) {
+        HpdsConfig config = loadConfigString(yaml_text);
+        const std::string note = widenXyzForPoses(config, largest_translation, float32_key);
+        return py::make_tuple(note.empty() ? yaml_text : dumpConfigYaml(config), note);
+      },
+      py::arg("config_yaml"), py::arg("largest_translation"), py::arg("float32_key"),
+      "(config YAML, note): output.float64_xyz set where poses this far from the origin would make float32 x y z "
+      "round by over 1 % of the output radius and the config chose no type (hpds::widenXyzForPoses); else the same "
+      "YAML and an empty note.");
   m.def(
       "config_dict",
       [](const std::string &yaml_text, const std::string &path) {

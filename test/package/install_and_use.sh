@@ -157,6 +157,17 @@ CPP
     > "$work/core_pc.log" 2>&1 || { cat "$work/core_pc.log"; fail "a program built with pkg-config hpds_core does not build"; }
   LD_LIBRARY_PATH=$prefix/${core_pc%/pkgconfig/hpds_core.pc} "$work/core_pc" > /dev/null ||
     fail "a program built with pkg-config hpds_core does not run"
+  # pkg-config's -I (not CMake's -isystem) shows a consumer's strict warnings in our headers: every core header,
+  # in one file, must be clean under them (Hierarchy.hpp gave -Wsign-conversion warnings).
+  (cd "$prefix/include" && find hpds -name '*.hpp' ! -path 'hpds/pcl/*' ! -name pcl.hpp | sort |
+    sed 's/.*/#include <&>/') > "$work/all_headers.cpp"
+  # (Eigen's own headers warn there too: only ours are checked.)
+  # shellcheck disable=SC2046
+  g++ -std=c++17 -fsyntax-only -Wall -Wextra -Wpedantic -Wshadow -Wsign-conversion "$work/all_headers.cpp" \
+    $(cat "$work/core_pc.flags") > "$work/all_headers.log" 2>&1 || { cat "$work/all_headers.log"; fail "core headers do not compile"; }
+  if grep -E "include/hpds/.*warning" "$work/all_headers.log"; then
+    fail "the installed core headers warn under -Wall -Wextra -Wpedantic -Wshadow -Wsign-conversion"
+  fi
 fi
 
 # A separate project against the prefix.

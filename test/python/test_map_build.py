@@ -406,16 +406,18 @@ class MapBuild(unittest.TestCase):
         self.assertIn("viewpoint", str(e.exception))
         self.assertEqual(tile_files(self.out("viewpoint")), [])
 
-    def test_float32_rounding_is_warned_and_float64_xyz_avoids_it(self):
+    def test_far_poses_write_float64_unless_float32_is_asked_and_then_warn(self):
         # 1e7 m along x: float32 x y z round by 0.6 m, against an output radius of 0.11 m.
         poses = self.two_poses("poses_far.txt", dx=1e7)
         base = self.frames[:2] + ["--poses", poses, "--tile-size", str(TILE), "--workers", "0"] + SAMPLING
-        for flags, warned in (([], True), (["--float64-xyz"], False)):
+        for flags, warned in (([], False), (["--float64-xyz"], False), (["--float32-xyz"], True)):
             with self.subTest(flags=flags):
                 out = self.out("far%s" % "".join(flags))
                 with contextlib.redirect_stderr(io.StringIO()) as err:
                     self.assertEqual(map_build.main(base + ["-o", out] + flags), 0)
                 self.assertEqual("float64_xyz" in err.getvalue(), warned, err.getvalue())
+                # The widening is said where it happens, with the flag that keeps float32.
+                self.assertEqual("written as float64" in err.getvalue(), not flags, err.getvalue())
                 with open(os.path.join(out, "manifest.json")) as f:
                     rounding = json.load(f)["position_rounding"]
                 tile = hpds.ply.read(os.path.join(out, tile_files(out)[0]))
@@ -441,6 +443,17 @@ class MapBuild(unittest.TestCase):
         with contextlib.redirect_stderr(io.StringIO()) as err:
             self.assertEqual(map_build.main(base + ["-o", self.out("flags_bad"), "--covariances", "--no-normals"]), 1)
         self.assertIn("--covariances", err.getvalue())
+        # A config whose combination only the flags make valid is judged with them, as `hpds sample` judges it.
+        config = os.path.join(self.root, "normals_off_covariances_on.yaml")
+        with open(config, "w") as f:
+            f.write("normals:\n  enabled: false\n  covariances: true\n")
+        with contextlib.redirect_stderr(io.StringIO()) as err:
+            self.assertEqual(map_build.main(base + ["-o", self.out("flags_file"), "--config", config]), 1)
+        self.assertIn("normals.covariances: needs normals.enabled", err.getvalue())
+        self.assertIn("normals_off_covariances_on.yaml, with the flags over it", err.getvalue())
+        with contextlib.redirect_stderr(io.StringIO()):
+            self.assertEqual(map_build.main(base + ["-o", self.out("flags_mended"), "--config", config, "--normals"]), 0)
+        self.assertIn("cov_xx", hpds.ply.read(os.path.join(self.out("flags_mended"), tile_files(self.out("flags_mended"))[0])).dtype.names)
 
     def test_only_the_output_folder_is_made_and_no_lock_file_stays(self):
         # Found in a user trial: a mistyped -o on a shared file system became a tree of folders holding a whole map,

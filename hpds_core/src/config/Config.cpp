@@ -5,6 +5,7 @@
 #include <cstdio>
 #include <stdexcept>
 
+#include "hpds/config/YamlScalar.hpp"
 #include "hpds/sampling/CellKey.hpp"
 
 namespace hpds {
@@ -18,7 +19,7 @@ void requireFinite(const std::string &key, double v) {
 }
 void requireNonNegative(const std::string &key, double v) {
   requireFinite(key, v);
-  if (v < 0.0) fail(key, "must be >= 0, got " + std::to_string(v));
+  if (v < 0.0) fail(key, "must be >= 0, got " + yaml::formatNumber(v));
 }
 }  // namespace
 
@@ -106,8 +107,8 @@ void validateNeighbourhoods(const HpdsConfig &c) {
   const auto bound = [&](const std::string &key, double value, int level, const std::string &what) {
     const double limit = kMaxRadiusInLevelRadii * poissonRadius(resolved.cell_size, level);
     if (value > limit)
-      fail(key, "must be <= " + std::to_string(limit) + " m (64 radii of level " + std::to_string(level) + ", " +
-                    what + "), got " + std::to_string(value));
+      fail(key, "must be <= " + yaml::formatNumber(limit) + " m (64 radii of level " + std::to_string(level) + ", " +
+                    what + "), got " + yaml::formatNumber(value));
   };
   bound("normals.radius", c.normals.radius, finest, "the finest level the normals read");
   bound("order.feature_radius", c.order.feature_radius, output, "the output level");
@@ -125,7 +126,7 @@ void validateConfig(const HpdsConfig &c) {
                            "): expected random, input, sphericity or surface_variation");
   requireFinite("hierarchy.cell_size", c.hierarchy.cell_size);
   if (c.hierarchy.cell_size < 0.0)
-    fail("hierarchy.cell_size", "must be > 0, or 0 = derived from output.spacing, got " + std::to_string(c.hierarchy.cell_size));
+    fail("hierarchy.cell_size", "must be > 0, or 0 = derived from output.spacing, got " + yaml::formatNumber(c.hierarchy.cell_size));
   if (c.hierarchy.cell_size > kMaxCellSize) fail("hierarchy.cell_size", "must be <= 1e6 m");
   if (c.hierarchy.max_depth < 0 || c.hierarchy.max_depth > 21)
     fail("hierarchy.max_depth", "must be in 0..21, got " + std::to_string(c.hierarchy.max_depth));
@@ -162,11 +163,11 @@ void validateConfig(const HpdsConfig &c) {
   // Below 1e-4 the float32 output would not resolve the normal's variance against the in-plane 1.
   if (c.normals.covariance_epsilon < 1e-4 || c.normals.covariance_epsilon > 1.0)
     fail("normals.covariance_epsilon",
-         "must be in 1e-4..1, got " + std::to_string(c.normals.covariance_epsilon));
+         "must be in 1e-4..1, got " + yaml::formatNumber(c.normals.covariance_epsilon));
   requireFinite("normals.covariance_line_ratio", c.normals.covariance_line_ratio);
   if (c.normals.covariance_line_ratio < 0.0 || c.normals.covariance_line_ratio > 1.0)
     fail("normals.covariance_line_ratio",
-         "must be in 0..1 (0 = every neighbourhood a plane), got " + std::to_string(c.normals.covariance_line_ratio));
+         "must be in 0..1 (0 = every neighbourhood a plane), got " + yaml::formatNumber(c.normals.covariance_line_ratio));
   requireNonNegative("map.evict_distance", c.map.evict_distance);
   if (c.map.keep_depth < -1 || c.map.keep_depth > c.hierarchy.max_depth)
     fail("map.keep_depth", "must be -1 or in 0..hierarchy.max_depth (" + std::to_string(c.hierarchy.max_depth) +
@@ -222,7 +223,9 @@ OutputResolution resolveOutput(const HpdsConfig &c) {
   if (by_spacing) r.spacing_asked = c.output.spacing;
   const std::string result = "output level " + std::to_string(r.level) + ", r_" + std::to_string(r.level) + " = " +
                              metres(r.radius) + ", level-0 cell " + metres(r.cell_size);
-  const std::string cell = derived ? "hierarchy.cell_size 0 (" + metres(kDefaultCellSize) + ")"
+  const std::string cell = derived
+                               ? "hierarchy.cell_size 0 (no output.spacing to derive it from: " +
+                                     metres(kDefaultCellSize) + ")"
                                    : "hierarchy.cell_size " + metres(c.hierarchy.cell_size);
   if (by_spacing && derived) {
     r.reason = result + ": the spacing asked (" + spacing + "), with the cell derived from it (hierarchy.cell_size 0)";

@@ -13,7 +13,8 @@
 namespace hpds {
 
 /// applyConfigYaml's contract for the HpdsConfig keys (strong guarantee, errors start with the dotted key).
-void applyConfigKeysYaml(const std::string &yaml_text, HpdsConfig &config, const std::string &source);
+void applyConfigKeysYaml(const std::string &yaml_text, HpdsConfig &config, const std::string &source,
+                         ConfigValidation validation = ConfigValidation::kNow);
 
 namespace yaml_node {
 /// What a node is, for messages: "a map", "nothing (null)", "the quoted string '4.0'", "'abc'".

@@ -371,7 +371,8 @@ const std::string &plainScalarText(const YAML::Node &node, const std::string &ke
 }
 }  // namespace yaml_node
 
-void applyConfigKeysYaml(const std::string &yaml_text, HpdsConfig &config, const std::string &source) {
+void applyConfigKeysYaml(const std::string &yaml_text, HpdsConfig &config, const std::string &source,
+                         ConfigValidation validation) {
   try {
     // yaml-cpp takes a few hundred bytes per node: a 6 MB sequence took 1.4 GB.
     if (yaml_text.size() > kMaxConfigBytes)
@@ -402,7 +403,7 @@ void applyConfigKeysYaml(const std::string &yaml_text, HpdsConfig &config, const
       fail(kDocument, "expected a map of config keys, got text that is not YAML");
     HpdsConfig result = config;  // work on a copy so a failure leaves the caller's config untouched
     applyDocument(document, result);
-    validateConfig(result);
+    if (validation == ConfigValidation::kNow) validateConfig(result);
     config = result;
   } catch (const std::invalid_argument &e) {
     if (source.empty()) throw;
@@ -411,10 +412,15 @@ void applyConfigKeysYaml(const std::string &yaml_text, HpdsConfig &config, const
 }
 
 void applyConfigYaml(const std::string &yaml_text, HpdsConfig &config, const std::string &source) {
+  applyConfigYaml(yaml_text, config, source, ConfigValidation::kNow);
+}
+
+void applyConfigYaml(const std::string &yaml_text, HpdsConfig &config, const std::string &source,
+                     ConfigValidation validation) {
   // The whole file as the node reads it: its `ros:` section and diagnostic_period are validated, then dropped.
   NodeConfig node;
   node.hpds = config;
-  applyNodeConfigYaml(yaml_text, node, source);
+  applyNodeConfigYaml(yaml_text, node, source, validation);
   config = node.hpds;
 }
 
@@ -445,9 +451,11 @@ std::string readConfigFile(const std::string &path) {
   return text;
 }
 
-HpdsConfig loadConfigFile(const std::string &path) {
+HpdsConfig loadConfigFile(const std::string &path) { return loadConfigFile(path, ConfigValidation::kNow); }
+
+HpdsConfig loadConfigFile(const std::string &path, ConfigValidation validation) {
   HpdsConfig config;
-  applyConfigYaml(readConfigFile(path), config, path);
+  applyConfigYaml(readConfigFile(path), config, path, validation);
   return config;
 }
 

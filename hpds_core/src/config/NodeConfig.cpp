@@ -215,7 +215,8 @@ const std::vector<std::string> &nodeOnlyKeys() {
   return keys;
 }
 
-void applyNodeConfigYaml(const std::string &yaml_text, NodeConfig &config, const std::string &source) {
+void applyNodeConfigYaml(const std::string &yaml_text, NodeConfig &config, const std::string &source,
+                         ConfigValidation validation) {
   const std::vector<std::string> &ignored_keys = nodeOnlyKeys();
   const std::string suffix = source.empty() ? "" : " (in " + source + ")";
   if (yaml_text.size() > kMaxConfigBytes)
@@ -238,7 +239,8 @@ void applyNodeConfigYaml(const std::string &yaml_text, NodeConfig &config, const
   }
   NodeConfig result = config;
   if (!root.IsMap()) {
-    applyConfigKeysYaml(yaml_text, result.hpds, source);  // empty document: defaults; anything else: its error
+    // empty document: defaults; anything else: its error
+    applyConfigKeysYaml(yaml_text, result.hpds, source, validation);
   } else {
     YAML::Node rest(YAML::NodeType::Map);
     try {
@@ -268,19 +270,19 @@ void applyNodeConfigYaml(const std::string &yaml_text, NodeConfig &config, const
     }
     YAML::Emitter out;
     emit(out, rest);
-    applyConfigKeysYaml(rest.size() ? std::string(out.c_str()) : std::string(), result.hpds, source);
+    applyConfigKeysYaml(rest.size() ? std::string(out.c_str()) : std::string(), result.hpds, source, validation);
   }
   try {
-    validateRosConfig(result.ros, result.hpds);
+    if (validation == ConfigValidation::kNow) validateRosConfig(result.ros, result.hpds);
   } catch (const std::invalid_argument &e) {
     throw std::invalid_argument(e.what() + suffix);
   }
   config = std::move(result);
 }
 
-NodeConfig loadNodeConfigFile(const std::string &path) {
+NodeConfig loadNodeConfigFile(const std::string &path, ConfigValidation validation) {
   NodeConfig config;
-  applyNodeConfigYaml(readConfigFile(path), config, path);
+  applyNodeConfigYaml(readConfigFile(path), config, path, validation);
   return config;
 }
 

@@ -157,6 +157,19 @@ double positionRounding(const PointBuffer &cloud) {
   return std::ldexp(largest, -24);
 }
 
+double largestCoordinate(const PointBuffer &cloud) {
+  double largest = 0.0;
+  for (const char *name : {"x", "y", "z"}) {
+    const PointField *axis = cloud.layout().find(name);
+    if (!axis) continue;
+    for (std::size_t i = 0; i < cloud.size(); ++i) {
+      const double v = readAsDouble(cloud.record(i), *axis);
+      if (std::isfinite(v)) largest = std::max(largest, std::fabs(v));
+    }
+  }
+  return largest;
+}
+
 bool roundingMatters(double rounding, double output_radius) { return rounding > 0.01 * output_radius; }
 
 std::string positionRoundingWarning(double rounding, double output_radius, const std::string &key,
@@ -176,6 +189,20 @@ std::string positionRoundingWarning(double rounding, double output_radius, const
   out << "the output's float32 x y z round positions by up to " << rounding << " m (coordinates up to "
       << std::ldexp(rounding, 24) << " m), more than 1 % of the output radius " << output_radius
       << " m: samples may come out closer than it; set " << key << " (or work in a local frame)";
+  return out.str();
+}
+
+std::string widenXyzForPoses(HpdsConfig &config, double largest_translation, const std::string &float32_key) {
+  if (outputXyzType(config.output) != XyzType::AsInput || !std::isfinite(largest_translation)) return {};
+  const double radius = resolveOutput(config).radius;
+  const double rounding = std::ldexp(std::fabs(largest_translation), -24);
+  if (!roundingMatters(rounding, radius)) return {};
+  config.output.float64_xyz = true;
+  std::ostringstream out;
+  out << "x y z are written as float64: the poses place sensors up to " << std::fabs(largest_translation)
+      << " m from the origin, where float32 would round positions by up to " << rounding
+      << " m, more than 1 % of the output radius " << radius << " m; set " << float32_key
+      << " for a reader that takes float32 only (PCL's typed point clouds)";
   return out.str();
 }
 

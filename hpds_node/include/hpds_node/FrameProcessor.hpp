@@ -178,6 +178,11 @@ bool lookupSensorPose(const tf2::BufferCore &buffer, const std::string &target, 
 bool lookupViewpoint(const tf2::BufferCore &buffer, const std::string &cloud_frame, const std::string &sensor_frame,
                      const ros::Time &stamp, Eigen::Vector3d &viewpoint, std::string *why = nullptr);
 
+/// What to set when a frame was dropped for want of a transform (`why`: lookupSensorPose's reason): a transform that
+/// tf can only extrapolate into the future arrived later than ros/tf_timeout (`tf_timeout` seconds) waited, which a
+/// user fixes by raising it, not by looking for a missing frame. Empty for other reasons.
+[[nodiscard]] std::string noTransformAdvice(const std::string &why, double tf_timeout);
+
 /// Whether a cloud in `cloud_frame` has no known sensor position in map mode: it arrives in the fixed frame itself and
 /// no ros/sensor_frame says where the sensor was, so the viewpoint is the map's origin.
 [[nodiscard]] bool sensorAtMapOrigin(const NodeConfig &config, const std::string &cloud_frame);

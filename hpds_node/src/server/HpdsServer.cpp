@@ -409,7 +409,8 @@ void HpdsServer::handle(const sensor_msgs::PointCloud2::ConstPtr &msg, std::size
                                                                     : " '" + msg->header.frame_id + "' -> '" +
                                                                           target_frame_ + "'")
                                           << " (" << count(DropReason::NoTransform)
-                                          << " so far, counted as no_transform): " << why);
+                                          << " so far, counted as no_transform): " << why
+                                          << hpds_node::noTransformAdvice(why, config_.ros.tf_timeout));
     } else {
       // 4. Shared per-frame processing, then publish what was built, in arrival order. With one worker its
       //    pipeline counts the frames itself; several take the index of their frame in the stream.

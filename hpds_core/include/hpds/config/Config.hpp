@@ -88,6 +88,13 @@ struct HpdsConfig {
 /// Throws std::invalid_argument whose message starts with the offending key (e.g. "hierarchy.max_depth: ...").
 void validateConfig(const HpdsConfig &config);
 
+/// How a loader ends. kNow: validateConfig on the result (every loader's default). kByCaller: the keys, their types
+/// and their syntax are checked but not the values or their combination, for a caller that lays more settings over
+/// the loaded config (command-line flags, a dict of overrides) and then validates the result itself, so that a file
+/// whose combination only the overrides make valid (`normals: {enabled: false, covariances: true}` with `--normals`)
+/// is judged with them.
+enum class ConfigValidation { kNow, kByCaller };
+
 /// The output level and the level-0 cell a config runs with, and why.
 ///  - output.level -1, output.spacing S > 0, hierarchy.cell_size 0 (derived): r_L = S. L is the largest level, at
 ///    most max_depth, with 2 S / sqrt(3) * 2^L <= kDefaultCellSize (else 0), and cell_size = 2 S / sqrt(3) * 2^L

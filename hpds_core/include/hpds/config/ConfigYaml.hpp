@@ -10,7 +10,8 @@
 // - Every error is std::invalid_argument whose message starts with the dotted key
 //   ("hierarchy.max_depth: expected an integer, got 'abc'"); errors with no key start with "(document)"
 //   (syntax errors, which carry yaml-cpp's line and column) or "config file '<path>'" (unreadable file).
-// - Every loader finishes with validateConfig on the result.
+// - Every loader finishes with validateConfig on the result, unless its caller asks to do that itself
+//   (ConfigValidation::kByCaller).
 // - yaml-cpp stays out of this header so callers (the CLI, the ROS node) need not see it.
 #pragma once
 
@@ -33,6 +34,8 @@ inline constexpr std::size_t kMaxConfigBytes = 256 * 1024;
 /// Reads the YAML file at `path` (readConfigFile) over the defaults; errors name `path`. An empty file gives the
 /// defaults.
 [[nodiscard]] HpdsConfig loadConfigFile(const std::string &path);
+/// The same with the values left for the caller to validate (ConfigValidation::kByCaller) or not.
+[[nodiscard]] HpdsConfig loadConfigFile(const std::string &path, ConfigValidation validation);
 
 /// Same as loadConfigFile for YAML held in memory.
 [[nodiscard]] HpdsConfig loadConfigString(const std::string &yaml_text);
@@ -41,6 +44,8 @@ inline constexpr std::size_t kMaxConfigBytes = 256 * 1024;
 /// result. Strong guarantee: on any error `config` is unchanged. `source` (a file path, "rosparam ~", ...) is
 /// appended to error messages as " (in <source>)" when not empty.
 void applyConfigYaml(const std::string &yaml_text, HpdsConfig &config, const std::string &source = "");
+void applyConfigYaml(const std::string &yaml_text, HpdsConfig &config, const std::string &source,
+                     ConfigValidation validation);
 
 /// Complete YAML of every key in struct order; loading it back gives an equal struct (doubles are printed
 /// with the shortest text that parses back to the same value).

@@ -51,11 +51,13 @@ struct NodeConfig {
 [[nodiscard]] const std::vector<std::string> &nodeOnlyKeys();
 
 /// Overlays the YAML `yaml_text` (top-level config keys and an optional `ros:` map) onto `config` and validates
-/// the result (validateConfig + validateRosConfig).
-void applyNodeConfigYaml(const std::string &yaml_text, NodeConfig &config, const std::string &source);
+/// the result (validateConfig + validateRosConfig), unless `validation` leaves both to the caller.
+void applyNodeConfigYaml(const std::string &yaml_text, NodeConfig &config, const std::string &source,
+                         ConfigValidation validation = ConfigValidation::kNow);
 
 /// Reads a YAML file (same shape) over the defaults; errors name the path.
-[[nodiscard]] NodeConfig loadNodeConfigFile(const std::string &path);
+[[nodiscard]] NodeConfig loadNodeConfigFile(const std::string &path,
+                                            ConfigValidation validation = ConfigValidation::kNow);
 
 /// Throws std::invalid_argument naming the "ros.*" key for a bad value; publish_levels are checked against
 /// hierarchy.max_depth, fixed_frame must be set in map mode, load_map_on_start / save_map_on_shutdown need map mode

@@ -54,6 +54,9 @@ enum class XyzType { AsInput, Float32, Float64 };
 /// compare it with the output radius and say when it is not small against it.
 [[nodiscard]] double positionRounding(const PointBuffer &cloud);
 
+/// [m] The largest finite |x|, |y| or |z| of `cloud`, whatever their type (0 for an empty cloud).
+[[nodiscard]] double largestCoordinate(const PointBuffer &cloud);
+
 /// Whether float32 positions that round by up to `rounding` metres (positionRounding) can break the sampling at
 /// output radius `output_radius`: more than 1 % of it. The one threshold of every rounding warning, and of the
 /// Python binding's move to a local origin.
@@ -67,5 +70,14 @@ enum class XyzType { AsInput, Float32, Float64 };
 /// that float64 output cannot restore them and suggests a local frame instead of `key`.
 [[nodiscard]] std::string positionRoundingWarning(double rounding, double output_radius, const std::string &key,
                                                   double input_rounding = 0.0);
+
+/// Where poses place a run's samples far from the origin (georeferenced maps), float32 x y z would break the spacing
+/// asked for. When neither output key chooses a type (outputXyzType AsInput) and float32 would round positions
+/// around sensors at `largest_translation` (the largest |component| of the frames' pose translations, metres) by
+/// more than 1 % of the output radius (roundingMatters), this sets output.float64_xyz and returns the sentence that
+/// says so and names `float32_key` (what the reader sets to keep float32 for a float32-only reader); otherwise it
+/// changes nothing and returns "". Samples lie a sensor's range beyond its pose: positionRoundingWarning on the
+/// written cloud still catches what this bound misses.
+std::string widenXyzForPoses(HpdsConfig &config, double largest_translation, const std::string &float32_key);
 
 }  // namespace hpds

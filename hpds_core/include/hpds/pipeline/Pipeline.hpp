@@ -34,8 +34,11 @@
 //   points neither sets it nor has to match it; a frame of other fields throws std::invalid_argument before anything
 //   changes, unless the map has never held a sample (then its fields become the map's).
 // - Same config (seed) and same frames give identical samples, whatever `threads` is.
-// - normals() and makeCloud() take ids of live samples (outputSamples(), FrameResult::new_samples of the last frame, ...);
-//   any other id (evicted, from an earlier scan-mode frame, never issued) throws std::invalid_argument.
+// - normals() and makeCloud() take ids of live samples (outputSamples(), FrameResult::new_samples of the last frame, ...)
+//   and throw std::invalid_argument for an id that is no live sample. Ids are valid until the next addFrame or
+//   loadMap: the hierarchy reuses the slots of evicted samples and scan mode starts each frame afresh, so an id kept
+//   across frames may name another sample by then, which cannot be told from a stale id. Keep positions or the
+//   output cloud across frames, not ids.
 // - Not thread-safe: one thread drives a Pipeline. A moved-from Pipeline may only be assigned to or destroyed.
 //   Another thread may stop a long addFrame or normals() through setInterrupt (util/Interrupt.hpp).
 #pragma once
@@ -68,7 +71,7 @@ struct FrameCounters {
   std::uint64_t out_of_range = 0;     ///< coordinates beyond the hierarchy's exact key range
   std::uint64_t dropped_depth = 0;    ///< rejected at every level down to buildDepth()
   std::uint64_t accepted = 0;
-  std::uint64_t evicted = 0;  ///< samples removed from the map before this frame
+  std::uint64_t evicted = 0;  ///< samples removed from the map with this frame (before and after its insertion)
   std::array<std::uint64_t, kMaxDepthLimit + 1> accepted_per_level{};
 
   FrameCounters &operator+=(const FrameCounters &o);
@@ -111,7 +114,9 @@ class Pipeline {
   [[nodiscard]] std::vector<SampleNormal> normals(const std::vector<SampleId> &ids,
                                                   std::vector<LocalPca> *neighbourhoods = nullptr) const;
   /// Output cloud of `ids` (normals estimated when normals.enabled, with covariances when normals.covariances),
-  /// layout of OutputCloud.hpp. `seconds_normals` gets the time of both.
+  /// layout of OutputCloud.hpp. `seconds_normals` gets the time of both. x y z are float32 unless the input's are
+  /// float64 or an output key says otherwise: in map mode with poses far from the origin (UTM), float32 rounds the
+  /// fixed-frame positions (positionRounding; widenXyzForPoses sets output.float64_xyz where that matters).
   [[nodiscard]] PointBuffer makeCloud(const std::vector<SampleId> &ids, bool with_frame_field,
                                       double *seconds_normals = nullptr) const;
 

@@ -113,12 +113,12 @@ class Hierarchy {
 
   [[nodiscard]] int maxDepth() const { return max_depth_; }
   [[nodiscard]] double cellSize() const { return cell_size_; }
-  [[nodiscard]] double edge(int level) const { return edge_[level]; }
-  [[nodiscard]] double radius(int level) const { return radius_[level]; }
+  [[nodiscard]] double edge(int level) const { return edge_[static_cast<std::size_t>(level)]; }
+  [[nodiscard]] double radius(int level) const { return radius_[static_cast<std::size_t>(level)]; }
 
   /// Live samples (all levels) and per level.
   [[nodiscard]] std::size_t sampleCount() const { return live_; }
-  [[nodiscard]] std::size_t countAtLevel(int level) const { return grids_[level].size(); }
+  [[nodiscard]] std::size_t countAtLevel(int level) const { return grids_[static_cast<std::size_t>(level)].size(); }
   /// One past the largest sample id ever handed out (ids below it may be free slots).
   [[nodiscard]] std::size_t idBound() const { return level_.size(); }
   [[nodiscard]] bool isLive(SampleId id) const { return id < level_.size() && level_[id] != kFreeSlotLevel; }
@@ -137,7 +137,7 @@ class Hierarchy {
   }
   /// The sample at `level` in the cell containing `xyz`, or kNoSample.
   [[nodiscard]] SampleId sampleInCell(int level, const double xyz[3]) const;
-  [[nodiscard]] const LevelGrid &grid(int level) const { return grids_[level]; }
+  [[nodiscard]] const LevelGrid &grid(int level) const { return grids_[static_cast<std::size_t>(level)]; }
 
   /// Live sample ids of levels 0..max_level in increasing id order.
   [[nodiscard]] std::vector<SampleId> samplesUpTo(int max_level) const;
@@ -181,7 +181,8 @@ class Hierarchy {
                       const LevelGrid::KnownBlock &own) const;
   /// conflictIn in the grid of `level`.
   double conflictAt(int level, const double q[3], const CellKey &key, double radius, SampleId &witness) const {
-    return conflictIn(grids_[level], edge_[level], q, key, radius, witness);
+    const auto l = static_cast<std::size_t>(level);
+    return conflictIn(grids_[l], edge_[l], q, key, radius, witness);
   }
   /// `key`'s block in `grid`, looked up, with `key`'s cell to be left out of a walk.
   static LevelGrid::KnownBlock ownBlock(const LevelGrid &grid, const CellKey &key) {
@@ -206,11 +207,13 @@ class Hierarchy {
     // data-dependent loop exit (a mispredicted branch per rejection otherwise). Inline: it runs once per try.
     // Counting stops at `last`, the batch's last level: a point sent past it is dropped, however far.
     int next = level + 1;
-    for (int l = level + 1; l <= last; ++l) next += d2 < radius2_[l] ? 1 : 0;
+    for (int l = level + 1; l <= last; ++l) next += d2 < radius2_[static_cast<std::size_t>(l)] ? 1 : 0;
     return next;
   }
   /// Puts the point of `rank` on the schedule of `level`; level max_depth + 1 (at most) means dropped.
-  void schedule(int level, std::uint32_t rank) { pending_[level][rank >> 6] |= std::uint64_t(1) << (rank & 63); }
+  void schedule(int level, std::uint32_t rank) {
+    pending_[static_cast<std::size_t>(level)][rank >> 6] |= std::uint64_t(1) << (rank & 63);
+  }
   /// Witness-cache slots are keyed by a cell this many levels finer than the level being tried.
   static constexpr int kWitnessGroupOffset = 1;
   /// Points a pass looks ahead to prefetch.
@@ -292,11 +295,11 @@ class Hierarchy {
 
 template <typename Fn>
 void Hierarchy::visitBall(int level, const double q[3], double radius, Fn &fn) const {
-  const LevelGrid &grid = grids_[level];
+  const LevelGrid &grid = grids_[static_cast<std::size_t>(level)];
   if (grid.size() == 0) return;
   CellKey k;
   if (!keyAt(level, q, k)) return;
-  const double e = edge_[level];
+  const double e = edge_[static_cast<std::size_t>(level)];
   const double r2 = radius * radius;
   auto visit = [&](SampleId s) {
     const double d2 = distance2(position(s), q);
