@@ -529,6 +529,23 @@ TEST(PipelineLayout, OtherFieldsAreRefusedOnlyWhileTheMapHoldsSamples) {
     EXPECT_NE(m.find("x y z range as float32 float32 float32 float32, 16 bytes"), std::string::npos) << m;
     EXPECT_NE(m.find("differ from the map's (x y z intensity"), std::string::npos) << m;
   }
+  // clearMap is the way out for a stream whose fields changed for good: the map empties, the frame count stays, and
+  // the next frame's fields become the map's; its output is that of a fresh pipeline at the same frame index.
+  const std::uint32_t frames = p.framesProcessed();
+  p.clearMap();
+  EXPECT_EQ(p.hierarchy().sampleCount(), 0u);
+  EXPECT_EQ(p.framesProcessed(), frames);
+  ASSERT_NO_THROW((void)p.addFrame(patchIn(with_range, 3.0, 1.0)));
+  Pipeline fresh(layoutTestConfig());
+  fresh.setNextFrameIndex(frames);
+  (void)fresh.addFrame(patchIn(with_range, 3.0, 1.0));
+  const PointBuffer got = p.makeCloud(p.outputSamples(), false), want = fresh.makeCloud(fresh.outputSamples(), false);
+  EXPECT_TRUE(got.layout() == want.layout());
+  EXPECT_EQ(got.bytes(), want.bytes());
+  HpdsConfig scan = layoutTestConfig();
+  scan.mode = Mode::Scan;
+  Pipeline scanning(scan);
+  EXPECT_THROW(scanning.clearMap(), std::invalid_argument);
 }
 
 }  // namespace

@@ -148,6 +148,16 @@ std::string FrameProcessor::loadMap(const std::string &path) {
   return warning;
 }
 
+std::size_t FrameProcessor::clearMap() {
+  const std::size_t held = pipeline_.hierarchy().sampleCount();
+  pipeline_.clearMap();
+  loaded_deepest_ = -1;
+  loaded_frames_ = 0;
+  local_map_sent_ = false;
+  last_local_map_stamp_ = 0.0;
+  return held;
+}
+
 bool viewpointNeedsLookup(const std::string &cloud_frame, const std::string &sensor_frame) {
   return !sensor_frame.empty() && sensor_frame != tfFrameId(cloud_frame);
 }
@@ -202,7 +212,8 @@ ProcessedFrame FrameProcessor::process(const sensor_msgs::PointCloud2 &msg, cons
     inserted = pipeline_.addFrame(frame);
   } catch (const std::invalid_argument &e) {
     r.drop = DropReason::LayoutChanged;
-    r.why = e.what();
+    // The node logs this: say the way out that needs no restart.
+    r.why = std::string(e.what()) + " (if the stream's fields changed for good, ~clear_map starts a map with them)";
     countDrop(r.drop);
     return r;
   }

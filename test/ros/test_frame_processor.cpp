@@ -458,6 +458,27 @@ TEST(FrameProcessor, DropsAreCountedByReason) {
   EXPECT_EQ(processor.stats().dropped[int(hpds_node::DropReason::NoTransform)], 1u);
   EXPECT_EQ(processor.stats().droppedTotal(), 3u);
   EXPECT_EQ(processor.stats().processed, 1u);
+  {
+    // A driver restarted with other fields for good: every frame was dropped until a restart. ~clear_map's
+    // clearMap empties the map, and the next frame's fields become the map's.
+    FrameProcessor restarted(config);
+    ASSERT_TRUE(restarted.process(good, lidar.pose(0), OutputRequest::none(0)).processed);
+    const auto refused = restarted.process(toMsg(plain, 2.0), lidar.pose(1), OutputRequest::all());
+    ASSERT_FALSE(refused.processed);
+    EXPECT_NE(refused.why.find("~clear_map starts a map with them"), std::string::npos) << refused.why;
+    EXPECT_EQ(restarted.clearMap(), before);
+    EXPECT_EQ(restarted.pipeline().hierarchy().sampleCount(), 0u);
+    const hpds::PointBuffer &src = lidar.frame(1).frame.points;
+    hpds::PointBuffer xyz_only(other, src.size());
+    for (std::size_t i = 0; i < src.size(); ++i)
+      for (int a = 0; a < 3; ++a)
+        hpds::writeFromDouble(xyz_only.record(i), other.fields[static_cast<std::size_t>(a)],
+                              hpds::readAsDouble(src.record(i), src.layout().fields[static_cast<std::size_t>(a)]));
+    const auto after = restarted.process(toMsg(xyz_only, 2.0), lidar.pose(1), OutputRequest::all());
+    EXPECT_TRUE(after.processed) << after.why;
+    EXPECT_GT(after.output.width, 100u);
+    EXPECT_EQ(restarted.pipeline().hierarchy().recordLayout().fields.size(), 3u);
+  }
 
   // A default-constructed message (no fields, 0 x 0: a driver's idle output) is an empty frame, not a malformed
   // one without x (it was counted as missing_xyz), whatever fields the map has.

@@ -216,6 +216,25 @@ TEST_F(NodePersistence, SaveAndLoadServicesOnARunningNode) {
   EXPECT_EQ(again.hierarchy().sampleCount(), ref.pipeline().hierarchy().sampleCount());
   EXPECT_EQ(again.framesProcessed(), 5u);
   EXPECT_EQ(output.size(), sent);
+
+  // ~clear_map empties the running map (the file stays), and frame 0 sent again is new to it: it gives what a fresh
+  // processor numbering it 5 gives.
+  const std::vector<std::uint8_t> last_save = readBytes(file);
+  r = call(target_ + "/clear_map");
+  ASSERT_TRUE(r.success) << r.message;
+  EXPECT_TRUE(contains(r.message, "cleared " + std::to_string(ref.pipeline().hierarchy().sampleCount()) + " samples"))
+      << r.message;
+  EXPECT_TRUE(hpds_test::waitFor([&] { return diag.value("samples stored") == 0.0; }, 30.0))
+      << "samples stored: " << diag.value("samples stored");
+  EXPECT_TRUE(readBytes(file) == last_save) << "a clear leaves the file alone";
+  FrameProcessor cleared(config_);
+  cleared.setNextFrameIndex(5);
+  {
+    SCOPED_TRACE("frame 0 after the clear");
+    const auto [out, news] = send(0);
+    ASSERT_TRUE(out && news);
+    expectSameAsReference(*out, *news, cleared, *frameMsg(lidar, 0));
+  }
 }
 
 TEST(NodePersistenceRefused, ScanModeAndNoMapFile) {
@@ -239,6 +258,13 @@ TEST(NodePersistenceRefused, ScanModeAndNoMapFile) {
   EXPECT_TRUE(contains(r.message, "it is '" + later + "' now, but parameters are read only at start")) << r.message;
   EXPECT_FALSE(fs::exists(later));
   ros::param::del(nofile + "/ros/map_file");
+  // ~clear_map needs a map, not a file.
+  auto c = call(scan + "/clear_map");
+  EXPECT_FALSE(c.success);
+  EXPECT_TRUE(contains(c.message, "scan mode")) << c.message;
+  c = call(nofile + "/clear_map");
+  EXPECT_TRUE(c.success) << c.message;
+  EXPECT_TRUE(contains(c.message, "cleared 0 samples")) << c.message;
 }
 
 // Issue 24 item 5: one segfault was seen during a ~save_map call on a node without ros/map_file. Under TSan only

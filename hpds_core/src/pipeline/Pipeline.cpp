@@ -416,6 +416,12 @@ void Pipeline::replaceMap(Hierarchy &&map, std::uint32_t next_frame) {
   map_layout_fixed_ = !hierarchy_.recordLayout().fields.empty();
 }
 
+void Pipeline::clearMap() {
+  if (config_.mode != Mode::Map) throw std::invalid_argument("mode: clearing the map needs map mode");
+  // A bare hierarchy has no fields, so replaceMap lets the next frame set them.
+  replaceMap(Hierarchy(config_.hierarchy.cell_size, config_.hierarchy.max_depth), frames_);
+}
+
 std::vector<SampleId> Pipeline::outputSamples() const { return hierarchy_.samplesUpTo(output_level_); }
 
 std::vector<SampleId> Pipeline::atOutputLevels(const std::vector<SampleId> &ids) const {

@@ -129,6 +129,8 @@ class FrameProcessor {
   /// std::runtime_error ("<path>: <problem>") for a missing, corrupt, truncated or incompatible file, leaving the
   /// processor unchanged. Returns hpds::loadMap's warning (kept normals of other settings, dropped), or empty.
   std::string loadMap(const std::string &path);
+  /// Map mode: an empty map whose fields the next frame sets (hpds::Pipeline::clearMap); returns the samples it held.
+  std::size_t clearMap();
   /// Map mode, after a loadMap: what a save would lose (hpds::shallowSaveWarning: this run builds fewer levels than
   /// the loaded map held, so its deeper levels would not cover the frames since), or empty.
   [[nodiscard]] std::string shallowSaveWarning() const;

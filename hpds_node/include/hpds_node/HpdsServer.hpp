@@ -98,6 +98,7 @@ class HpdsServer {
 
   // Map persistence.
   bool onMapService(bool save, std_srvs::Trigger::Request &req, std_srvs::Trigger::Response &res);
+  bool onClearMap(std_srvs::Trigger::Request &req, std_srvs::Trigger::Response &res);
   /// On the worker (or when no worker runs): performs the save or load.
   [[nodiscard]] std::pair<bool, std::string> runMapCommand(bool save);
   void loadMapOnStart();
@@ -164,14 +165,14 @@ class HpdsServer {
   // Services: their own queue and thread, declared after the pool so that they are torn down first.
   ros::CallbackQueue service_queue_;
   std::unique_ptr<ros::AsyncSpinner> service_spinner_;
-  ros::ServiceServer srv_save_map_, srv_load_map_;
+  ros::ServiceServer srv_save_map_, srv_load_map_, srv_clear_map_;
   bool shut_down_ = false;
   bool shutdown_ok_ = true;
   // The map's frame counter when it was last loaded or saved (0: the empty map of the start). A shutdown with no
   // frame since leaves ros/map_file alone: re-saving a map just loaded would rewrite it under this run's settings
   // (normals of other settings dropped) and an empty start would overwrite a map nobody asked to load.
   std::uint32_t frames_at_last_sync_ = 0;
-  bool loaded_or_saved_ = false;
+  std::string last_sync_ = "the start";  ///< what set frames_at_last_sync_, for the shutdown log
 };
 
 }  // namespace hpds_node

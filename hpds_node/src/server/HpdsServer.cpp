@@ -108,6 +108,8 @@ HpdsServer::HpdsServer(ros::NodeHandle nh, ros::NodeHandle private_nh, const std
       "save_map", [this](auto &req, auto &res) { return onMapService(true, req, res); });
   srv_load_map_ = service_nh.advertiseService<std_srvs::Trigger::Request, std_srvs::Trigger::Response>(
       "load_map", [this](auto &req, auto &res) { return onMapService(false, req, res); });
+  srv_clear_map_ = service_nh.advertiseService<std_srvs::Trigger::Request, std_srvs::Trigger::Response>(
+      "clear_map", [this](auto &req, auto &res) { return onClearMap(req, res); });
   service_spinner_ = std::make_unique<ros::AsyncSpinner>(1, &service_queue_);
   service_spinner_->start();
 
@@ -131,6 +133,7 @@ bool HpdsServer::shutdown() {
   if (service_spinner_) service_spinner_->stop();
   srv_save_map_.shutdown();
   srv_load_map_.shutdown();
+  srv_clear_map_.shutdown();
   // hpds_node stops itself while roscpp still runs (node_main.cpp); a nodelet is destroyed after its manager's
   // ros::shutdown(), which has taken rosconsole down: then the lines go to stderr directly, or nobody would learn
   // what became of the map.
@@ -152,9 +155,8 @@ bool HpdsServer::shutdown() {
   // The workers are gone: the map is complete (no frame half-inserted) and nothing else touches it.
   if (config_.ros.save_map_on_shutdown && config_.hpds.mode == hpds::Mode::Map) {
     if (processors_.front()->pipeline().framesProcessed() == frames_at_last_sync_) {
-      say(false, tag_ + ": shutdown: no frame was processed since " +
-                     (loaded_or_saved_ ? "the map was last loaded or saved" : "the start") + ": '" +
-                     config_.ros.map_file + "' is left as it is");
+      say(false, tag_ + ": shutdown: no frame was processed since " + last_sync_ + ": '" + config_.ros.map_file +
+                     "' is left as it is");
       return shutdown_ok_;
     }
     const auto [ok, message] = runMapCommand(true);
@@ -227,7 +229,7 @@ std::pair<bool, std::string> HpdsServer::runMapCommand(bool save) {
         }
     }
     frames_at_last_sync_ = pipeline.framesProcessed();
-    loaded_or_saved_ = true;
+    last_sync_ = "the map was last loaded or saved";
     return {true, msg.str()};
   } catch (const std::exception &e) {
     msg << (save ? "saving the map failed: " : "loading the map failed: ") << e.what();
@@ -276,6 +278,35 @@ bool HpdsServer::onMapService(bool save, std_srvs::Trigger::Request &, std_srvs:
     ROS_ERROR_STREAM_NAMED("hpds", tag_ << ": " << service << ": " << res.message);
   }
   return true;  // the outcome is in the response: a false return would hide the message from the caller
+}
+
+bool HpdsServer::onClearMap(std_srvs::Trigger::Request &, std_srvs::Trigger::Response &res) {
+  res.success = false;
+  if (config_.hpds.mode != hpds::Mode::Map) {
+    res.message = "this node runs in scan mode, which keeps no map to clear";
+    ROS_WARN_STREAM_NAMED("hpds", tag_ << ": ~clear_map refused: " << res.message);
+    return true;
+  }
+  res.message = "the node is shutting down";
+  pool_->runBetweenFrames([&](std::size_t worker) {
+    FrameProcessor &processor = *processors_.front();  // map mode's only one
+    const std::size_t held = processor.clearMap();
+    // A shutdown save with no frame since writes nothing: an empty map must not replace the file.
+    frames_at_last_sync_ = processor.pipeline().framesProcessed();
+    last_sync_ = "the map was cleared";
+    std::ostringstream msg;
+    msg << "cleared " << held << " samples; the next frame's point fields become the map's (next frame index "
+        << processor.pipeline().framesProcessed() << ")";
+    res.message = msg.str();
+    res.success = true;
+    takeSnapshot(worker, 0.0);
+  });
+  if (res.success) {
+    ROS_INFO_STREAM_NAMED("hpds", tag_ << ": ~clear_map: " << res.message);
+  } else {
+    ROS_WARN_STREAM_NAMED("hpds", tag_ << ": ~clear_map: " << res.message);
+  }
+  return true;
 }
 
 void HpdsServer::onCloud(const ros::MessageEvent<const sensor_msgs::PointCloud2> &event) {

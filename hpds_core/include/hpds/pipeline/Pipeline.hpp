@@ -149,6 +149,10 @@ class Pipeline {
   /// leaving the pipeline unchanged, outside map mode, when the map's cell_size/max_depth differ from the config, or
   /// when frames already taken have other point fields than the map's (every later frame would be refused).
   void replaceMap(Hierarchy &&map, std::uint32_t next_frame);
+  /// Map mode: forgets every sample and the map's point fields (the next frame with points sets them again); frames
+  /// keep their numbering. The way out for a stream whose fields changed for good (a driver restarted with other
+  /// fields), whose frames the map refuses. std::invalid_argument in scan mode.
+  void clearMap();
 
  private:
   // Map files carry the kept normals (io/HierarchyFile.hpp).
