@@ -146,6 +146,60 @@ TEST(Downsample, SamplesAreRealPointsSpacedAndCoveringByBruteForce) {
   }
 }
 
+// Found by a SLAM integrator: the one-call API takes no pose, and feeding a Pipeline meant building a PointLayout
+// and PointBuffer by hand; nor did Samples say the radius it ran at. frameFromPoints gives a posed frame whose
+// samples name their input point; a map built from it is Poisson-disk in the fixed frame (brute force) and each
+// sample sits at pose * points[index].
+TEST(Downsample, FrameFromPointsFeedsAMapWithPosesAndNamesEachInputPoint) {
+  std::uint64_t state = 11;
+  auto uniform = [&] {
+    state = state * 6364136223846793005ull + 1442695040888963407ull;
+    return static_cast<float>((state >> 40) * 0x1.0p-24);
+  };
+  HpdsConfig config;
+  config.mode = Mode::Map;
+  config.hierarchy.cell_size = 2.0;
+  config.hierarchy.max_depth = 4;
+  config.output.level = 3;
+  config.output.spacing = 0.0;
+  config.normals.enabled = false;
+  Pipeline pipeline(config);
+  std::vector<std::vector<Eigen::Vector3f>> frames(3);
+  std::vector<Eigen::Isometry3d> poses(3);
+  for (int k = 0; k < 3; ++k) {
+    for (int i = 0; i < 1500; ++i) frames[k].emplace_back(4.0f * uniform(), 4.0f * uniform(), 0.5f * uniform());
+    poses[k] = Eigen::Translation3d(1.5 * k, 0.5 * k, 0.0) * Eigen::AngleAxisd(0.3 * k, Eigen::Vector3d::UnitZ());
+    const Frame frame = frameFromPoints(frames[k], poses[k], 10.0 + k);
+    EXPECT_EQ(frame.stamp, 10.0 + k);
+    (void)pipeline.addFrame(frame);
+  }
+  const Hierarchy &h = pipeline.hierarchy();
+  const PointField *index = h.recordLayout().find("index");
+  ASSERT_NE(index, nullptr);
+  const std::vector<SampleId> ids = pipeline.outputSamples();
+  ASSERT_GT(ids.size(), 10u);
+  const double r = poissonRadius(config.hierarchy.cell_size, 3);
+  for (std::size_t i = 0; i < ids.size(); ++i) {
+    const Eigen::Map<const Eigen::Vector3d> p(h.position(ids[i]));
+    // Which frame: the one whose posed point at that index is this sample.
+    const auto k = static_cast<std::size_t>(readAsDouble(h.record(ids[i]), *index));
+    bool found = false;
+    for (int f = 0; f < 3 && !found; ++f)
+      found = k < frames[f].size() && (poses[f] * frames[f][k].cast<double>() - p).norm() < 1e-9;
+    EXPECT_TRUE(found) << "sample " << i << " is no posed input point of index " << k;
+    for (std::size_t j = i + 1; j < ids.size(); ++j)
+      ASSERT_GE((p - Eigen::Map<const Eigen::Vector3d>(h.position(ids[j]))).norm(), r) << i << " " << j;
+  }
+  // The one-call API says the resolution it ran at.
+  const Samples s = downsample(frames[0], withNormals());
+  const OutputResolution want = resolveOutput(withNormals());
+  EXPECT_EQ(s.output_level, want.level);
+  EXPECT_EQ(s.radius, want.radius);
+  EXPECT_EQ(s.cell_size, want.cell_size);
+  EXPECT_EQ(frameFromPoints(std::vector<Eigen::Vector3d>{{1.0, 2.0, 3.0}}).points.layout().find("x")->type,
+            FieldType::Float64);
+}
+
 TEST(Downsample, NanInfAndNoReturnPointsNeverComeOut) {
   const float nan = std::numeric_limits<float>::quiet_NaN(), inf = std::numeric_limits<float>::infinity();
   std::vector<Eigen::Vector3f> points = {{nan, 0, 0}, {0, 0, 0}, {1, inf, 0}, {1, 1, 1}, {5, 5, 5}};

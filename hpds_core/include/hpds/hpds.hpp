@@ -16,6 +16,8 @@
 // - Throws std::invalid_argument for an invalid config (the message names the key, as the CLI does), a viewpoint
 //   that is not finite, or more than 2^32 - 1 points.
 // - Thread-safe: calls share no state; each call may use config.threads worker threads.
+// - Streams (frames with poses, map mode, save/load): hpds::Pipeline with hpds::frameFromPoints
+//   (hpds/points/Frame.hpp), hpds::saveMap / loadMap (hpds/io/HierarchyFile.hpp).
 // - Memory: the call holds the whole cloud and its hierarchy at once, about 190 bytes per input point with the
 //   shipped normals (measured: 4 M points peaked at 0.76 GB on one thread, 1.1 GB on two).
 #pragma once
@@ -54,6 +56,10 @@ struct Samples {
   /// first; the map's other rule, map.evict_distance, acts before a frame and so never in one call). Not 0: the
   /// result no longer covers the cloud; raise map.max_samples (0 = no cap) or use scan mode for one cloud.
   std::uint64_t evicted = 0;
+  /// The resolution the call ran with (resolveOutput): the samples are levels 0..output_level, at least `radius`
+  /// metres apart, of a hierarchy whose level-0 cells are `cell_size` metres wide.
+  int output_level = -1;
+  double radius = 0.0, cell_size = 0.0;
 
   [[nodiscard]] std::size_t size() const { return index.size(); }
 };

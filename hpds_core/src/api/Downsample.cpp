@@ -10,28 +10,10 @@ namespace hpds {
 
 namespace {
 
-// Each record carries the point's input position next to x/y/z, so a sample names the point it came from.
+// Each record carries the point's input position next to x/y/z (frameFromPoints), so a sample names the point it
+// came from.
 template <typename Scalar>
 constexpr std::uint32_t kIndexOffset = 3 * sizeof(Scalar);
-
-template <typename Scalar>
-Frame frameOf(const std::vector<Eigen::Matrix<Scalar, 3, 1>> &points) {
-  constexpr FieldType kXyz = sizeof(Scalar) == 8 ? FieldType::Float64 : FieldType::Float32;
-  PointLayout layout;
-  layout.append("x", kXyz);
-  layout.append("y", kXyz);
-  layout.append("z", kXyz);
-  layout.append("index", FieldType::UInt32);
-  Frame frame;
-  frame.points = PointBuffer(layout, points.size());
-  for (std::size_t i = 0; i < points.size(); ++i) {
-    std::uint8_t *rec = frame.points.record(i);
-    std::memcpy(rec, points[i].data(), 3 * sizeof(Scalar));
-    const auto index = static_cast<std::uint32_t>(i);
-    std::memcpy(rec + kIndexOffset<Scalar>, &index, sizeof index);
-  }
-  return frame;
-}
 
 template <typename Scalar>
 Samples downsampleFrame(const std::vector<Eigen::Matrix<Scalar, 3, 1>> &points, const HpdsConfig &config,
@@ -43,13 +25,16 @@ Samples downsampleFrame(const std::vector<Eigen::Matrix<Scalar, 3, 1>> &points, 
   Pipeline pipeline(config);
   pipeline.setInterrupt(interrupt);
   throwIfInterrupted(interrupt, "before the frame");
-  Frame frame = frameOf(points);
+  Frame frame = frameFromPoints(points);
   frame.viewpoint = viewpoint;
   const FrameCounters counters = pipeline.addFrame(frame).counters;
   const Hierarchy &hierarchy = pipeline.hierarchy();
   const std::vector<SampleId> ids = pipeline.outputSamples();
 
   Samples out;
+  out.output_level = pipeline.outputLevel();
+  out.radius = pipeline.outputResolution().radius;
+  out.cell_size = pipeline.outputResolution().cell_size;
   out.skipped_invalid = counters.skipped_invalid;
   out.skipped_zero = counters.skipped_zero;
   out.skipped_range = counters.skipped_range;

@@ -12,6 +12,7 @@
 #pragma once
 
 #include <Eigen/Geometry>
+#include <vector>
 
 #include "hpds/points/PointBuffer.hpp"
 
@@ -23,5 +24,16 @@ struct Frame {
   Eigen::Isometry3d sensor_to_fixed = Eigen::Isometry3d::Identity();
   Eigen::Vector3d viewpoint = Eigen::Vector3d::Zero();
 };
+
+/// A Frame of bare positions (sensor frame, metres) for Pipeline::addFrame, e.g. from a driver's callback: x y z
+/// (float32, or float64 for the Vector3d overload) and a uint32 field `index`, the point's position in `points`,
+/// so that every sample's record (Hierarchy::record, readAsDouble on the field "index") names its input point.
+/// The hpds::downsample one-call API builds its frames with it. std::invalid_argument for 2^32 points or more.
+[[nodiscard]] Frame frameFromPoints(const std::vector<Eigen::Vector3f> &points,
+                                    const Eigen::Isometry3d &sensor_to_fixed = Eigen::Isometry3d::Identity(),
+                                    double stamp = 0.0);
+[[nodiscard]] Frame frameFromPoints(const std::vector<Eigen::Vector3d> &points,
+                                    const Eigen::Isometry3d &sensor_to_fixed = Eigen::Isometry3d::Identity(),
+                                    double stamp = 0.0);
 
 }  // namespace hpds
