@@ -371,6 +371,42 @@ TEST(Cli, AFolderInputIsItsFramesInNameOrder) {
   EXPECT_EQ(readText(tmp / "s" / "out.ply"), first);
 }
 
+// Found offline: verify could not check a posed map's coverage: its one --input was in the sensor frame, the map in
+// the pose frame, and every point read as uncovered. --input takes the map's frames and --poses poses them.
+TEST(Cli, VerifyChecksAPosedMapAgainstItsPosedFrames) {
+  const auto tmp = test::scratchDir("cli_verify_poses");
+  std::string log;
+  ASSERT_EQ(runHpds("synth -o " + shellQuote(tmp / "s") + " --frames 3 --beams 8 --azimuth-steps 600", &log), 0) << log;
+  std::string frames;
+  for (int i = 0; i < 3; ++i) frames += shellQuote(tmp / "s" / ("frame_00000" + std::to_string(i) + ".pcd")) + " ";
+  const std::string poses = " --poses " + shellQuote(tmp / "s" / "poses.txt");
+  ASSERT_EQ(runHpds("sample " + frames + "--mode map --spacing 0.2" + poses + " -o " + shellQuote(tmp / "map.ply"), &log),
+            0)
+      << log;
+  const std::string verify = "verify " + shellQuote(tmp / "map.ply") + " --spacing 0.2";
+  EXPECT_EQ(runHpds(verify + " --input " + frames + poses, &log), 0) << log;
+  EXPECT_NE(log.find("OK: no violations"), std::string::npos) << log;
+  // Unposed, the frames lie where the sensor saw them, and the drive moved: coverage fails, as it should.
+  EXPECT_EQ(runHpds(verify + " --input " + frames, &log), 1) << log;
+  EXPECT_EQ(runHpds(verify + poses, &log), 1) << log;
+  EXPECT_NE(log.find("--poses: give the --input frames it poses"), std::string::npos) << log;
+  const std::string first = shellQuote(tmp / "s" / "frame_000000.pcd");
+  EXPECT_EQ(runHpds(verify + " --input " + first + poses, &log), 1) << log;
+  EXPECT_NE(log.find("3 poses for 1 inputs"), std::string::npos) << log;
+  // A scan-mode output of posed frames: frame K against its input posed by line K.
+  ASSERT_EQ(runHpds("sample " + frames + "--spacing 0.2" + poses + " -o " + shellQuote(tmp / "scan.ply"), &log), 0)
+      << log;
+  const std::string second = shellQuote(tmp / "s" / "frame_000001.pcd");
+  EXPECT_EQ(runHpds("verify " + shellQuote(tmp / "scan.ply") + " --spacing 0.2 --frame 1 --input " + second + poses,
+                    &log),
+            0)
+      << log;
+  EXPECT_EQ(runHpds("verify " + shellQuote(tmp / "scan.ply") + " --spacing 0.2 --frame 1 --input " + first + poses,
+                    &log),
+            1)
+      << log;
+}
+
 // Found with a frame moved to UTM coordinates as a PLY (no VIEWPOINT): normals faced the origin, 5e6 m away, half of
 // them away from the sensor, without a word, and the CLI had no way to say where the sensor was.
 TEST(Cli, AViewpointFarFromEveryPointIsSaidAndViewpointSetsIt) {

@@ -1,9 +1,10 @@
-// `hpds verify SAMPLING.ply (--cell-size C | --spacing S) [--max-depth M] [--input INPUT] [--frame K]`: an
+// `hpds verify SAMPLING.ply (--cell-size C | --spacing S) [--max-depth M] [--input INPUT...] [--poses P] [--frame K]`: an
 // independent check of a written sampling (k-d trees, not the sampler's grids). Prints a per-level table; exit code 1
 // on any violation. A scan-mode output of several frames is checked frame by frame.
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 #include <iostream>
 #include <map>
 #include <utility>
@@ -12,6 +13,7 @@
 #include "CliOptions.hpp"
 #include "Commands.hpp"
 #include "hpds/eval/SamplingVerifier.hpp"
+#include "hpds/io/PoseFile.hpp"
 #include "hpds/pcl/PointCloudFile.hpp"
 
 namespace hpds::cli {
@@ -20,7 +22,8 @@ namespace {
 struct VerifyArgs {
   std::string sampling;
   CellSizeOptions cell;
-  std::string input;
+  std::vector<std::string> inputs;
+  std::string poses;
   long long frame = -1;  // -1: every frame
   int threads = 1;
 };
@@ -44,6 +47,29 @@ std::map<std::uint64_t, PointBuffer> byFrame(PointBuffer sampling) {
   }
   return frames;
 }
+// The inputs as the sampling saw them, in one cloud of float64 x y z: each posed by its pose (none: as they are).
+// NaN/Inf and exact (0,0,0) no-returns are left out before posing, as hpds sample skips them: posed, a no-return
+// would land on the sensor and read as an uncovered point.
+PointBuffer posedInputs(const std::vector<std::string> &paths, const std::vector<Eigen::Isometry3d> &poses) {
+  PointLayout layout;
+  for (const char *axis : {"x", "y", "z"}) layout.append(axis, FieldType::Float64);
+  PointBuffer all(layout, 0);
+  for (std::size_t k = 0; k < paths.size(); ++k) {
+    const PointBuffer cloud = readPointCloud(paths[k]);
+    const PointField *f[3] = {cloud.layout().find("x"), cloud.layout().find("y"), cloud.layout().find("z")};
+    if (!f[0] || !f[1] || !f[2]) throw std::invalid_argument("--input '" + paths[k] + "': no x/y/z fields");
+    std::uint8_t rec[24];
+    for (std::size_t i = 0; i < cloud.size(); ++i) {
+      Eigen::Vector3d p;
+      for (int a = 0; a < 3; ++a) p[a] = readAsDouble(cloud.record(i), *f[a]);
+      if (!p.allFinite() || p.isZero(0.0)) continue;
+      if (!poses.empty()) p = poses[k] * p;
+      std::memcpy(rec, p.data(), sizeof rec);
+      all.pushBack(rec);
+    }
+  }
+  return all;
+}
 }  // namespace
 
 void addVerifyCommand(CLI::App &app) {
@@ -51,7 +77,12 @@ void addVerifyCommand(CLI::App &app) {
   CLI::App *cmd = app.add_subcommand("verify", "check a sampling: one sample per cell, additive spacing, coverage");
   cmd->add_option("sampling", a->sampling, "sampling written by hpds sample (needs x y z level)")->required();
   addCellSizeOptions(*cmd, a->cell, true);
-  cmd->add_option("--input", a->input, "input cloud, same frame as the sampling: also check coverage <= 2 r_D");
+  cmd->add_option("--input", a->inputs,
+                  "input cloud(s) the sampling was made from: also check coverage <= 2 r_D (several: a map's frames, "
+                  "checked together)");
+  cmd->add_option("--poses", a->poses,
+                  "the KITTI pose file the sampling was made with (hpds sample --poses): each --input is posed by "
+                  "its line, or with --frame K by line K");
   cmd->add_option("--frame", a->frame,
                   "a scan-mode output of several frames (field 'frame'): check only this frame (-1 = each frame "
                   "on its own; --input needs one frame)")
@@ -105,24 +136,45 @@ void addVerifyCommand(CLI::App &app) {
       PointBuffer one = std::move(it->second);
       frames.clear();
       frames.emplace(static_cast<std::uint64_t>(a->frame), std::move(one));
-    } else if (frames.size() > 1 && !a->input.empty()) {
+    } else if (frames.size() > 1 && !a->inputs.empty()) {
       throw std::invalid_argument("--input: '" + a->sampling + "' holds " + std::to_string(frames.size()) +
                                   " scan-mode frames (field 'frame'), each sampled from its own input: check "
                                   "coverage one frame at a time with --frame K");
     }
+    std::vector<Eigen::Isometry3d> poses;
+    if (!a->poses.empty()) {
+      if (a->inputs.empty()) throw std::invalid_argument("--poses: give the --input frames it poses");
+      poses = readKittiPoses(a->poses);
+      if (a->frame >= 0) {
+        // A scan-mode output: frame K was sampled from one input posed by line K.
+        if (a->inputs.size() != 1)
+          throw std::invalid_argument("--frame: one --input, the frame's, posed by line " + std::to_string(a->frame) +
+                                      " of --poses");
+        if (static_cast<std::size_t>(a->frame) >= poses.size())
+          throw std::invalid_argument("--poses: '" + a->poses + "' has " + std::to_string(poses.size()) +
+                                      " poses, none for frame " + std::to_string(a->frame));
+        poses = {poses[static_cast<std::size_t>(a->frame)]};
+      } else if (poses.size() != a->inputs.size()) {
+        throw std::invalid_argument("--poses: '" + a->poses + "' has " + std::to_string(poses.size()) +
+                                    " poses for " + std::to_string(a->inputs.size()) +
+                                    " inputs (one pose per input, as hpds sample takes them)");
+      }
+    } else if (a->frame >= 0 && a->inputs.size() > 1) {
+      throw std::invalid_argument("--frame: one --input, the frame's");
+    }
+    const bool with_input = !a->inputs.empty();
     PointBuffer input;
-    if (!a->input.empty()) input = readPointCloud(a->input);
+    if (with_input) input = posedInputs(a->inputs, poses);
     // The levels the sampling must reach: --spacing names its output level, and a sampling that stops short of it
     // (its finest levels missing) leaves the input uncovered at that spacing. With --cell-size only the levels
     // present are known; an input must then be covered at level 0 at least, which an empty sampling is not.
     const int implied = deepestLevelFor(a->cell);
-    const int through = implied >= 0 ? implied : (a->input.empty() ? -1 : 0);
+    const int through = implied >= 0 ? implied : (with_input ? 0 : -1);
     std::size_t bad = 0, bad_frames = 0;
     for (const auto &[frame, sampling] : frames) {
       VerifyReport report;
       try {
-        report = verifySampling(sampling, cell_size, a->input.empty() ? nullptr : &input, a->threads, key_depth,
-                                through);
+        report = verifySampling(sampling, cell_size, with_input ? &input : nullptr, a->threads, key_depth, through);
       } catch (const std::invalid_argument &e) {
         // The verifier knows no file names; its complaints are about the sampling's content.
         std::string why = e.what();
@@ -140,7 +192,7 @@ void addVerifyCommand(CLI::App &app) {
       bad_frames += v > 0 ? 1 : 0;
       // Without an input nothing can fail there, but a sampling asked for --spacing that holds none of its finest
       // levels is not what that spacing gives.
-      if (a->input.empty() && implied >= 0 && !report.levels.empty() && report.levels.back().union_count > 0 &&
+      if (!with_input && implied >= 0 && !report.levels.empty() && report.levels.back().union_count > 0 &&
           report.levels.back().count == 0)
         std::cout << "note: level " << implied << " (the level --spacing gives) holds no sample"
                   << (several ? " in frame " + std::to_string(frame) : std::string())
@@ -148,7 +200,7 @@ void addVerifyCommand(CLI::App &app) {
       if (report.levels.empty() || report.levels.back().union_count == 0)
         std::cout << "note: " << (several ? "frame " + std::to_string(frame) + " of " : std::string())
                   << "the sampling holds no sample"
-                  << (a->input.empty() ? ": give --input to check it against the input" : "") << "\n";
+                  << (with_input ? "" : ": give --input to check it against the input") << "\n";
     }
     if (frames.size() > 1)
       std::cout << frames.size() << " frames checked on their own, " << bad_frames << " with violations\n";
