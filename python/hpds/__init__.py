@@ -27,13 +27,17 @@ class Samples(dict):
     """What downsample returns: a dict of per-sample arrays, plus `skipped`, the input points left out by reason
     ({"invalid": NaN/Inf, "zero": (0,0,0) no-returns, "range": outside input.min_range/max_range, "out_of_range":
     beyond the exact key range of the finest level}) and, in map mode, "evicted": samples given up to stay within
-    map.max_samples. A copy is a Samples too."""
+    map.max_samples; and `resolution`, what the call ran at ({"output_level": L, "radius": r_L in metres,
+    "cell_size": the level-0 cell in metres}: the samples are levels 0..L, at least r_L apart). A copy is a Samples
+    too."""
 
     skipped = None
+    resolution = None
 
     def copy(self):
         out = Samples(self)
         out.skipped = dict(self.skipped) if self.skipped is not None else None
+        out.resolution = dict(self.resolution) if self.resolution is not None else None
         return out
 
 
@@ -106,9 +110,10 @@ def downsample(points, config=None, viewpoint=None):
         viewpoint = [float(v) for v in viewpoint]
     except (TypeError, ValueError):
         raise ValueError("viewpoint: expected 3 numbers (x, y, z), got %r" % (viewpoint,)) from None
-    arrays, skipped, rounding = _hpds.downsample(_xyz_of(points), text, path, viewpoint)
+    arrays, skipped, rounding, resolution = _hpds.downsample(_xyz_of(points), text, path, viewpoint)
     result = Samples(arrays)
     result.skipped = skipped
+    result.resolution = resolution
     if skipped["out_of_range"]:
         warnings.warn("hpds.downsample: %d points lie beyond the exact key range and were not sampled (see "
                       "samples.skipped): %s" % (skipped["out_of_range"], _hpds.key_range_advice(text, path)),

@@ -162,13 +162,18 @@ void bindDownsample(py::module_ &m) {
         skipped["range"] = s.skipped_range;
         skipped["out_of_range"] = s.out_of_range;
         skipped["evicted"] = s.evicted;
-        return py::make_tuple(out, skipped, rounding);
+        py::dict resolution;
+        resolution["output_level"] = s.output_level;
+        resolution["radius"] = s.radius;
+        resolution["cell_size"] = s.cell_size;
+        return py::make_tuple(out, skipped, rounding, resolution);
       },
       py::arg("points"), py::arg("config_yaml"), py::arg("config_path"), py::arg("viewpoint"),
       "Samples of `points` ((N, 3) float32/float64) with the config (file `config_path` if not empty, else "
       "`config_yaml`) and normals facing `viewpoint` (x, y, z in the points' frame): (dict of index, level and, with "
       "normals, normal and curvature, with covariances covariance; dict of the points left out by reason; the "
-      "warning for float32 points rounded by more than 1 % of the output radius, or '').");
+      "warning for float32 points rounded by more than 1 % of the output radius, or ''; the resolution: output_level, "
+      "radius, cell_size).");
 }
 
 }  // namespace hpds::python

@@ -1,5 +1,6 @@
 """hpds.downsample against the C++ one-call API (hpds::downsample, run by downsample_dump) on real and synthetic
 frames, bit for bit; configs as dicts and YAML files; errors as Python exceptions naming the key."""
+import math
 import os
 import unittest
 import warnings
@@ -196,6 +197,16 @@ class Arguments(support.ScratchCase):
         self.assertEqual(s.skipped["invalid"], len(pts[::5]))
         self.assertEqual(s.skipped["zero"], len(pts[1::5]))
         self.assertEqual(s.skipped["out_of_range"], 0)
+
+    def test_the_resolution_run_at_is_given_and_holds(self):
+        s = hpds.downsample(self.points, {"output": {"spacing": 0.3}, "normals": {"enabled": False}})
+        r = s.resolution
+        # The derived cell: r_L is the spacing, r_D = sqrt(3)/2 * cell_size / 2^D.
+        self.assertAlmostEqual(r["radius"], 0.3, places=12)
+        self.assertAlmostEqual(r["radius"], math.sqrt(3) / 2 * r["cell_size"] / 2 ** r["output_level"], places=12)
+        self.assertEqual(s["level"].max(), r["output_level"])
+        self.assertEqual(s.copy().resolution, r)
+        self.assertIsNot(s.copy().resolution, r)
 
     def test_points_beyond_the_key_range_are_counted_and_warned(self):
         # Found: 2e7 m coordinates left the result without a word.
