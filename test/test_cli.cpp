@@ -180,7 +180,7 @@ TEST(Cli, SyntheticStreamScanModeTagsFramesAndSeedsAreDeterministic) {
   EXPECT_EQ(runHpds(verify_a + " --frame 1 --input " + shellQuote(tmp / "s" / "frame_000000.pcd"), &log), 1)
       << "frame 1's samples do not cover frame 0's points\n" << log;
   EXPECT_EQ(runHpds(verify_a + " --input " + shellQuote(tmp / "s" / "frame_000001.pcd"), &log), 1) << log;
-  EXPECT_NE(log.find("check coverage one frame at a time with --frame K"), std::string::npos) << log;
+  EXPECT_NE(log.find("give every input in order (frame K is input K), or check one with --frame K"), std::string::npos) << log;
   EXPECT_EQ(runHpds(verify_a + " --frame 2", &log), 1) << log;
   EXPECT_NE(log.find("holds no sample of frame 2"), std::string::npos) << log;
   ASSERT_EQ(runHpds("sample " + inputs + " --mode map --poses " + shellQuote(tmp / "s" / "poses.txt") + " -o " + shellQuote(tmp / "m.ply") +
@@ -230,7 +230,12 @@ TEST(Cli, ScanModeTakesAnEmptyFrameWithFewerFields) {
   for (int a = 0; a < 3; ++a) writeFromDouble(xyz.record(0), l.fields[a], 1.0 + a);
   writePcd((tmp / "xyz.pcd").string(), xyz);
   EXPECT_EQ(runHpds("sample " + f0 + " " + shellQuote(tmp / "xyz.pcd") + " -o " + shellQuote(tmp / "bad.ply"), &log), 1);
-  EXPECT_NE(log.find("xyz.pcd' has other point fields than the frames with samples before it"), std::string::npos) << log;
+  // Both sets of fields are named (the output's: the input's with hpds's own).
+  EXPECT_NE(log.find("xyz.pcd' has other point fields (x y z normal_x"), std::string::npos) << log;
+  EXPECT_NE(log.find("than the frames with samples before it (x y z normal_x normal_y normal_z curvature frame "
+                     "intensity time ring level"),
+            std::string::npos)
+      << log;
 }
 
 TEST(Cli, CovariancesAreWrittenAsSixPlyPropertiesAfterTheNormals) {
@@ -359,16 +364,29 @@ TEST(Cli, AFolderInputIsItsFramesInNameOrder) {
   std::filesystem::create_directories(tmp / "empty");
   std::ofstream(tmp / "empty" / "notes.txt") << "no frames here\n";
   EXPECT_EQ(runHpds("sample " + shellQuote(tmp / "empty") + " -o " + shellQuote(tmp / "e.ply"), &log), 1) << log;
-  EXPECT_NE(log.find("holds no .pcd, .ply or .bin file"), std::string::npos) << log;
-  // An output inside the folder becomes one of its inputs on the next run: refused, never overwritten.
+  EXPECT_NE(log.find("holds no .pcd, .ply or .bin frame"), std::string::npos) << log;
+  // An output saved into the folder came back as a frame on the next run (a trial's second run read 229 069 points
+  // for 172 800): hpds's own PLY files are left out, and said to be; so are hidden files.
   ASSERT_EQ(runHpds("sample " + shellQuote(tmp / "s") + " --spacing 0.2 -o " + shellQuote(tmp / "s" / "out.ply"), &log),
             0)
       << log;
-  const std::string first = readText(tmp / "s" / "out.ply");
-  EXPECT_EQ(runHpds("sample " + shellQuote(tmp / "s") + " --spacing 0.2 -o " + shellQuote(tmp / "s" / "out.ply"), &log),
-            1)
+  EXPECT_NE(log.find("hpds: folder '"), std::string::npos) << log;
+  EXPECT_NE(log.find("3 inputs in name order, 'frame_000000.pcd' to 'frame_000002.pcd'"), std::string::npos) << log;
+  std::filesystem::copy_file(tmp / "s" / "frame_000001.pcd", tmp / "s" / ".hidden.pcd");
+  ASSERT_EQ(runHpds("sample " + shellQuote(tmp / "s") + " --spacing 0.2 -o " + shellQuote(tmp / "s" / "again.ply"), &log),
+            0)
       << log;
-  EXPECT_EQ(readText(tmp / "s" / "out.ply"), first);
+  EXPECT_NE(log.find("out.ply' left out of folder"), std::string::npos) << log;
+  EXPECT_NE(log.find("written by hpds (an output, not a frame)"), std::string::npos) << log;
+  EXPECT_NE(log.find(".hidden.pcd' left out of folder"), std::string::npos) << log;
+  EXPECT_EQ(readText(tmp / "s" / "again.ply"), readText(tmp / "s" / "out.ply"));
+  // Natural name order: unpadded numbers meet their pose lines (frame_2 before frame_10).
+  std::filesystem::create_directories(tmp / "n");
+  for (const auto &[from, to] : {std::pair{"frame_000000.pcd", "f_1.pcd"}, std::pair{"frame_000001.pcd", "f_2.pcd"},
+                                 std::pair{"frame_000002.pcd", "f_10.pcd"}})
+    std::filesystem::copy_file(tmp / "s" / from, tmp / "n" / to);
+  ASSERT_EQ(runHpds("sample " + shellQuote(tmp / "n") + map + shellQuote(tmp / "natural.ply"), &log), 0) << log;
+  EXPECT_EQ(readText(tmp / "natural.ply"), readText(tmp / "listed.ply"));
 }
 
 // Found offline: verify could not check a posed map's coverage: its one --input was in the sensor frame, the map in
@@ -388,6 +406,7 @@ TEST(Cli, VerifyChecksAPosedMapAgainstItsPosedFrames) {
   EXPECT_NE(log.find("OK: no violations"), std::string::npos) << log;
   // Unposed, the frames lie where the sensor saw them, and the drive moved: coverage fails, as it should.
   EXPECT_EQ(runHpds(verify + " --input " + frames, &log), 1) << log;
+  EXPECT_EQ(runHpds(verify + " --input " + shellQuote(tmp / "s") + poses, &log), 0) << log;  // a folder, as sample
   EXPECT_EQ(runHpds(verify + poses, &log), 1) << log;
   EXPECT_NE(log.find("--poses: give the --input frames it poses"), std::string::npos) << log;
   const std::string first = shellQuote(tmp / "s" / "frame_000000.pcd");
@@ -405,6 +424,19 @@ TEST(Cli, VerifyChecksAPosedMapAgainstItsPosedFrames) {
                     &log),
             1)
       << log;
+  // All frames in one run: frame K against input K, posed by line K; inputs in another order fail.
+  EXPECT_EQ(runHpds("verify " + shellQuote(tmp / "scan.ply") + " --spacing 0.2 --input " + frames + poses, &log), 0)
+      << log;
+  EXPECT_NE(log.find("3 frames checked on their own, 0 with violations"), std::string::npos) << log;
+  EXPECT_EQ(runHpds("verify " + shellQuote(tmp / "scan.ply") + " --spacing 0.2 --input " + second + " " + first + " " +
+                        shellQuote(tmp / "s" / "frame_000002.pcd") + poses,
+                    &log),
+            1)
+      << log;
+  EXPECT_EQ(runHpds("verify " + shellQuote(tmp / "scan.ply") + " --spacing 0.2 --input " + first + " " + second, &log),
+            1)
+      << log;
+  EXPECT_NE(log.find("holds frame 2, but 2 inputs were given"), std::string::npos) << log;
 }
 
 // Found with a frame moved to UTM coordinates as a PLY (no VIEWPOINT): normals faced the origin, 5e6 m away, half of

@@ -82,7 +82,7 @@ TEST(HostileCli, TruncatedAndGarbageFilesOfEveryFormat) {
       {"sample " + q(tmp / "garbage_after_magic.ply") + out, 1, "garbage_after_magic.ply: "},
       {"sample " + q(tmp / "garbage_after_header.pcd") + out, 1, "garbage_after_header.pcd: "},
       {"sample " + q(tmp / "odd.bin") + out, 1, "multiple of 16"},
-      {"sample " + q(tmp / "adir.pcd") + out, 1, "adir.pcd' holds no .pcd, .ply or .bin file"},  // a folder: its frames
+      {"sample " + q(tmp / "adir.pcd") + out, 1, "adir.pcd' holds no .pcd, .ply or .bin frame"},  // a folder: its frames
       {"sample " + good + " --poses " + q(tmp / "poses_garbage.txt") + out, 1, "poses_garbage.txt:1: "},
       {"sample " + good + " --poses " + q(tmp / "poses_cut.txt") + out, 1, "expected 12 numbers, found 11"},
       {"sample " + good + " --poses " + q(tmp / "poses_inf.txt") + out, 1, "non-finite"},

@@ -100,7 +100,7 @@ TEST(XyzTypeCli, Float32InputAtLargeCoordinatesIsSaidToHaveLostItsDigits) {
   std::string log;
   ASSERT_EQ(hpds(posed + q(tmp / "posed.ply"), &log), 0) << log;
   EXPECT_EQ(xType(tmp / "posed.ply"), FieldType::Float64);
-  EXPECT_NE(log.find("hpds: note: x y z are written as float64: the poses place sensors up to 5e+06 m"),
+  EXPECT_NE(log.find("hpds: note: x y z are written as float64: the poses' coordinates reach 5e+06 m"),
             std::string::npos)
       << log;
   EXPECT_NE(log.find("set --float32-xyz for a reader that takes float32 only"), std::string::npos) << log;

@@ -173,6 +173,9 @@ HpdsConfig resolveConfig(const SamplingOptions &o) {
   if (o.mode) c.mode = parseMode(*o.mode, "--mode");
   if (o.evict_distance) c.map.evict_distance = *o.evict_distance;
   if (o.max_samples) c.map.max_samples = *o.max_samples;
+  if ((o.evict_distance || o.max_samples) && c.mode != Mode::Map)
+    std::cerr << "hpds: warning: --evict-distance and --max-samples bound a map: scan mode (each frame on its own) "
+                 "ignores them; give --mode map for a map\n";
   if (o.threads) c.threads = *o.threads;
   try {
     validateConfig(c);

@@ -2,9 +2,7 @@
 #include <algorithm>
 #include <atomic>
 #include <chrono>
-#include <cctype>
 #include <cmath>
-#include <filesystem>
 #include <iostream>
 #include <limits>
 #include <map>
@@ -14,6 +12,7 @@
 #include <stdexcept>
 
 #include "CliOptions.hpp"
+#include "InputFolders.hpp"
 #include "Commands.hpp"
 #include "OutputPaths.hpp"
 #include "RunReport.hpp"
@@ -71,38 +70,12 @@ void appendCloud(PointBuffer &all, const PointBuffer &part, const std::string &i
   } else if (part.size() == 0) {
     return;
   } else if (all.layout() != part.layout()) {
-    throw std::invalid_argument("scan mode writes all frames into one file, but '" + input +
-                                "' has other point fields than the frames with samples before it");
+    throw std::invalid_argument("scan mode writes all frames into one file, but '" + input + "' has other point " +
+                                "fields (" + describeFields(part.layout()) + ") than the frames with samples before "
+                                "it (" + describeFields(all.layout()) + "): sample such inputs in separate runs");
   }
   all.bytes().insert(all.bytes().end(), part.bytes().begin(), part.bytes().end());
   all.setOrganization(static_cast<std::uint32_t>(all.size()), 1);
-}
-
-// A folder given as an input stands for its point-cloud files (.pcd, .ply, .bin, any case), in name order: a
-// recorded drive of 10 000 frames no longer needs a glob the shell may refuse as too long. Other files in it are
-// left alone; a folder with no such file is an error, not an empty run.
-std::vector<std::string> expandInputs(const std::vector<std::string> &given) {
-  namespace fs = std::filesystem;
-  std::vector<std::string> inputs;
-  for (const std::string &in : given) {
-    std::error_code ec;
-    if (!fs::is_directory(in, ec)) {
-      inputs.push_back(in);
-      continue;
-    }
-    std::vector<std::string> files;
-    for (const fs::directory_entry &e : fs::directory_iterator(in, ec)) {
-      std::string ext = e.path().extension().string();
-      std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return std::tolower(c); });
-      if ((ext == ".pcd" || ext == ".ply" || ext == ".bin") && e.is_regular_file(ec)) files.push_back(e.path().string());
-    }
-    if (ec) throw std::invalid_argument("input folder '" + in + "': " + ec.message());
-    if (files.empty())
-      throw std::invalid_argument("input folder '" + in + "' holds no .pcd, .ply or .bin file");
-    std::sort(files.begin(), files.end());
-    inputs.insert(inputs.end(), files.begin(), files.end());
-  }
-  return inputs;
 }
 
 // Every path this run reads or writes, checked before any work (OutputPaths.hpp).
@@ -169,10 +142,15 @@ int runSample(const SampleArgs &a) {
       const std::lock_guard<std::mutex> lock(far_viewpoint_mutex);
       if (far_viewpoint.empty()) {
         std::ostringstream w;
+        w.precision(12);
         w << "the nearest point of '" << a.inputs[i] << "' is " << d << " m from its viewpoint ("
-          << frame.viewpoint.transpose() << "), where normals are made to face and input.min_range/max_range measure "
-          << "from: the input seems not to be in its sensor's frame; give the sensor's position with --viewpoint X Y Z"
-          << (poses.empty() ? " (or the frames' sensor poses with --poses)" : "");
+          << frame.viewpoint.x() << ", " << frame.viewpoint.y() << ", " << frame.viewpoint.z()
+          << "), where normals are made to face and input.min_range/max_range measure from: ";
+        if (a.viewpoint.empty())
+          w << "the input seems not to be in its sensor's frame; give the sensor's position with --viewpoint X Y Z"
+            << (poses.empty() ? " (or the frames' sensor poses with --poses)" : "");
+        else
+          w << "check --viewpoint: it is the sensor's position in the inputs' own coordinates";
         far_viewpoint = w.str();
       }
     }
@@ -309,7 +287,8 @@ void addSampleCommand(CLI::App &app) {
   CLI::App *cmd = app.add_subcommand("sample", "sample point clouds into an additive Poisson-disk hierarchy");
   cmd->add_option("inputs", args->inputs,
                   "input clouds: .pcd, .ply, KITTI .bin (several = a stream of frames); a folder stands for its "
-                  ".pcd/.ply/.bin files in name order")
+                  ".pcd/.ply/.bin files in natural name order (frame_2 before frame_10), hidden files and hpds's "
+                  "own outputs left out")
       ->required();
   cmd->add_option("-o,--output", args->output, "output PLY (binary little-endian)")
       ->required()
@@ -325,7 +304,7 @@ void addSampleCommand(CLI::App &app) {
   cmd->add_option("--save-map", args->save_map, "map mode: save the final map (written atomically) for a later --load-map");
   addSamplingOptions(*cmd, args->sampling);
   cmd->callback([args] {
-    args->inputs = expandInputs(args->inputs);
+    args->inputs = expandInputFolders(args->inputs, std::cerr);
     const int rc = runSample(*args);
     if (rc != 0) throw CLI::RuntimeError(rc);
   });

@@ -1,6 +1,6 @@
-// `hpds verify SAMPLING.ply (--cell-size C | --spacing S) [--max-depth M] [--input INPUT...] [--poses P] [--frame K]`: an
-// independent check of a written sampling (k-d trees, not the sampler's grids). Prints a per-level table; exit code 1
-// on any violation. A scan-mode output of several frames is checked frame by frame.
+// `hpds verify SAMPLING.ply (--cell-size C | --spacing S) [--max-depth M] [--input INPUT...] [--poses P]
+// [--frame K]`: an independent check of a written sampling (k-d trees, not the sampler's grids). Prints a per-level
+// table; exit code 1 on any violation. A scan-mode output of several frames is checked frame by frame.
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
@@ -12,6 +12,7 @@
 
 #include "CliOptions.hpp"
 #include "Commands.hpp"
+#include "InputFolders.hpp"
 #include "hpds/eval/SamplingVerifier.hpp"
 #include "hpds/io/PoseFile.hpp"
 #include "hpds/pcl/PointCloudFile.hpp"
@@ -78,8 +79,8 @@ void addVerifyCommand(CLI::App &app) {
   cmd->add_option("sampling", a->sampling, "sampling written by hpds sample (needs x y z level)")->required();
   addCellSizeOptions(*cmd, a->cell, true);
   cmd->add_option("--input", a->inputs,
-                  "input cloud(s) the sampling was made from: also check coverage <= 2 r_D (several: a map's frames, "
-                  "checked together)");
+                  "input cloud(s) or folder(s) the sampling was made from: also check coverage <= 2 r_D (a map's "
+                  "frames are checked together; a scan-mode output's frame K against input K)");
   cmd->add_option("--poses", a->poses,
                   "the KITTI pose file the sampling was made with (hpds sample --poses): each --input is posed by "
                   "its line, or with --frame K by line K");
@@ -90,6 +91,7 @@ void addVerifyCommand(CLI::App &app) {
       ->check(integerIn(-1, 4294967295));
   cmd->add_option("--threads", a->threads, "worker threads, 0 = all cores")->capture_default_str()->check(integerIn(0, 1024));
   cmd->callback([a, cmd] {
+    a->inputs = expandInputFolders(a->inputs, std::cerr);
     const double cell_size = resolveCellSize(a->cell);
     // A scan-mode output of several frames holds one sampling per frame (each frame sampled on its own): each is
     // checked on its own, as the sampler made it.
@@ -126,6 +128,7 @@ void addVerifyCommand(CLI::App &app) {
       }
     }
     const bool several = all.layout().find("frame") != nullptr;
+    const PointLayout sampling_layout = all.layout();
     std::map<std::uint64_t, PointBuffer> frames = byFrame(std::move(all));
     if (a->frame >= 0) {
       if (!several) throw std::invalid_argument("--frame: '" + a->sampling + "' has no 'frame' field");
@@ -136,10 +139,21 @@ void addVerifyCommand(CLI::App &app) {
       PointBuffer one = std::move(it->second);
       frames.clear();
       frames.emplace(static_cast<std::uint64_t>(a->frame), std::move(one));
-    } else if (frames.size() > 1 && !a->inputs.empty()) {
+    } else if (several && a->inputs.size() == 1 && frames.size() > 1) {
       throw std::invalid_argument("--input: '" + a->sampling + "' holds " + std::to_string(frames.size()) +
-                                  " scan-mode frames (field 'frame'), each sampled from its own input: check "
-                                  "coverage one frame at a time with --frame K");
+                                  " scan-mode frames (field 'frame'), each sampled from its own input: give every "
+                                  "input in order (frame K is input K), or check one with --frame K");
+    }
+    // A scan-mode output of several frames against all its inputs: frame K was sampled from input K (posed by line K).
+    const bool per_frame = several && a->frame < 0 && a->inputs.size() > 1;
+    if (per_frame) {
+      for (const auto &[frame, samples] : frames)
+        if (frame >= a->inputs.size())
+          throw std::invalid_argument("--input: '" + a->sampling + "' holds frame " + std::to_string(frame) + ", but " +
+                                      std::to_string(a->inputs.size()) + " inputs were given (frame K is input K)");
+      // An input whose frame left no sample must still be covered: checked against an empty sampling.
+      for (std::size_t k = 0; k < a->inputs.size(); ++k)
+        frames.try_emplace(k, sampling_layout, 0);
     }
     std::vector<Eigen::Isometry3d> poses;
     if (!a->poses.empty()) {
@@ -164,7 +178,7 @@ void addVerifyCommand(CLI::App &app) {
     }
     const bool with_input = !a->inputs.empty();
     PointBuffer input;
-    if (with_input) input = posedInputs(a->inputs, poses);
+    if (with_input && !per_frame) input = posedInputs(a->inputs, poses);
     // The levels the sampling must reach: --spacing names its output level, and a sampling that stops short of it
     // (its finest levels missing) leaves the input uncovered at that spacing. With --cell-size only the levels
     // present are known; an input must then be covered at level 0 at least, which an empty sampling is not.
@@ -174,6 +188,12 @@ void addVerifyCommand(CLI::App &app) {
     for (const auto &[frame, sampling] : frames) {
       VerifyReport report;
       try {
+        if (per_frame) {
+          const std::size_t k = static_cast<std::size_t>(frame);
+          std::vector<Eigen::Isometry3d> pose;
+          if (!poses.empty()) pose.push_back(poses[k]);
+          input = posedInputs({a->inputs[k]}, pose);
+        }
         report = verifySampling(sampling, cell_size, with_input ? &input : nullptr, a->threads, key_depth, through);
       } catch (const std::invalid_argument &e) {
         // The verifier knows no file names; its complaints are about the sampling's content.

@@ -199,8 +199,8 @@ std::string widenXyzForPoses(HpdsConfig &config, double largest_translation, con
   if (!roundingMatters(rounding, radius)) return {};
   config.output.float64_xyz = true;
   std::ostringstream out;
-  out << "x y z are written as float64: the poses place sensors up to " << std::fabs(largest_translation)
-      << " m from the origin, where float32 would round positions by up to " << rounding
+  out << "x y z are written as float64: the poses' coordinates reach " << std::fabs(largest_translation)
+      << " m, where float32 would round positions by up to " << rounding
       << " m, more than 1 % of the output radius " << radius << " m; set " << float32_key
       << " for a reader that takes float32 only (PCL's typed point clouds)";
   return out.str();

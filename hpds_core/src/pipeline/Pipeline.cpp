@@ -55,19 +55,6 @@ FrameCounters &FrameCounters::operator+=(const FrameCounters &o) {
 }
 
 namespace {
-/// "x y z intensity as float32 float32 float32 float32, 16 bytes": what tells two layouts apart in an error (two
-/// layouts that read the same here hold the same fields, which the map takes in either layout).
-std::string fieldNames(const PointLayout &l) {
-  std::string names, types;
-  for (const PointField &f : l.fields) {
-    names += (names.empty() ? "" : " ") + f.name;
-    types += std::string(types.empty() ? "" : " ") + fieldTypeName(f.type) +
-             (f.count > 1 ? "[" + std::to_string(f.count) + "]" : "");
-  }
-  return (names.empty() ? "none" : names) + " as " + (types.empty() ? "-" : types) + ", " +
-         std::to_string(l.point_step) + " bytes";
-}
-
 /// True when `a` and `b` hold the same fields (name, type, count), whatever their order, offsets and padding.
 bool sameFields(const PointLayout &a, const PointLayout &b) {
   if (a.fields.size() != b.fields.size()) return false;
@@ -139,8 +126,8 @@ FrameResult Pipeline::addFrame(const Frame &frame) {
       records = &records_in_map_layout;
       keep_layout = false;
     } else if (hierarchy_.idBound() > 0) {
-      throw std::invalid_argument("frame's point fields (" + fieldNames(layout) + ") differ from the map's (" +
-                                  fieldNames(hierarchy_.recordLayout()) +
+      throw std::invalid_argument("frame's point fields (" + describeFields(layout) + ") differ from the map's (" +
+                                  describeFields(hierarchy_.recordLayout()) +
                                   "; those of the first frame with points or of the loaded map)");
     }
   }
@@ -400,8 +387,8 @@ void Pipeline::replaceMap(Hierarchy &&map, std::uint32_t next_frame) {
     throw std::invalid_argument("hierarchy: the map's cell_size/max_depth differ from the configuration's");
   // Frames already taken fixed the fields: a map of other fields would have every later frame refused.
   if (map_layout_fixed_ && map.idBound() > 0 && !sameFields(map.recordLayout(), hierarchy_.recordLayout())) {
-    throw std::invalid_argument("the map's point fields (" + fieldNames(map.recordLayout()) +
-                                ") differ from those of the frames so far (" + fieldNames(hierarchy_.recordLayout()) +
+    throw std::invalid_argument("the map's point fields (" + describeFields(map.recordLayout()) +
+                                ") differ from those of the frames so far (" + describeFields(hierarchy_.recordLayout()) +
                                 "): later frames would all be refused");
   }
   hierarchy_ = std::move(map);

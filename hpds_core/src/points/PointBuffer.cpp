@@ -28,6 +28,17 @@ std::size_t fieldTypeSize(FieldType type) {
 
 bool isValidFieldType(std::uint8_t raw) { return raw >= 1 && raw <= 8; }
 
+std::string describeFields(const PointLayout &l) {
+  std::string names, types;
+  for (const PointField &f : l.fields) {
+    names += (names.empty() ? "" : " ") + f.name;
+    types += std::string(types.empty() ? "" : " ") + fieldTypeName(f.type) +
+             (f.count > 1 ? "[" + std::to_string(f.count) + "]" : "");
+  }
+  return (names.empty() ? "none" : names) + " as " + (types.empty() ? "-" : types) + ", " +
+         std::to_string(l.point_step) + " bytes";
+}
+
 const char *fieldTypeName(FieldType type) {
   switch (type) {
     case FieldType::Int8:

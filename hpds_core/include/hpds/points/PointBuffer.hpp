@@ -69,6 +69,9 @@ struct PointLayout {
   bool operator!=(const PointLayout &o) const { return !(*this == o); }
 };
 
+/// "x y z intensity as float32 float32 float32 float32, 16 bytes": what tells two layouts apart in an error message.
+[[nodiscard]] std::string describeFields(const PointLayout &layout);
+
 class PointBuffer {
  public:
   PointBuffer() = default;

@@ -1,0 +1,87 @@
+#include "InputFolders.hpp"
+
+#include <algorithm>
+#include <cctype>
+#include <filesystem>
+#include <fstream>
+#include <ostream>
+#include <stdexcept>
+
+namespace hpds::cli {
+
+namespace {
+
+bool isDigit(char c) { return std::isdigit(static_cast<unsigned char>(c)) != 0; }
+
+// The PLY writer's header line (io/PlyWriter.cpp), within the first bytes of the file.
+bool writtenByHpds(const std::filesystem::path &path) {
+  std::ifstream in(path, std::ios::binary);
+  std::string head(256, '\0');
+  in.read(head.data(), static_cast<std::streamsize>(head.size()));
+  head.resize(static_cast<std::size_t>(in.gcount()));
+  return head.rfind("ply", 0) == 0 && head.find("\ncomment written by hpds\n") != std::string::npos;
+}
+
+}  // namespace
+
+bool naturalLess(const std::string &a, const std::string &b) {
+  std::size_t i = 0, j = 0;
+  while (i < a.size() && j < b.size()) {
+    if (isDigit(a[i]) && isDigit(b[j])) {
+      // Compare the digit runs as numbers: without leading zeros, the longer is larger, else by text.
+      std::size_t ie = i, je = j;
+      while (ie < a.size() && isDigit(a[ie])) ++ie;
+      while (je < b.size() && isDigit(b[je])) ++je;
+      std::size_t is = i, js = j;
+      while (is + 1 < ie && a[is] == '0') ++is;
+      while (js + 1 < je && b[js] == '0') ++js;
+      if (ie - is != je - js) return ie - is < je - js;
+      if (const int c = a.compare(is, ie - is, b, js, je - js); c != 0) return c < 0;
+      if (ie - i != je - j) return ie - i < je - j;  // equal values: fewer leading zeros first
+      i = ie;
+      j = je;
+    } else {
+      if (a[i] != b[j]) return static_cast<unsigned char>(a[i]) < static_cast<unsigned char>(b[j]);
+      ++i;
+      ++j;
+    }
+  }
+  return a.size() - i < b.size() - j;
+}
+
+std::vector<std::string> expandInputFolders(const std::vector<std::string> &given, std::ostream &notes) {
+  namespace fs = std::filesystem;
+  std::vector<std::string> inputs;
+  for (const std::string &in : given) {
+    std::error_code ec;
+    if (!fs::is_directory(in, ec)) {
+      inputs.push_back(in);
+      continue;
+    }
+    std::vector<std::string> files;
+    for (const fs::directory_entry &e : fs::directory_iterator(in, ec)) {
+      const std::string name = e.path().filename().string();
+      std::string ext = e.path().extension().string();
+      std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return std::tolower(c); });
+      if (!(ext == ".pcd" || ext == ".ply" || ext == ".bin") || !e.is_regular_file(ec)) continue;
+      if (name.front() == '.') {
+        notes << "hpds: note: '" << e.path().string() << "' left out of folder '" << in << "': a hidden file\n";
+      } else if (ext == ".ply" && writtenByHpds(e.path())) {
+        notes << "hpds: note: '" << e.path().string() << "' left out of folder '" << in
+              << "': written by hpds (an output, not a frame)\n";
+      } else {
+        files.push_back(e.path().string());
+      }
+    }
+    if (ec) throw std::invalid_argument("input folder '" + in + "': " + ec.message());
+    if (files.empty()) throw std::invalid_argument("input folder '" + in + "' holds no .pcd, .ply or .bin frame");
+    std::sort(files.begin(), files.end(), naturalLess);
+    notes << "hpds: folder '" << in << "': " << files.size() << " input" << (files.size() == 1 ? "" : "s")
+          << " in name order, '" << fs::path(files.front()).filename().string() << "' to '"
+          << fs::path(files.back()).filename().string() << "'\n";
+    inputs.insert(inputs.end(), files.begin(), files.end());
+  }
+  return inputs;
+}
+
+}  // namespace hpds::cli
