@@ -15,6 +15,7 @@
 #include "TestData.hpp"
 #include "hpds/io/KittiBin.hpp"
 #include "hpds/io/PlyWriter.hpp"
+#include "hpds/io/PoseFile.hpp"
 #include "hpds/pcl/PointCloudFile.hpp"
 
 namespace hpds {
@@ -437,6 +438,42 @@ TEST(Cli, VerifyChecksAPosedMapAgainstItsPosedFrames) {
             1)
       << log;
   EXPECT_NE(log.find("holds frame 2, but 2 inputs were given"), std::string::npos) << log;
+}
+
+// A trajectory from a SLAM tool in TUM form (time x y z qx qy qz qw, a '#' header) poses the frames as the KITTI file
+// of the same poses: the map it builds passes verify against the KITTI-posed frames.
+TEST(Cli, TumTrajectoryPosesTheFramesAsKittiPosesDo) {
+  const auto tmp = test::scratchDir("cli_tum_poses");
+  std::string log;
+  ASSERT_EQ(runHpds("synth -o " + shellQuote(tmp / "s") + " --frames 3 --beams 8 --azimuth-steps 600", &log), 0) << log;
+  {
+    std::ofstream tum(tmp / "trajectory.tum");
+    tum << "# timestamp tx ty tz qx qy qz qw\n";
+    tum.precision(17);
+    double t = 1.7e9;
+    for (const Eigen::Isometry3d &p : readKittiPoses((tmp / "s" / "poses.txt").string())) {
+      const Eigen::Quaterniond q(p.linear());
+      tum << (t += 0.1) << " " << p.translation().x() << " " << p.translation().y() << " " << p.translation().z()
+          << " " << q.x() << " " << q.y() << " " << q.z() << " " << q.w() << "\n";
+    }
+  }
+  std::string frames;
+  for (int i = 0; i < 3; ++i) frames += shellQuote(tmp / "s" / ("frame_00000" + std::to_string(i) + ".pcd")) + " ";
+  for (const auto &[poses, out] : {std::pair{"trajectory.tum", "tum.ply"}, std::pair{"s/poses.txt", "kitti.ply"}})
+    ASSERT_EQ(runHpds("sample " + frames + "--mode map --spacing 0.2 --poses " + shellQuote(tmp / poses) + " -o " +
+                          shellQuote(tmp / out),
+                      &log),
+              0)
+        << log;
+  EXPECT_EQ(runHpds("verify " + shellQuote(tmp / "tum.ply") + " --spacing 0.2 --input " + frames + " --poses " +
+                        shellQuote(tmp / "s" / "poses.txt"),
+                    &log),
+            0)
+      << log;
+  const double tum_samples = double(readPointCloud((tmp / "tum.ply").string()).size());
+  EXPECT_NEAR(tum_samples, double(readPointCloud((tmp / "kitti.ply").string()).size()), 0.005 * tum_samples);
+  // Unposed, the same check fails: the poses moved the frames.
+  EXPECT_EQ(runHpds("verify " + shellQuote(tmp / "tum.ply") + " --spacing 0.2 --input " + frames, &log), 1) << log;
 }
 
 // Found with a frame moved to UTM coordinates as a PLY (no VIEWPOINT): normals faced the origin, 5e6 m away, half of

@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "IoTestSupport.hpp"
+#include "TestData.hpp"
 #include "hpds/io/KittiBin.hpp"
 #include "hpds/io/PoseFile.hpp"
 #include "hpds/pcl/PointCloudFile.hpp"
@@ -141,6 +142,43 @@ TEST(Poses, KittiPrecisionIsAcceptedAndMadeExactlyOrthonormal) {
   EXPECT_NEAR(poses[1].linear()(0, 1), 5.272628e-04, 1e-6);
 }
 
+// A TUM trajectory (time x y z qx qy qz qw, '#' comment lines, as evo and SLAM tools write them) gives the poses of the
+// same KITTI file, in file order.
+TEST(Poses, TumTrajectoriesReadAsTheSameKittiPoses) {
+  const ScratchDir scratch("io_poses_tum");
+  std::mt19937_64 rng(5);
+  std::normal_distribution<double> g(0.0, 1.0);
+  std::vector<Eigen::Isometry3d> poses;
+  std::string tum = "# timestamp tx ty tz qx qy qz qw\n";
+  for (int i = 0; i < 50; ++i) {
+    const Eigen::Quaterniond q = Eigen::Quaterniond(g(rng), g(rng), g(rng), g(rng)).normalized();
+    Eigen::Isometry3d p = Eigen::Isometry3d::Identity();
+    p.linear() = q.toRotationMatrix();
+    p.translation() = Eigen::Vector3d(g(rng) * 1e3, g(rng), 4e5 + g(rng));
+    poses.push_back(p);
+    char line[256];
+    // 7 digits in the quaternion, as trajectories are often printed: normalised on reading.
+    std::snprintf(line, sizeof line, "%.6f %.17g %.17g %.17g %.7f %.7f %.7f %.7f\n", 1.6e9 + 0.1 * i,
+                  p.translation().x(), p.translation().y(), p.translation().z(), q.x(), q.y(), q.z(), q.w());
+    tum += line;
+    if (i == 20) tum += "\n  # a comment after a blank line\n";
+  }
+  const std::string kitti_path = (scratch.path / "kitti.txt").string(), tum_path = (scratch.path / "tum.txt").string();
+  writeKittiPoses(kitti_path, poses);
+  writeBytes(tum_path, tum);
+  const auto from_kitti = readKittiPoses(kitti_path), from_tum = readKittiPoses(tum_path);
+  ASSERT_EQ(from_tum.size(), poses.size());
+  ASSERT_EQ(from_kitti.size(), poses.size());
+  for (std::size_t i = 0; i < poses.size(); ++i) {
+    EXPECT_LT((from_tum[i].linear() - from_kitti[i].linear()).cwiseAbs().maxCoeff(), 1e-6) << i;
+    EXPECT_EQ(from_tum[i].translation(), from_kitti[i].translation()) << i;
+    EXPECT_TRUE(rigidPoseProblem(from_tum[i]).empty()) << i << ": " << rigidPoseProblem(from_tum[i]);
+  }
+  // Comments in a KITTI file are skipped too.
+  writeBytes(scratch.path / "commented.txt", "# poses of drive 0\n" + hpds::test::readText(kitti_path));
+  EXPECT_EQ(readKittiPoses((scratch.path / "commented.txt").string()).size(), poses.size());
+}
+
 // ---------------------------------------------------------------------------------------------------------------------
 // Malformed input: always std::runtime_error naming the path, never a crash, hang or huge allocation
 
@@ -152,7 +190,11 @@ TEST(BadInput, PoseFiles) {
     writeBytes(dir / name, content);
     expectError([&] { (void)readKittiPoses((dir / name).string()); }, name, parts);
   };
-  check("eleven.txt", good + "1 0 0 0 0 1 0 0 0 0 1\n", {":2:", "expected 12 numbers, found 11"});
+  check("eleven.txt", good + "1 0 0 0 0 1 0 0 0 0 1\n", {":2:", "expected 12 numbers", "or 8 (TUM", "found 11"});
+  check("seven.txt", "# t x y z qx qy qz qw\n0 1 2 3 0 0 0\n", {":2:", "found 7"});
+  check("mixed.txt", "\n" + good + "0.1 1 2 3 0 0 0 1\n", {":3:", "8 numbers (TUM), but line 2 had 12 (KITTI)"});
+  check("quaternion.txt", "0.1 1 2 3 0 0 0 1\n0.2 1 2 3 0 0 0.1 1\n", {":2:", "quaternion", "norm 1.00499"});
+  check("zero_quaternion.txt", "0.1 1 2 3 0 0 0 0\n", {":1:", "norm 0,"});
   check("thirteen.txt", good + good + "1 0 0 0 0 1 0 0 0 0 1 0 5\n", {":3:", "found 13"});
   check("abc.txt", good + "\n1 0 0 0 0 1 0 abc 0 0 1 0\n", {":3:", "'abc' is not a number"});
   check("comma.txt", "1,0 0 0 0 1 0 0 0 0 1 0\n", {":1:", "'1,0'"});

@@ -207,7 +207,7 @@ TEST_F(OutputSafety, SigkillDuringTheWriteLeavesThePreviousOutput) {
 }
 
 // A run that writes a folder of files (synth, render, analyze) into a folder that exists replaces all of its files or
-// none: killed while its third frame is written, the folder holds the previous run's frames and poses, never some
+// none: killed once it has reached its third frame, the folder holds the previous run's frames and poses, never some
 // new frames beside old poses; the next run into it removes the killed run's staging folder.
 TEST_F(OutputSafety, AKilledSynthLeavesAnExistingFolderAsItWas) {
   const fs::path out = dir_ / "s";
@@ -221,20 +221,19 @@ TEST_F(OutputSafety, AKilledSynthLeavesAnExistingFolderAsItWas) {
     return found;
   };
   const pid_t pid = spawnHpds({"synth", "-o", out.string(), "--frames", "50"}, dir_ / "log.txt");
-  // Polled: the third frame's temporary appears (in the run's staging folder; a run writing straight into the
-  // folder would show it there) once the first two frames are written.
-  auto isThirdsTemporary = [](const fs::path &p) {
-    const std::string name = p.filename().string();
-    return name.rfind("frame_000002.pcd", 0) == 0 && name != "frame_000002.pcd";
-  };
+  // Polled until the run has reached its third frame: in its staging folder that frame's temporary or, once
+  // renamed, the frame itself, which stays there until the run ends (47 frames later), so a slow poll (a sanitizer
+  // build) cannot miss it. A run writing straight into the folder would show the temporary there.
+  auto startsThird = [](const fs::path &p) { return p.filename().string().rfind("frame_000002.pcd", 0) == 0; };
   bool third = false;
-  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(120);
   while (!third && std::chrono::steady_clock::now() < deadline) {
-    for (const auto &e : fs::directory_iterator(out)) third = third || isThirdsTemporary(e.path());
+    for (const auto &e : fs::directory_iterator(out))
+      third = third || (startsThird(e.path()) && e.path().filename() != "frame_000002.pcd");
     for (const fs::path &staging : stagingIn(out)) {
       std::error_code ec;
       for (fs::directory_iterator it(staging, ec), end; !ec && it != end; it.increment(ec))
-        third = third || isThirdsTemporary(it->path());
+        third = third || startsThird(it->path());
     }
     if (!third) std::this_thread::sleep_for(std::chrono::milliseconds(1));
   }

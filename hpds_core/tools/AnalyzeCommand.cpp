@@ -442,7 +442,7 @@ void addAnalyzeCommand(CLI::App &app) {
   auto *input = cmd->add_option("--input", a->inputs,
                                 "the input clouds of the sampling: adds the grid baselines at equal count");
   // Both act on the --input clouds only: without them they would be dropped without a word.
-  cmd->add_option("--poses", a->poses, "KITTI poses of the inputs (as given to hpds sample)")->needs(input);
+  cmd->add_option("--poses", a->poses, "poses of the inputs, KITTI or TUM (as given to hpds sample)")->needs(input);
   cmd->add_option("--patch", a->patch, "cx,cy,size [m]: the square xy patch to analyse (default: found automatically)")
       ->delimiter(',')
       ->expected(3)

@@ -293,7 +293,8 @@ void addSampleCommand(CLI::App &app) {
   cmd->add_option("-o,--output", args->output, "output PLY (binary little-endian)")
       ->required()
       ->check(nonEmptyPath());
-  cmd->add_option("--poses", args->poses, "KITTI pose file: one 3x4 sensor-to-world matrix per line, one per input");
+  cmd->add_option("--poses", args->poses, "pose file, one sensor-to-world pose per input in order: KITTI (a 3x4 "
+                  "matrix per line) or TUM (time x y z qx qy qz qw)");
   cmd->add_option("--viewpoint", args->viewpoint,
                   "[m] X Y Z: the sensor's position in the inputs' own coordinates, for every input (normals face it, "
                   "input.min_range/max_range measure from it); default: a PCD's VIEWPOINT, else the origin")

@@ -82,7 +82,7 @@ void addVerifyCommand(CLI::App &app) {
                   "input cloud(s) or folder(s) the sampling was made from: also check coverage <= 2 r_D (a map's "
                   "frames are checked together; a scan-mode output's frame K against input K)");
   cmd->add_option("--poses", a->poses,
-                  "the KITTI pose file the sampling was made with (hpds sample --poses): each --input is posed by "
+                  "the pose file the sampling was made with (hpds sample --poses): each --input is posed by "
                   "its line, or with --frame K by line K");
   cmd->add_option("--frame", a->frame,
                   "a scan-mode output of several frames (field 'frame'): check only this frame (-1 = each frame "

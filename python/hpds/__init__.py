@@ -164,7 +164,8 @@ def read_cloud(path, return_viewpoint=False):
 
 
 def read_poses(path):
-    """A KITTI pose file (one 3x4 sensor-to-world matrix per line) as an (N, 4, 4) float64 array.
+    """A pose file (KITTI: one 3x4 sensor-to-world matrix per line; or TUM: time x y z qx qy qz qw) as an
+    (N, 4, 4) float64 array.
 
     Raises FileNotFoundError / IsADirectoryError for a path that is no file, RuntimeError for a malformed one."""
     path = os.fspath(path)

@@ -26,7 +26,8 @@ def parse_args(argv):
     p = argparse.ArgumentParser(prog="python3 -m hpds.map_build", description=__doc__.split("\n\n")[0],
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("inputs", nargs="+", metavar="INPUT", help="frames: .pcd, .ply, KITTI .bin, in stream order")
-    p.add_argument("--poses", required=True, help="KITTI pose file: one 3x4 sensor-to-world matrix per input")
+    p.add_argument("--poses", required=True, help="pose file, one sensor-to-world pose per input: KITTI (3x4 matrix per line) "
+                   "or TUM (time x y z qx qy qz qw)")
     p.add_argument("-o", "--output", required=True, metavar="OUTDIR", help="output folder (tiles and manifest.json)")
     p.add_argument("--tile-size", required=True, type=float, metavar="T",
                    help="[m] tile edge, a whole multiple of hierarchy.cell_size; with the cell derived from "

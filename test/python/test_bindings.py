@@ -457,6 +457,25 @@ class Arguments(support.ScratchCase):
         self.assertEqual(hpds.load_config(c), c)
 
 
+class Poses(support.ScratchCase):
+    def test_kitti_and_tum_files_give_the_same_matrices(self):
+        # A quarter turn about z, then half a turn about x, at a far offset; TUM lists qx qy qz qw after the time.
+        kitti = "# sensor to world\n0 -1 0 1000.5 1 0 0 -20 0 0 1 3\n1 0 0 0 0 -1 0 0 0 0 -1 0\n"
+        s = np.sqrt(0.5)
+        tum = "# timestamp tx ty tz qx qy qz qw\n1.0 1000.5 -20 3 0 0 %r %r\n\n1.1 0 0 0 1 0 0 0\n" % (s, s)
+        for name, text in (("p.txt", kitti), ("p.tum", tum)):
+            with open(self.path(name), "w") as f:
+                f.write(text)
+        a, b = hpds.read_poses(self.path("p.txt")), hpds.read_poses(self.path("p.tum"))
+        self.assertEqual(a.shape, (2, 4, 4))
+        np.testing.assert_allclose(b, a, atol=1e-15)
+        with open(self.path("mixed.txt"), "w") as f:
+            f.write(kitti + tum)
+        with self.assertRaises(RuntimeError) as e:
+            hpds.read_poses(self.path("mixed.txt"))
+        self.assertIn("one format per file", str(e.exception))
+
+
 class Viewpoint(support.ScratchCase):
     """A PCD's VIEWPOINT is where its sensor was: normals face it in hpds sample, and in Python when passed on."""
 

@@ -69,12 +69,17 @@ std::vector<Eigen::Isometry3d> readKittiPoses(const std::string &path) {
   std::vector<Eigen::Isometry3d> poses;
   std::string line;
   std::size_t line_no = 0;
+  // The format of the file's first pose line (12: KITTI, 8: TUM); a file mixing them is refused, as its lines could
+  // not all mean what they say.
+  std::size_t format = 0, format_line = 0;
   while (std::getline(in, line)) {
     ++line_no;
     std::array<double, 12> v{};
     std::size_t count = 0;
     const char *p = line.data();
     const char *end = p + line.size();
+    while (p < end && isSpace(*p)) ++p;
+    if (p < end && *p == '#') continue;  // a comment, as TUM files start with
     while (true) {
       while (p < end && isSpace(*p)) ++p;
       if (p == end) break;
@@ -93,21 +98,45 @@ std::vector<Eigen::Isometry3d> readKittiPoses(const std::string &path) {
       p = tok_end;
     }
     if (count == 0) continue;
-    if (count != 12)
-      failLine(path, line_no, "expected 12 numbers, found " + std::to_string(count) + " (row-major 3x4 [R|t])");
+    if (count != 12 && count != 8)
+      failLine(path, line_no,
+               "expected 12 numbers (KITTI: a row-major 3x4 [R|t]) or 8 (TUM: time x y z qx qy qz qw), found " +
+                   std::to_string(count));
+    if (format == 0) {
+      format = count;
+      format_line = line_no;
+    } else if (count != format) {
+      failLine(path, line_no,
+               std::to_string(count) + " numbers (" + (count == 12 ? "KITTI" : "TUM") + "), but line " +
+                   std::to_string(format_line) + " had " + std::to_string(format) + " (" +
+                   (format == 12 ? "KITTI" : "TUM") + "): one format per file");
+    }
 
     Eigen::Matrix3d r;
     Eigen::Vector3d t;
-    for (int row = 0; row < 3; ++row) {
-      for (int col = 0; col < 3; ++col) r(row, col) = v[row * 4 + col];
-      t(row) = v[row * 4 + 3];
-    }
-    double err = 0.0;
-    if (const std::string why = rotationProblem(r, &err); !why.empty()) failLine(path, line_no, why);
-    if (err > kExactTolerance) {
-      // Nearest rotation in the Frobenius sense; det stays +1 because R was already within 1e-3 of a rotation.
-      const Eigen::JacobiSVD<Eigen::Matrix3d> svd(r, Eigen::ComputeFullU | Eigen::ComputeFullV);
-      r = svd.matrixU() * svd.matrixV().transpose();
+    if (count == 12) {
+      for (int row = 0; row < 3; ++row) {
+        for (int col = 0; col < 3; ++col) r(row, col) = v[row * 4 + col];
+        t(row) = v[row * 4 + 3];
+      }
+      double err = 0.0;
+      if (const std::string why = rotationProblem(r, &err); !why.empty()) failLine(path, line_no, why);
+      if (err > kExactTolerance) {
+        // Nearest rotation in the Frobenius sense; det stays +1 because R was already within 1e-3 of a rotation.
+        const Eigen::JacobiSVD<Eigen::Matrix3d> svd(r, Eigen::ComputeFullU | Eigen::ComputeFullV);
+        r = svd.matrixU() * svd.matrixV().transpose();
+      }
+    } else {
+      // TUM: the time stamp (v[0]) is not used, poses are matched to frames by order as KITTI's are.
+      t = Eigen::Vector3d(v[1], v[2], v[3]);
+      const Eigen::Quaterniond q(v[7], v[4], v[5], v[6]);
+      const double norm = q.norm();
+      if (!(std::abs(norm - 1.0) <= kAcceptTolerance)) {
+        char buf[160];
+        std::snprintf(buf, sizeof buf, "quaternion qx qy qz qw has norm %.6g, not 1 (tolerance 1e-3)", norm);
+        failLine(path, line_no, buf);
+      }
+      r = q.normalized().toRotationMatrix();
     }
     Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
     pose.linear() = r;

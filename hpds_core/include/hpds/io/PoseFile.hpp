@@ -1,17 +1,21 @@
-// KITTI odometry pose files: one pose per non-empty line, 12 numbers forming a row-major 3x4 matrix [R | t] that maps
-// sensor coordinates into the world frame (translation in the file's units, metres for KITTI).
+// Pose files: one pose per line that maps sensor coordinates into the world frame (translation in the file's units,
+// metres for KITTI). Two formats, one per file: KITTI odometry (12 numbers, a row-major 3x4 matrix [R | t]) and TUM
+// (8 numbers: time x y z qx qy qz qw, as SLAM tools and evo write trajectories).
 //
 // Contract
-// - readKittiPoses returns the poses in file order. Blank (whitespace-only) lines are skipped but still counted for
-//   line numbers.
-// - Each rotation must be orthonormal with determinant +1 within 1e-3 (KITTI prints ~7 significant digits, so real
-//   files deviate by ~1e-6). A rotation that is not orthonormal to double precision is then replaced by the nearest
+// - readKittiPoses reads either format and returns the poses in file order: one pose per frame, matched by order (a
+//   TUM line's time is not used). Blank lines and comment lines (first non-blank character '#') are skipped but
+//   still counted for line numbers. writeKittiPoses writes KITTI.
+// - Each KITTI rotation must be orthonormal with determinant +1 within 1e-3 (KITTI prints ~7 significant digits, so
+//   real files deviate by ~1e-6). A rotation that is not orthonormal to double precision is then replaced by the nearest
 //   true rotation (SVD projection), so callers always get an exact isometry; one that already is orthonormal is kept
-//   bit for bit, so a write/read round trip is exact.
+//   bit for bit, so a write/read round trip is exact. Each TUM quaternion must have norm 1 within 1e-3 and is
+//   normalised.
 // - writeKittiPoses writes each number in the shortest decimal form that parses back to the identical double
 //   (std::to_chars, independent of the global locale), so a write/read round trip is exact.
 // - Errors: std::runtime_error whose message starts with the path and, for content errors, gives the 1-based line
-//   number: wrong number count, non-numeric token, NaN/Inf, invalid rotation; missing/unreadable file; I/O failure.
+//   number: wrong number count, formats mixed, non-numeric token, NaN/Inf, invalid rotation or quaternion;
+//   missing/unreadable file; I/O failure.
 //   Also thrown by writeKittiPoses for a non-finite pose.
 // - Thread-safety: reentrant; concurrent calls on different paths are safe.
 #pragma once
