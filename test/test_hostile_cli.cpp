@@ -84,10 +84,14 @@ TEST(HostileCli, TruncatedAndGarbageFilesOfEveryFormat) {
       {"sample " + q(tmp / "odd.bin") + out, 1, "multiple of 16"},
       {"sample " + q(tmp / "adir.pcd") + out, 1, "adir.pcd' holds no .pcd, .ply or .bin frame"},  // a folder: its frames
       {"sample " + good + " --poses " + q(tmp / "poses_garbage.txt") + out, 1, "poses_garbage.txt:1: "},
-      {"sample " + good + " --poses " + q(tmp / "poses_cut.txt") + out, 1, "expected 12 numbers, found 11"},
+      {"sample " + good + " --poses " + q(tmp / "poses_cut.txt") + out, 1, "or 8 (TUM: time x y z qx qy qz qw), found 11"},
       {"sample " + good + " --poses " + q(tmp / "poses_inf.txt") + out, 1, "non-finite"},
       {"sample " + good + " --poses " + q(tmp / "poses_scaled.txt") + out, 1, "not a rotation"},
       {"verify " + q(tmp / "cut.ply") + " --cell-size 4", 1, "truncated"},
+      // --input takes every path after it: the sampling given after it is said to have been taken as an input.
+      {"verify --input " + good + " " + q(tmp / "cut.ply") + " --cell-size 4", 2,
+       "SAMPLING is missing: --input takes every path after it, so '" + (tmp / "cut.ply").string() + "' was read"},
+      {"verify --cell-size 4", 2, "SAMPLING is required"},
   });
   // A failed run leaves no partial output behind.
   EXPECT_FALSE(fs::exists(tmp / "out.ply"));

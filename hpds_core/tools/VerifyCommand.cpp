@@ -76,7 +76,8 @@ PointBuffer posedInputs(const std::vector<std::string> &paths, const std::vector
 void addVerifyCommand(CLI::App &app) {
   auto a = std::make_shared<VerifyArgs>();
   CLI::App *cmd = app.add_subcommand("verify", "check a sampling: one sample per cell, additive spacing, coverage");
-  cmd->add_option("sampling", a->sampling, "sampling written by hpds sample (needs x y z level)")->required();
+  // Not ->required(): checked in the callback, where a SAMPLING taken by a greedy --input can be said.
+  cmd->add_option("sampling", a->sampling, "sampling written by hpds sample (needs x y z level)");
   addCellSizeOptions(*cmd, a->cell, true);
   cmd->add_option("--input", a->inputs,
                   "input cloud(s) or folder(s) the sampling was made from: also check coverage <= 2 r_D (a map's "
@@ -91,6 +92,11 @@ void addVerifyCommand(CLI::App &app) {
       ->check(integerIn(-1, 4294967295));
   cmd->add_option("--threads", a->threads, "worker threads, 0 = all cores")->capture_default_str()->check(integerIn(0, 1024));
   cmd->callback([a, cmd] {
+    if (a->sampling.empty() && a->inputs.empty())
+      throw CLI::ValidationError("SAMPLING is required: the output of hpds sample to check");
+    if (a->sampling.empty())
+      throw CLI::ValidationError("SAMPLING is missing: --input takes every path after it, so '" + a->inputs.back() +
+                                 "' was read as an input; give SAMPLING first: hpds verify SAMPLING --input INPUT...");
     a->inputs = expandInputFolders(a->inputs, std::cerr);
     const double cell_size = resolveCellSize(a->cell);
     // A scan-mode output of several frames holds one sampling per frame (each frame sampled on its own): each is
