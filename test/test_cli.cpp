@@ -412,7 +412,7 @@ TEST(Cli, VerifyChecksAPosedMapAgainstItsPosedFrames) {
   EXPECT_NE(log.find("--poses: give the --input frames it poses"), std::string::npos) << log;
   const std::string first = shellQuote(tmp / "s" / "frame_000000.pcd");
   EXPECT_EQ(runHpds(verify + " --input " + first + poses, &log), 1) << log;
-  EXPECT_NE(log.find("3 poses for 1 inputs"), std::string::npos) << log;
+  EXPECT_NE(log.find("3 poses for 1 inputs: one pose per input, by order"), std::string::npos) << log;
   // A scan-mode output of posed frames: frame K against its input posed by line K.
   ASSERT_EQ(runHpds("sample " + frames + "--spacing 0.2" + poses + " -o " + shellQuote(tmp / "scan.ply"), &log), 0)
       << log;

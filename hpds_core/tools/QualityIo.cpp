@@ -7,6 +7,7 @@
 #include <cstdio>
 #include <stdexcept>
 
+#include "CliOptions.hpp"
 #include "hpds/io/AtomicFile.hpp"
 #include "hpds/pcl/PointCloudFile.hpp"
 #include "hpds/io/PoseFile.hpp"
@@ -64,8 +65,7 @@ std::vector<Eigen::Vector3d> loadInputs(const std::vector<std::string> &inputs, 
   if (!poses_file.empty()) {
     poses = readKittiPoses(poses_file);
     if (poses.size() != inputs.size())
-      throw std::invalid_argument("--poses: '" + poses_file + "' has " + std::to_string(poses.size()) + " poses for " +
-                                  std::to_string(inputs.size()) + " inputs");
+      throw std::invalid_argument(poseCountMismatch(poses_file, poses.size(), inputs.size()));
   }
   std::vector<Eigen::Vector3d> out;
   for (std::size_t i = 0; i < inputs.size(); ++i) {

@@ -97,8 +97,7 @@ int runSample(const SampleArgs &a) {
   if (!a.poses.empty()) {
     poses = readKittiPoses(a.poses);
     if (poses.size() != a.inputs.size())
-      throw std::invalid_argument("--poses: '" + a.poses + "' has " + std::to_string(poses.size()) + " poses for " +
-                                  std::to_string(a.inputs.size()) + " inputs (one pose per input is required)");
+      throw std::invalid_argument(poseCountMismatch(a.poses, poses.size(), a.inputs.size()));
     double largest_translation = 0.0;
     for (const Eigen::Isometry3d &pose : poses)
       largest_translation = std::max(largest_translation, pose.translation().cwiseAbs().maxCoeff());

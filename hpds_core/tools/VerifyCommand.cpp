@@ -175,9 +175,7 @@ void addVerifyCommand(CLI::App &app) {
                                       " poses, none for frame " + std::to_string(a->frame));
         poses = {poses[static_cast<std::size_t>(a->frame)]};
       } else if (poses.size() != a->inputs.size()) {
-        throw std::invalid_argument("--poses: '" + a->poses + "' has " + std::to_string(poses.size()) +
-                                    " poses for " + std::to_string(a->inputs.size()) +
-                                    " inputs (one pose per input, as hpds sample takes them)");
+        throw std::invalid_argument(poseCountMismatch(a->poses, poses.size(), a->inputs.size()));
       }
     } else if (a->frame >= 0 && a->inputs.size() > 1) {
       throw std::invalid_argument("--frame: one --input, the frame's");

@@ -245,8 +245,8 @@ def build(inputs, poses_path, outdir, tile_size, config_yaml, runner, chunk_fram
     inputs = [os.path.abspath(p) for p in inputs]  # workers elsewhere see the same shared paths
     poses = _hpds.read_poses(os.fspath(poses_path))
     if len(poses) != len(inputs):
-        raise BuildError("--poses: '%s' has %d poses for %d inputs (one pose per input is required)"
-                         % (poses_path, len(poses), len(inputs)))
+        raise BuildError("--poses: '%s' has %d poses for %d inputs: one pose per input, by order (line K poses "
+                         "input K; a TUM line's time is not matched to the frames)" % (poses_path, len(poses), len(inputs)))
     if len(poses):
         # Georeferenced poses: float64 x y z unless the config chose a type, as `hpds sample` does.
         config_yaml, note = _hpds.widen_xyz_for_poses(config_yaml, float(np.abs(poses[:, :3, 3]).max()),
