@@ -1,5 +1,5 @@
-// readKittiPoses on the fuzzer's bytes: only std::runtime_error may come out; accepted poses must be exact
-// isometries (orthonormal, det +1, finite) and survive writeKittiPoses/readKittiPoses bit for bit.
+// readKittiPoses (KITTI and TUM lines, comments) on the fuzzer's bytes: only std::runtime_error may come out; accepted
+// poses must be exact isometries (orthonormal, det +1, finite) and survive writeKittiPoses/readKittiPoses bit for bit.
 #include <cmath>
 #include <cstring>
 #include <stdexcept>

@@ -195,6 +195,9 @@ int main(int argc, char **argv) {
             "3.330669e-16 2.326810e-11 2.392370e-10 9.999999e-01 -4.440892e-16\n\n"
             "9.999978e-01 5.272628e-04 -2.066935e-03 -4.690294e-02 -5.296506e-04 9.999992e-01 -1.154865e-03 "
             "-2.839928e-02 2.066324e-03 1.155958e-03 9.999971e-01 8.586941e-01\n");
+  writeText(dir / "poses" / "tum.txt",
+            "# timestamp tx ty tz qx qy qz qw\n1700000000.1 12.5 -3.25 0.75 0 0 0.7071068 0.7071068\n"
+            "1700000000.2 13.0 -3.2 0.76 0.0012 -0.0008 0.7082 0.7060\n");
 
   HpdsConfig config;
   writeText(dir / "config_yaml" / "defaults.yaml", dumpConfigYaml(config));
