@@ -335,7 +335,8 @@ void HpdsServer::onCloud(const ros::MessageEvent<const sensor_msgs::PointCloud2>
   // never lets the first line through.
   if (lost > 0 && logAllowed("lost_upstream"))
     ROS_WARN_STREAM_NAMED("hpds", tag_ << ": " << lost << " frame(s) from " << publisher << " never arrived (header.seq "
-                                           << "jumped to " << msg->header.seq << "): lost before hpds received them ("
+                                           << "jumped to " << msg->header.seq << "): lost in a publisher's queue or in this "
+                                           << "node's roscpp queue (an overloaded machine) before hpds received them ("
                                            << lost_total << " so far, counted in /diagnostics as 'frames lost "
                                            << "upstream'; a throttle, drop or filter upstream skips numbers on "
                                            << "purpose, and then this is expected)");
