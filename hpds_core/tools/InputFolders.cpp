@@ -7,19 +7,21 @@
 #include <ostream>
 #include <stdexcept>
 
+#include "hpds/io/PlyWriter.hpp"
+
 namespace hpds::cli {
 
 namespace {
 
 bool isDigit(char c) { return std::isdigit(static_cast<unsigned char>(c)) != 0; }
 
-// The PLY writer's header line (io/PlyWriter.cpp), within the first bytes of the file.
+// The PLY writer's comment line, within the first bytes of the file.
 bool writtenByHpds(const std::filesystem::path &path) {
   std::ifstream in(path, std::ios::binary);
   std::string head(256, '\0');
   in.read(head.data(), static_cast<std::streamsize>(head.size()));
   head.resize(static_cast<std::size_t>(in.gcount()));
-  return head.rfind("ply", 0) == 0 && head.find("\ncomment written by hpds\n") != std::string::npos;
+  return head.rfind("ply", 0) == 0 && head.find(std::string("\n") + kPlyWriterComment + "\n") != std::string::npos;
 }
 
 }  // namespace

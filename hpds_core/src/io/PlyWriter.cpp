@@ -92,7 +92,7 @@ PlyPlan planPly(const std::string &path, const PointBuffer &cloud) {
     fail(path, std::string("cannot write PLY: invalid layout: ") + e.what());
   }
 
-  std::string header = "ply\nformat binary_little_endian 1.0\ncomment written by hpds\n";
+  std::string header = std::string("ply\nformat binary_little_endian 1.0\n") + kPlyWriterComment + "\n";
   if (cloud.height() > 1) {
     header += "obj_info num_cols " + std::to_string(cloud.width()) + "\n";
     header += "obj_info num_rows " + std::to_string(cloud.height()) + "\n";

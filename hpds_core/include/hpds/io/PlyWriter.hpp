@@ -28,6 +28,10 @@
 
 namespace hpds {
 
+/// The comment line every header carries, third after `ply` and `format`: it marks the file as hpds's own output
+/// (the command-line tool leaves such files out of an input folder).
+inline constexpr const char *kPlyWriterComment = "comment written by hpds";
+
 void writePly(const std::string &path, const PointBuffer &cloud);
 /// The same bytes into `file` (its target names the file in messages), without committing it: a program writing
 /// several outputs commits them only once all are written, so that a failure leaves every previous output as it was.
