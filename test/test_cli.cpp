@@ -378,7 +378,7 @@ TEST(Cli, AFolderInputIsItsFramesInNameOrder) {
             0)
       << log;
   EXPECT_NE(log.find("out.ply' left out of folder"), std::string::npos) << log;
-  EXPECT_NE(log.find("written by hpds (an output, not a frame)"), std::string::npos) << log;
+  EXPECT_NE(log.find("samples written by hpds (an output, not a frame; name it to take it)"), std::string::npos) << log;
   EXPECT_NE(log.find(".hidden.pcd' left out of folder"), std::string::npos) << log;
   EXPECT_EQ(readText(tmp / "s" / "again.ply"), readText(tmp / "s" / "out.ply"));
   // Natural name order: unpadded numbers meet their pose lines (frame_2 before frame_10).
@@ -388,6 +388,75 @@ TEST(Cli, AFolderInputIsItsFramesInNameOrder) {
     std::filesystem::copy_file(tmp / "s" / from, tmp / "n" / to);
   ASSERT_EQ(runHpds("sample " + shellQuote(tmp / "n") + map + shellQuote(tmp / "natural.ply"), &log), 0) << log;
   EXPECT_EQ(readText(tmp / "natural.ply"), readText(tmp / "listed.ply"));
+  EXPECT_EQ(log.find("warning: --poses"), std::string::npos) << log;
+  // The same files in the order a shell glob gives (text order: f_10 before f_2) are taken as given, and a trial's
+  // map was posed wrong without a word: now a warning names the pair and says to give the folder.
+  const std::string glob_order = shellQuote(tmp / "n" / "f_1.pcd") + " " + shellQuote(tmp / "n" / "f_10.pcd") + " " +
+                                 shellQuote(tmp / "n" / "f_2.pcd");
+  ASSERT_EQ(runHpds("sample " + glob_order + map + shellQuote(tmp / "glob.ply"), &log), 0) << log;
+  EXPECT_NE(log.find("hpds: warning: --poses: '" + (tmp / "n" / "f_10.pcd").string() + "' is given before '" +
+                     (tmp / "n" / "f_2.pcd").string() + "'"),
+            std::string::npos)
+      << log;
+  EXPECT_NE(log.find("give the folder '" + (tmp / "n").string() + "' itself"), std::string::npos) << log;
+  EXPECT_NE(readText(tmp / "glob.ply"), readText(tmp / "natural.ply"));
+  // Frames hpds writes as PLY (`synth --format ply`) are frames: a trial's folder of them was refused as "holds no
+  // frame" because every PLY hpds wrote carried the outputs' mark.
+  ASSERT_EQ(runHpds("synth -o " + shellQuote(tmp / "p") + " --frames 3 --beams 8 --azimuth-steps 600 --format ply",
+                    &log),
+            0)
+      << log;
+  const std::string ply_map = " --mode map --spacing 0.2 --poses " + shellQuote(tmp / "p" / "poses.txt") + " -o ";
+  ASSERT_EQ(runHpds("sample " + shellQuote(tmp / "p") + ply_map + shellQuote(tmp / "plyframes.ply"), &log), 0) << log;
+  EXPECT_NE(log.find("3 inputs in name order"), std::string::npos) << log;
+  EXPECT_EQ(log.find("left out"), std::string::npos) << log;
+}
+
+// Found in a trial: `hpds sample --config` accepted a `ros:` section the node refuses (queue_size 0), although the
+// config says every reader checks it as the node does; it is checked against the file's own keys, as the node
+// reads the file, so that flags for the sampling (--mode scan) cannot make a node file fail.
+TEST(Cli, AConfigsRosSectionIsCheckedAsTheNodeChecksIt) {
+  const auto tmp = test::scratchDir("cli_ros_section");
+  std::string log;
+  ASSERT_EQ(runHpds("synth -o " + shellQuote(tmp / "s") + " --frames 1 --beams 8 --azimuth-steps 600", &log), 0) << log;
+  const std::string frame = shellQuote(tmp / "s" / "frame_000000.pcd");
+  std::ofstream(tmp / "bad.yaml") << "ros:\n  queue_size: 0\n";
+  EXPECT_EQ(runHpds("sample " + frame + " --config " + shellQuote(tmp / "bad.yaml") + " -o " + shellQuote(tmp / "a.ply"),
+                    &log),
+            1)
+      << log;
+  EXPECT_NE(log.find("ros.queue_size: must be in 1..1000, got 0 (in " + (tmp / "bad.yaml").string() + ")"),
+            std::string::npos)
+      << log;
+  EXPECT_FALSE(std::filesystem::exists(tmp / "a.ply"));
+  std::ofstream(tmp / "node.yaml") << "mode: map\nros:\n  fixed_frame: odom\n  map_file: m.hpdsmap\n"
+                                      "  load_map_on_start: true\n";
+  EXPECT_EQ(runHpds("sample " + frame + " --config " + shellQuote(tmp / "node.yaml") + " --mode scan -o " +
+                        shellQuote(tmp / "b.ply"),
+                    &log),
+            0)
+      << log;
+}
+
+// Found in a trial: NaN-only frames gave "wrote 0 samples" and exit 0, and nothing said why the map was empty.
+TEST(Cli, AnEmptyOutputSaysWhy) {
+  const auto tmp = test::scratchDir("cli_empty_output");
+  PointLayout l;
+  for (const char *axis : {"x", "y", "z"}) l.append(axis, FieldType::Float32);
+  PointBuffer nan_cloud(l, 50);
+  for (std::size_t i = 0; i < nan_cloud.size(); ++i) {
+    writeFromDouble(nan_cloud.record(i), l.fields[0], std::nan(""));
+    writeFromDouble(nan_cloud.record(i), l.fields[1], double(i));
+    writeFromDouble(nan_cloud.record(i), l.fields[2], 1.0);
+  }
+  writePly((tmp / "nan.ply").string(), nan_cloud);
+  std::string log;
+  ASSERT_EQ(runHpds("sample " + shellQuote(tmp / "nan.ply") + " --spacing 0.2 -o " + shellQuote(tmp / "out.ply"), &log),
+            0)
+      << log;
+  EXPECT_NE(log.find("wrote 0 samples"), std::string::npos) << log;
+  EXPECT_NE(log.find("hpds: warning: the output holds no sample: of 50 input points: 50 NaN/Inf"), std::string::npos)
+      << log;
 }
 
 // Found offline: verify could not check a posed map's coverage: its one --input was in the sensor frame, the map in

@@ -234,10 +234,4 @@ double resolveCellSize(const CellSizeOptions &o) {
   return resolveOutput(c).cell_size;
 }
 
-std::string poseCountMismatch(const std::string &poses_path, std::size_t poses, std::size_t inputs) {
-  return "--poses: '" + poses_path + "' has " + std::to_string(poses) + " poses for " + std::to_string(inputs) +
-         " inputs: one pose per input, by order (line K poses input K; a TUM line's time is not matched to the "
-         "frames)";
-}
-
 }  // namespace hpds::cli

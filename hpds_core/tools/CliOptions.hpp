@@ -66,8 +66,4 @@ void addCellSizeOptions(CLI::App &app, CellSizeOptions &options, bool depth_boun
 /// --cell-size: -1 (any level).
 [[nodiscard]] int deepestLevelFor(const CellSizeOptions &options);
 
-/// The error for a --poses file whose pose count is not the input count: poses go to inputs by order (a TUM line's
-/// time is not matched to a frame), which a trajectory of more poses than frames needs said.
-[[nodiscard]] std::string poseCountMismatch(const std::string &poses_path, std::size_t poses, std::size_t inputs);
-
 }  // namespace hpds::cli

@@ -5,10 +5,12 @@
 #include <charconv>
 #include <cmath>
 #include <cstdio>
+#include <iostream>
 #include <stdexcept>
 
 #include "CliOptions.hpp"
 #include "hpds/io/AtomicFile.hpp"
+#include "hpds/io/InputFolders.hpp"
 #include "hpds/pcl/PointCloudFile.hpp"
 #include "hpds/io/PoseFile.hpp"
 
@@ -66,6 +68,7 @@ std::vector<Eigen::Vector3d> loadInputs(const std::vector<std::string> &inputs, 
     poses = readKittiPoses(poses_file);
     if (poses.size() != inputs.size())
       throw std::invalid_argument(poseCountMismatch(poses_file, poses.size(), inputs.size()));
+    if (const std::string w = inputOrderWarning(inputs); !w.empty()) std::cerr << "hpds: warning: --poses: " << w << "\n";
   }
   std::vector<Eigen::Vector3d> out;
   for (std::size_t i = 0; i < inputs.size(); ++i) {

@@ -299,7 +299,7 @@ int runReplay(const ReplayArgs &a) {
     report.output_points = ply.size();
     report.invalid_normals = countInvalidNormals(ply);
     ply_file.emplace(a.output);
-    writePly(*ply_file, ply);
+    writePly(*ply_file, ply, PlyContent::kSamples);
     ply_file->finish();
   }
   report.seconds.write += since(t_write);

@@ -8,6 +8,7 @@
 #include <iostream>
 #include <sstream>
 #include <stdexcept>
+#include <utility>
 
 #include "QualityIo.hpp"
 
@@ -143,6 +144,26 @@ void Progress::step(std::size_t done, const std::string &what) {
 
 void Progress::finish() {
   if (tty_ && total_ >= 2) std::cerr << "\r\033[K" << std::flush;
+}
+
+std::string emptyOutputWarning(std::uint64_t output_points, const FrameCounters &t) {
+  if (output_points > 0) return "";
+  std::string w = "hpds: warning: the output holds no sample: ";
+  if (t.input == 0) return w + "the inputs hold no point";
+  w += "of " + std::to_string(t.input) + " input points";
+  const std::pair<std::uint64_t, const char *> reasons[] = {
+      {t.skipped_invalid, "NaN/Inf"},
+      {t.skipped_zero, "no-returns at (0,0,0) (input.skip_zero_points)"},
+      {t.skipped_range, "outside input.min_range/max_range"},
+      {t.out_of_range, "beyond the exact key range"},
+      {t.evicted, "samples evicted from the map (map.evict_distance, map.max_samples)"}};
+  const char *sep = ": ";
+  for (const auto &[count, what] : reasons)
+    if (count > 0) {
+      w += sep + std::to_string(count) + " " + what;
+      sep = ", ";
+    }
+  return w;
 }
 
 }  // namespace hpds::cli

@@ -54,6 +54,10 @@ struct RunReport {
 [[nodiscard]] std::string roundingWarning(const PointBuffer &cloud, double output_radius, const OutputConfig &output,
                                           double input_rounding = 0.0);
 
+/// A warning line (empty when `output_points` > 0) for a run that wrote no sample: why its input points gave none
+/// (all NaN, no-returns, out of range), which exit code 0 and a count of 0 would not say.
+[[nodiscard]] std::string emptyOutputWarning(std::uint64_t output_points, const FrameCounters &totals);
+
 /// A warning line (empty when nothing was evicted) for a map-mode run whose map lost samples to map.evict_distance
 /// or map.max_samples: the map it writes is then only what was left around the last frame, which a run that wanted
 /// the whole map would otherwise learn from a count at the end of the summary. `sensor_at_origin`: the frames had no

@@ -12,10 +12,11 @@
 #include <stdexcept>
 
 #include "CliOptions.hpp"
-#include "InputFolders.hpp"
+#include "hpds/io/InputFolders.hpp"
 #include "Commands.hpp"
 #include "OutputPaths.hpp"
 #include "RunReport.hpp"
+#include "hpds/config/NodeConfig.hpp"
 #include "hpds/io/AtomicFile.hpp"
 #include "hpds/io/HierarchyFile.hpp"
 #include "hpds/util/ParallelFor.hpp"
@@ -93,11 +94,14 @@ void checkSamplePaths(const SampleArgs &a) {
 int runSample(const SampleArgs &a) {
   checkSamplePaths(a);
   HpdsConfig config = resolveConfig(a.sampling);
+  // The node's keys this command does not use: checked all the same, as config/hpds.yaml promises.
+  if (!a.sampling.config_file.empty()) validateRosSectionOfFile(a.sampling.config_file);
   std::vector<Eigen::Isometry3d> poses;
   if (!a.poses.empty()) {
     poses = readKittiPoses(a.poses);
     if (poses.size() != a.inputs.size())
       throw std::invalid_argument(poseCountMismatch(a.poses, poses.size(), a.inputs.size()));
+    if (const std::string w = inputOrderWarning(a.inputs); !w.empty()) std::cerr << "hpds: warning: --poses: " << w << "\n";
     double largest_translation = 0.0;
     for (const Eigen::Isometry3d &pose : poses)
       largest_translation = std::max(largest_translation, pose.translation().cwiseAbs().maxCoeff());
@@ -242,7 +246,7 @@ int runSample(const SampleArgs &a) {
   // failure on the way (a full disk) leaves every previous output as it was, never a new cloud beside an old map.
   auto t0 = std::chrono::steady_clock::now();
   AtomicFile ply_file(a.output);
-  writePly(ply_file, output);
+  writePly(ply_file, output, PlyContent::kSamples);
   ply_file.finish();
   std::optional<AtomicFile> map_file;
   if (!a.save_map.empty()) {
@@ -273,6 +277,7 @@ int runSample(const SampleArgs &a) {
                                             poses.empty() && !any_viewpoint);
       !w.empty())
     std::cerr << w << "\n";
+  if (const std::string w = emptyOutputWarning(output.size(), report.totals); !w.empty()) std::cerr << w << "\n";
   if (report.totals.out_of_range > 0)
     std::cerr << "hpds: warning: " << report.totals.out_of_range
               << " points lie beyond the exact key range and were not inserted: " << keyRangeAdvice(config) << "\n";

@@ -12,7 +12,7 @@
 
 #include "CliOptions.hpp"
 #include "Commands.hpp"
-#include "InputFolders.hpp"
+#include "hpds/io/InputFolders.hpp"
 #include "hpds/eval/SamplingVerifier.hpp"
 #include "hpds/io/PoseFile.hpp"
 #include "hpds/pcl/PointCloudFile.hpp"
@@ -77,7 +77,7 @@ void addVerifyCommand(CLI::App &app) {
   auto a = std::make_shared<VerifyArgs>();
   CLI::App *cmd = app.add_subcommand("verify", "check a sampling: one sample per cell, additive spacing, coverage");
   // Not ->required(): checked in the callback, where a SAMPLING taken by a greedy --input can be said.
-  cmd->add_option("sampling", a->sampling, "sampling written by hpds sample (needs x y z level)");
+  cmd->add_option("sampling", a->sampling, "required: the sampling written by hpds sample (needs x y z level)");
   addCellSizeOptions(*cmd, a->cell, true);
   cmd->add_option("--input", a->inputs,
                   "input cloud(s) or folder(s) the sampling was made from: also check coverage <= 2 r_D (a map's "
@@ -177,6 +177,7 @@ void addVerifyCommand(CLI::App &app) {
       } else if (poses.size() != a->inputs.size()) {
         throw std::invalid_argument(poseCountMismatch(a->poses, poses.size(), a->inputs.size()));
       }
+      if (const std::string w = inputOrderWarning(a->inputs); !w.empty()) std::cerr << "hpds: warning: --poses: " << w << "\n";
     } else if (a->frame >= 0 && a->inputs.size() > 1) {
       throw std::invalid_argument("--frame: one --input, the frame's");
     }

@@ -25,7 +25,9 @@ from .tiled_build import MANIFEST, build, remove_scratch_unless_building, tile_p
 def parse_args(argv):
     p = argparse.ArgumentParser(prog="python3 -m hpds.map_build", description=__doc__.split("\n\n")[0],
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("inputs", nargs="+", metavar="INPUT", help="frames: .pcd, .ply, KITTI .bin, in stream order")
+    p.add_argument("inputs", nargs="+", metavar="INPUT",
+                   help="frames: .pcd, .ply, KITTI .bin, in stream order; a folder stands for its frames in natural "
+                        "name order (frame_2 before frame_10), as in hpds sample")
     p.add_argument("--poses", required=True, help="pose file, one sensor-to-world pose per input: KITTI (3x4 matrix per line) "
                    "or TUM (time x y z qx qy qz qw)")
     p.add_argument("-o", "--output", required=True, metavar="OUTDIR", help="output folder (tiles and manifest.json)")
@@ -64,6 +66,10 @@ def parse_args(argv):
         p.error("--workers: must be >= 0")
     if a.chunk_frames is not None and a.chunk_frames < 1:
         p.error("--chunk-frames: must be >= 1")
+    # As `hpds sample` checks it: output.spacing 0 in the config means "not set", which --spacing 0 must not
+    # silently become (it built every level down to max_depth).
+    if a.spacing is not None and not (0.0 < a.spacing <= 1e6):
+        p.error("--spacing: must be a finite number in (0, 1e+06], got %g" % a.spacing)
     return a
 
 
@@ -189,6 +195,11 @@ def main(argv=None):
           (c["samples_written"], m["output_level"], len(m["tiles"]), a.output,
            c["skipped_invalid"] + c["skipped_zero"] + c["skipped_range"], c["input_points"], c["out_of_range"],
            c["dropped_depth"]))
+    if c["samples_written"] == 0:
+        print("hpds.map_build: warning: the map holds no sample: of %d input points, %d were NaN/Inf, %d no-returns "
+              "at (0,0,0), %d outside input.min_range/max_range, %d beyond the exact key range"
+              % (c["input_points"], c["skipped_invalid"], c["skipped_zero"], c["skipped_range"], c["out_of_range"]),
+              file=sys.stderr)
     return 0
 
 

@@ -7,10 +7,13 @@
 Every problem with a file's contents is a ValueError that names it (a missing file or a folder is the OSError
 open() raises); nothing is allocated beyond what the file holds.
 """
+import errno
 import os
 import re
 
 import numpy as np
+
+from . import _hpds
 
 _TYPES = {"char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1", "short": "<i2", "int16": "<i2",
           "ushort": "<u2", "uint16": "<u2", "int": "<i4", "int32": "<i4", "uint": "<u4", "uint32": "<u4",
@@ -94,8 +97,11 @@ def _property_type(vertices, name):
     return _NAMES[key]
 
 
-def write(path, vertices):
-    """Writes a structured array as binary little-endian PLY, atomically (a temporary beside `path`, renamed)."""
+def write(path, vertices, samples=False):
+    """Writes a structured array as binary little-endian PLY, atomically (a temporary beside `path`, renamed).
+
+    samples: mark the file as a sampling's output, as `hpds sample` marks its own (its header comment), so that
+    `hpds sample FOLDER` and the map build leave it out of a folder of frames; not for frames."""
     if not os.fspath(path).lower().endswith(".ply"):
         # As `hpds sample -o out.pcd` is refused: a PLY under another format's name is read as that format.
         raise ValueError("write: '%s' is not a .ply name, and this writes PLY: name the output e.g. map.ply" % (path,))
@@ -103,7 +109,8 @@ def write(path, vertices):
     if vertices.dtype.names is None or vertices.ndim != 1:
         raise ValueError("write: expects a 1-D structured array (fields x, y, z, ...), got shape %s and dtype %s"
                          % (vertices.shape, vertices.dtype))
-    lines = ["ply", "format binary_little_endian 1.0", "element vertex %d" % len(vertices)]
+    lines = ["ply", "format binary_little_endian 1.0"] + ([_hpds.PLY_SAMPLES_COMMENT] if samples else []) + [
+        "element vertex %d" % len(vertices)]
     for name in vertices.dtype.names:
         if not _NAME.match(name):
             raise ValueError("write: field name %r is not one word of printable ASCII" % name)
@@ -116,7 +123,13 @@ def write(path, vertices):
         raise FileNotFoundError("write: '%s' is in folder '%s', which does not exist" % (path, folder))
     tmp = "%s.tmp.%d" % (path, os.getpid())
     try:
-        with open(tmp, "wb") as f:
+        try:
+            f = open(tmp, "wb")
+        except PermissionError:
+            # Said by the path asked for, not by the temporary's name.
+            raise PermissionError(errno.EACCES, "write: '%s' is in folder '%s', which is not writable"
+                                  % (path, folder)) from None
+        with f:
             f.write(("\n".join(lines) + "\n").encode("ascii"))
             f.write(vertices.astype(le).tobytes())
             f.flush()
@@ -164,4 +177,12 @@ def merge(paths, out_path):
     for p, part in zip(paths[1:], parts[1:]):
         if part.dtype != parts[0].dtype:
             raise ValueError("merge: '%s' has other fields than '%s'" % (p, paths[0]))
-    write(out_path, np.concatenate(parts))
+    # The merged tiles of a build are a sampling's output as each tile is; anything else merged is not marked.
+    write(out_path, np.concatenate(parts), samples=all(_marked_as_samples(p) for p in paths))
+
+
+def _marked_as_samples(path):
+    """Whether a PLY file's header carries the comment `hpds sample` and the map build mark their outputs with."""
+    with open(path, "rb") as f:
+        head = f.read(256)
+    return head.startswith(b"ply") and ("\n%s\n" % _hpds.PLY_SAMPLES_COMMENT).encode("ascii") in head

@@ -154,7 +154,11 @@ def _lock(outdir):
     so it is taken again on the file at the path."""
     path = os.path.join(outdir, LOCK)
     while True:
-        f = open(path, "a")
+        try:
+            f = open(path, "a")
+        except PermissionError:
+            # The folder, not the lock file the user never asked for.
+            raise BuildError("the output folder %s is not writable" % outdir) from None
         try:
             fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
@@ -234,7 +238,8 @@ def _write_json(path, data):
 def build(inputs, poses_path, outdir, tile_size, config_yaml, runner, chunk_frames=None, log=None, other_inputs=()):
     """Runs a tiled map build (see the module docstring) and returns the manifest as a dict.
 
-    inputs: point-cloud files, one frame each, in stream order; poses_path: KITTI poses, one per input;
+    inputs: point-cloud files, one frame each, in stream order, or folders of them (each taken in natural name
+    order, as `hpds sample` takes a folder: frame_2 before frame_10); poses_path: KITTI or TUM poses, one per input;
     config_yaml: the complete config (hpds._hpds.config_yaml), map mode; runner: SerialRunner or DaskRunner;
     other_inputs: further files the build read (the config file), which it must not overwrite either.
     Raises BuildError (a task failed, or the paths are unsafe) or ValueError (config, tile size).
@@ -242,11 +247,19 @@ def build(inputs, poses_path, outdir, tile_size, config_yaml, runner, chunk_fram
     log = log or (lambda msg: print("hpds.map_build: " + msg, file=sys.stderr, flush=True))
     t_start = time.monotonic()
     plan = _hpds.tiled_plan(config_yaml, tile_size)
+    try:
+        inputs, notes = _hpds.expand_inputs([os.fspath(p) for p in inputs])
+    except ValueError as e:  # a folder that cannot be read or holds no frame
+        raise BuildError(str(e)) from None
+    for note in notes.splitlines():
+        log(note[len("hpds: "):] if note.startswith("hpds: ") else note)
+    order = _hpds.input_order_warning(inputs)  # before abspath: in the paths as the user gave them
     inputs = [os.path.abspath(p) for p in inputs]  # workers elsewhere see the same shared paths
     poses = _hpds.read_poses(os.fspath(poses_path))
     if len(poses) != len(inputs):
-        raise BuildError("--poses: '%s' has %d poses for %d inputs: one pose per input, by order (line K poses "
-                         "input K; a TUM line's time is not matched to the frames)" % (poses_path, len(poses), len(inputs)))
+        raise BuildError(_hpds.pose_count_mismatch(os.fspath(poses_path), len(poses), len(inputs)))
+    if order:
+        log("warning: --poses: " + order)
     if len(poses):
         # Georeferenced poses: float64 x y z unless the config chose a type, as `hpds sample` does.
         config_yaml, note = _hpds.widen_xyz_for_poses(config_yaml, float(np.abs(poses[:, :3, 3]).max()),

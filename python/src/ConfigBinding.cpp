@@ -7,6 +7,7 @@
 
 #include "Bindings.hpp"
 #include "hpds/config/ConfigYaml.hpp"
+#include "hpds/config/NodeConfig.hpp"
 #include "hpds/config/YamlScalar.hpp"
 #include "hpds/pipeline/OutputCloud.hpp"
 
@@ -55,6 +56,8 @@ void bindConfig(py::module_ &m) {
       "config_yaml",
       [](const std::string &yaml_text, const std::string &path, const std::string &overlay) {
         if (overlay.empty()) return dumpConfigYaml(configFrom(yaml_text, path));
+        // Its `ros:` section as the node reads the file, which the overlay does not touch (hpds sample does this too).
+        if (!path.empty()) validateRosSectionOfFile(path);
         // The file's values are judged with the overlay over them, as the CLI judges a --config with its flags.
         HpdsConfig config;
         applyConfigYaml(path.empty() ? yaml_text : readConfigFile(path), config, path, ConfigValidation::kByCaller);

@@ -1,14 +1,18 @@
 // Files in: point clouds (as `hpds sample` reads them) and KITTI pose files, as NumPy arrays.
 #include <pybind11/numpy.h>
+#include <pybind11/stl.h>
 
 #include <algorithm>
 #include <cctype>
 #include <cstring>
+#include <sstream>
 #include <stdexcept>
 #include <vector>
 
 #include "Bindings.hpp"
+#include "hpds/io/InputFolders.hpp"
 #include "hpds/io/KittiBin.hpp"
+#include "hpds/io/PlyWriter.hpp"
 #include "hpds/io/PoseFile.hpp"
 #ifdef HPDS_PYTHON_WITH_PCL
 #include "hpds/pcl/PointCloudFile.hpp"
@@ -130,6 +134,20 @@ void bindIo(py::module_ &m) {
         return out;
       },
       py::arg("path"), "Poses of a KITTI pose file as an (N, 4, 4) float64 array of sensor-to-world matrices.");
+  // The input list rules of `hpds sample`, for the tiled map build: one implementation, the same order and texts.
+  m.def(
+      "expand_inputs",
+      [](const std::vector<std::string> &given) {
+        std::ostringstream notes;
+        std::vector<std::string> inputs = expandInputFolders(given, notes);
+        return py::make_tuple(inputs, notes.str());
+      },
+      py::arg("paths"), "(inputs, notes): every folder of `paths` replaced by its frames in natural name order.");
+  m.def("input_order_warning", &inputOrderWarning, py::arg("inputs"),
+        "'' or a warning that files of one folder are not in natural name order.");
+  m.def("pose_count_mismatch", &poseCountMismatch, py::arg("poses_path"), py::arg("poses"), py::arg("inputs"),
+        "The error text for a pose file whose pose count is not the input count.");
+  m.attr("PLY_SAMPLES_COMMENT") = kPlySamplesComment;
 }
 
 }  // namespace hpds::python

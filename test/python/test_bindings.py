@@ -177,9 +177,11 @@ class Arguments(support.ScratchCase):
         import warnings
         for first, extra in ((None, {"input": {"max_range": 1.0e7}}), ((0.0, 0.0, 0.0), {}), ((1.0, 1.0, 1.0), {})):
             cloud = geo if first is None else np.vstack([np.array([first]), geo])
+            # Without a point near it, the origin is no sensor position: said (below), so given here.
+            viewpoint = tuple(offset) if first is None else None
             with warnings.catch_warnings():
                 warnings.simplefilter("error")
-                got = hpds.downsample(cloud, dict(config, **extra))
+                got = hpds.downsample(cloud, dict(config, **extra), viewpoint=viewpoint)
             pts = cloud[got["index"]]
             far = pts[np.abs(pts).max(axis=1) > 1e3]
             d2 = ((far[:, None, :] - far[None, :, :]) ** 2).sum(axis=2)
@@ -266,26 +268,46 @@ class Arguments(support.ScratchCase):
         # Found in a user trial: a float32 cloud in UTM coordinates (5e6 m: float32 steps of 0.5 m) lost a third of
         # its samples to the rounding without a word; the CLI warns for such a file.
         utm = self.points.astype(np.float64) + np.array([5.0e5, 5.0e6, 0.0])
+        east = (5.0e5, 5.0e6, 0.0)  # the sensor, where the points are: no far-viewpoint warning
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
-            hpds.downsample(utm.astype(np.float32), {"normals": {"enabled": False}})
+            hpds.downsample(utm.astype(np.float32), {"normals": {"enabled": False}}, viewpoint=east)
         self.assertEqual(len(caught), 1)
         self.assertIs(caught[0].category, RuntimeWarning)
         self.assertIn("the input's own float32 x y z round positions by up to 0.29", str(caught[0].message))
         self.assertIn("local frame", str(caught[0].message))
         # float64, and float32 near the origin, say nothing.
-        for quiet_points in (utm, self.points):
+        for quiet_points, vp in ((utm, east), (self.points, None)):
             with warnings.catch_warnings(record=True) as quiet:
                 warnings.simplefilter("always")
-                hpds.downsample(quiet_points, {"normals": {"enabled": False}})
+                hpds.downsample(quiet_points, {"normals": {"enabled": False}}, viewpoint=vp)
             self.assertEqual(quiet, [])
         # The threshold is 1 % of the output radius: 0.5 mm at a 5 cm spacing is reached at about 8400 m.
         for x, warned in ((8000.0, False), (9000.0, True)):
             with warnings.catch_warnings(record=True) as w:
                 warnings.simplefilter("always")
                 hpds.downsample((self.points + np.float32(x)).astype(np.float32),
-                                {"output": {"spacing": 0.05}, "normals": {"enabled": False}})
+                                {"output": {"spacing": 0.05}, "normals": {"enabled": False}}, viewpoint=(x, x, x))
             self.assertEqual(len(w), int(warned), x)
+
+    def test_a_viewpoint_far_from_every_point_is_warned(self):
+        # Found in a trial: world (UTM) points without the sensor's position gave 49 % of the normals flipped
+        # against the sensor's, without the warning `hpds sample` gives for the same cloud.
+        far = self.points.astype(np.float64) + np.array([5.0e5, 5.4e6, 0.0])
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            hpds.downsample(far)
+        self.assertEqual(len(caught), 1)
+        self.assertIs(caught[0].category, RuntimeWarning)
+        self.assertIn("m from the viewpoint (0, 0, 0)", str(caught[0].message))
+        self.assertIn("pass the sensor's position as viewpoint=(x, y, z)", str(caught[0].message))
+        # Given the sensor's position, or with the points in the sensor's frame, nothing; NaN points do not count.
+        with_nan = np.vstack([np.full((3, 3), np.nan), self.points.astype(np.float64)])
+        for points, vp in ((far, (5.0e5, 5.4e6, 0.0)), (with_nan, None)):
+            with warnings.catch_warnings(record=True) as quiet:
+                warnings.simplefilter("always")
+                hpds.downsample(points, viewpoint=vp)
+            self.assertEqual(quiet, [])
 
     def test_ctrl_c_stops_a_long_call(self):
         # Found in a user trial: a call of seconds on millions of points took Ctrl-C only once it had finished (19 s
@@ -356,6 +378,13 @@ class Arguments(support.ScratchCase):
         with self.assertRaises(ValueError) as e:
             hpds.downsample(self.points, bad)
         self.assertIn("hierarchy.max_depth", str(e.exception))
+        # The node's `ros:` section is checked as the node checks the file (hpds sample does), though unused here.
+        node_bad = self.path("node_bad.yaml")
+        with open(node_bad, "w") as f:
+            f.write("ros:\n  queue_size: 0\n")
+        with self.assertRaises(ValueError) as e:
+            hpds.downsample(self.points, node_bad)
+        self.assertIn("ros.queue_size: must be in 1..1000, got 0 (in %s)" % node_bad, str(e.exception))
         with self.assertRaises(TypeError):
             hpds.downsample(self.points, 42)
         with self.assertRaises(TypeError):

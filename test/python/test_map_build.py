@@ -287,6 +287,59 @@ class MapBuild(unittest.TestCase):
             build([os.path.join(out, "tile_0_0.ply")], self.poses, out, TILE, self.config_yaml, SerialRunner(),
                   log=lambda m: None)
 
+    def test_a_folder_is_its_frames_in_name_order_and_a_glob_order_is_warned(self):
+        # A trial's map was posed wrong without a word: `map_build frames/*.pcd` with unpadded names gets the shell's
+        # text order (f_10 before f_2), and a folder, which `hpds sample` takes in name order, was refused.
+        folder = self.out("unpadded")
+        os.makedirs(folder)
+        for i, f in enumerate(self.frames):
+            shutil.copy(f, os.path.join(folder, "f_%d.pcd" % (i * 4)))  # f_0 f_4 f_8 f_12 f_16 f_20
+        logs = []
+        build([folder], self.poses, self.out("from_folder"), TILE, self.config_yaml, SerialRunner(), log=logs.append)
+        self.assert_same_tiles(self.out("from_folder"))
+        self.assertTrue(any("6 inputs in name order, 'f_0.pcd' to 'f_20.pcd'" in m for m in logs), logs)
+        self.assertFalse(any("warning" in m for m in logs), logs)
+        text_order = sorted(glob.glob(os.path.join(folder, "*.pcd")))  # what the shell gives for unpadded/*.pcd
+        logs = []
+        build(text_order, self.poses, self.out("from_glob"), TILE, self.config_yaml, SerialRunner(), log=logs.append)
+        warned = [m for m in logs if m.startswith("warning: --poses: ")]
+        self.assertEqual(len(warned), 1, logs)
+        self.assertIn("f_20.pcd' is given before '", warned[0])
+        self.assertIn("give the folder '%s' itself" % folder, warned[0])
+        # Each tile of the map (and a merge of them) is marked as hpds's output: the folder leaves it out.
+        tiles = [os.path.join(self.out("from_folder"), n) for n in tile_files(self.out("from_folder"))]
+        shutil.copy(tiles[0], os.path.join(folder, "tile.ply"))
+        hpds.ply.merge(tiles, os.path.join(folder, "merged.ply"))
+        points = hpds.read_cloud(self.frames[0])
+        hpds.ply.write(os.path.join(folder, "mine.ply"), points)  # a frame of the user's: not marked, so taken
+        inputs, notes = hpds._hpds.expand_inputs([folder])
+        self.assertEqual([os.path.basename(p) for p in inputs],
+                         ["f_0.pcd", "f_4.pcd", "f_8.pcd", "f_12.pcd", "f_16.pcd", "f_20.pcd", "mine.ply"])
+        self.assertIn("tile.ply' left out of folder", notes)
+        self.assertIn("merged.ply' left out of folder", notes)
+        with self.assertRaises(BuildError) as e:  # an empty folder, said as such
+            os.makedirs(self.out("no_frames"))
+            build([self.out("no_frames")], self.poses, self.out("e7"), TILE, self.config_yaml, SerialRunner(),
+                  log=lambda m: None)
+        self.assertIn("holds no .pcd, .ply or .bin frame", str(e.exception))
+
+    def test_an_empty_map_says_why(self):
+        # NaN-only frames gave "wrote 0 samples" and exit 0 with nothing said.
+        folder = self.out("nan_frames")
+        os.makedirs(folder)
+        cloud = hpds.read_cloud(self.frames[0])[:40].copy()
+        cloud["x"] = np.nan
+        for i in range(2):
+            hpds.ply.write(os.path.join(folder, "f_%d.ply" % i), cloud)
+        poses = os.path.join(folder, "poses.txt")
+        with open(poses, "w") as f:
+            f.write("1 0 0 0 0 1 0 0 0 0 1 0\n" * 2)
+        with contextlib.redirect_stderr(io.StringIO()) as err, contextlib.redirect_stdout(io.StringIO()):
+            rc = map_build.main([folder, "--poses", poses, "-o", self.out("empty_map"), "--tile-size", "8",
+                                 "--workers", "0"] + SAMPLING)
+        self.assertEqual(rc, 0)
+        self.assertIn("warning: the map holds no sample: of 80 input points, 80 were NaN/Inf", err.getvalue())
+
     def test_command_line_errors_name_the_option_or_key(self):
         base = self.frames[:2] + ["--poses", self.poses, "--workers", "0"]
         cases = [
@@ -303,6 +356,23 @@ class MapBuild(unittest.TestCase):
         with contextlib.redirect_stderr(io.StringIO()) as err:  # 2 inputs, 6 poses
             self.assertEqual(map_build.main(base + ["-o", self.out("e5"), "--tile-size", "8", "--cell-size", "2"]), 1)
         self.assertIn("poses", err.getvalue())
+        # A config's `ros:` section is checked as the node checks the file (a trial found `hpds sample --config`
+        # accepting what the node refuses; the map build judged only the sampling keys too).
+        node_bad = self.out("node_bad.yaml")
+        with open(node_bad, "w") as f:
+            f.write("ros:\n  queue_size: 0\n")
+        with contextlib.redirect_stderr(io.StringIO()) as err:
+            self.assertEqual(map_build.main(base + ["-o", self.out("e8"), "--tile-size", "8", "--config", node_bad]), 1)
+        self.assertIn("ros.queue_size: must be in 1..1000, got 0 (in %s)" % node_bad, err.getvalue())
+        # --spacing 0 was taken as output.spacing 0 ("not set") and built every level down to max_depth, exit 0; a
+        # bad command line, as in `hpds sample`.
+        for spacing in ("0", "-0.1", "nan"):
+            with self.subTest(spacing=spacing):
+                with contextlib.redirect_stderr(io.StringIO()) as err, self.assertRaises(SystemExit) as stop:
+                    map_build.main(base + ["-o", self.out("e6"), "--tile-size", "8", "--spacing", spacing])
+                self.assertEqual(stop.exception.code, 2)
+                self.assertIn("--spacing: must be a finite number in (0, 1e+06]", err.getvalue())
+                self.assertFalse(os.path.exists(self.out("e6")))
 
     def test_the_shipped_defaults_round_the_tile_size_to_whole_cells(self):
         # The README's command: no --cell-size, so the cell is derived from output.spacing (3.695 m for 0.1 m), an

@@ -280,6 +280,15 @@ void applyNodeConfigYaml(const std::string &yaml_text, NodeConfig &config, const
   config = std::move(result);
 }
 
+void validateRosSectionOfFile(const std::string &path) {
+  const NodeConfig file = loadNodeConfigFile(path, ConfigValidation::kByCaller);
+  try {
+    validateRosConfig(file.ros, file.hpds);
+  } catch (const std::invalid_argument &e) {
+    throw std::invalid_argument(std::string(e.what()) + " (in " + path + ")");
+  }
+}
+
 NodeConfig loadNodeConfigFile(const std::string &path, ConfigValidation validation) {
   NodeConfig config;
   applyNodeConfigYaml(readConfigFile(path), config, path, validation);

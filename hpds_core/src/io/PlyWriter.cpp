@@ -84,7 +84,7 @@ struct PlyPlan {
   std::size_t out_step = 0;
 };
 
-PlyPlan planPly(const std::string &path, const PointBuffer &cloud) {
+PlyPlan planPly(const std::string &path, const PointBuffer &cloud, PlyContent content) {
   const PointLayout &layout = cloud.layout();
   try {
     layout.validate();
@@ -92,7 +92,8 @@ PlyPlan planPly(const std::string &path, const PointBuffer &cloud) {
     fail(path, std::string("cannot write PLY: invalid layout: ") + e.what());
   }
 
-  std::string header = std::string("ply\nformat binary_little_endian 1.0\n") + kPlyWriterComment + "\n";
+  std::string header = "ply\nformat binary_little_endian 1.0\n";
+  if (content == PlyContent::kSamples) header += std::string(kPlySamplesComment) + "\n";
   if (cloud.height() > 1) {
     header += "obj_info num_cols " + std::to_string(cloud.width()) + "\n";
     header += "obj_info num_rows " + std::to_string(cloud.height()) + "\n";
@@ -182,13 +183,15 @@ void writePlanned(AtomicFile &file, const PlyPlan &plan, const PointBuffer &clou
 
 }  // namespace
 
-void writePly(const std::string &path, const PointBuffer &cloud) {
-  const PlyPlan plan = planPly(path, cloud);
+void writePly(const std::string &path, const PointBuffer &cloud, PlyContent content) {
+  const PlyPlan plan = planPly(path, cloud, content);
   AtomicFile file(path);
   writePlanned(file, plan, cloud);
   file.commit();
 }
 
-void writePly(AtomicFile &file, const PointBuffer &cloud) { writePlanned(file, planPly(file.target(), cloud), cloud); }
+void writePly(AtomicFile &file, const PointBuffer &cloud, PlyContent content) {
+  writePlanned(file, planPly(file.target(), cloud, content), cloud);
+}
 
 }  // namespace hpds

@@ -170,4 +170,10 @@ void writeKittiPoses(const std::string &path, const std::vector<Eigen::Isometry3
   file.close();
 }
 
+std::string poseCountMismatch(const std::string &poses_path, std::size_t poses, std::size_t inputs) {
+  return "--poses: '" + poses_path + "' has " + std::to_string(poses) + " poses for " + std::to_string(inputs) +
+         " inputs: one pose per input, by order (line K poses input K; a TUM line's time is not matched to the "
+         "frames)";
+}
+
 }  // namespace hpds

@@ -64,6 +64,11 @@ void applyNodeConfigYaml(const std::string &yaml_text, NodeConfig &config, const
 /// and a non-empty map_file.
 void validateRosConfig(const RosConfig &ros, const HpdsConfig &config);
 
+/// validateRosConfig on the config file at `path` as the node reads it alone (its `ros:` section against its own keys
+/// over the defaults), for readers that use only the sampling keys and judge those with their flags over them
+/// (`hpds sample --config`, the tiled map build): a file they accept, the node accepts. Errors name `path`.
+void validateRosSectionOfFile(const std::string &path);
+
 /// A warning (empty when there is none; no "hpds: warning:" prefix) naming the `ros:` settings that `mode` does not
 /// use although they differ from their defaults (scan mode: fixed_frame, local_map_*, map_file; map mode:
 /// output_frame): a user who set fixed_frame: odom and left mode at scan got scan-mode output in the sensor frame,

@@ -28,13 +28,15 @@
 
 namespace hpds {
 
-/// The comment line every header carries, third after `ply` and `format`: it marks the file as hpds's own output
-/// (the command-line tool leaves such files out of an input folder).
-inline constexpr const char *kPlyWriterComment = "comment written by hpds";
+/// What a file holds, for the header's comment line: a sampling's output (the tool's `sample` and `replay`, the
+/// tiles of a map build) carries kPlySamplesComment, third after `ply` and `format`, so that the command-line tool
+/// and the map build leave it out of an input folder; points (a frame, anything else) carry no comment.
+enum class PlyContent { kPoints, kSamples };
+inline constexpr const char *kPlySamplesComment = "comment written by hpds";
 
-void writePly(const std::string &path, const PointBuffer &cloud);
+void writePly(const std::string &path, const PointBuffer &cloud, PlyContent content = PlyContent::kPoints);
 /// The same bytes into `file` (its target names the file in messages), without committing it: a program writing
 /// several outputs commits them only once all are written, so that a failure leaves every previous output as it was.
-void writePly(AtomicFile &file, const PointBuffer &cloud);
+void writePly(AtomicFile &file, const PointBuffer &cloud, PlyContent content = PlyContent::kPoints);
 
 }  // namespace hpds

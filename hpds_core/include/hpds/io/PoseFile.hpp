@@ -21,6 +21,7 @@
 #pragma once
 
 #include <Eigen/Geometry>
+#include <cstddef>
 #include <string>
 #include <vector>
 
@@ -32,6 +33,10 @@ namespace hpds {
 /// 1e-3; bottom row exactly 0 0 0 1), else a sentence saying what is wrong. Pipeline::addFrame applies it to
 /// frame.sensor_to_fixed.
 [[nodiscard]] std::string rigidPoseProblem(const Eigen::Isometry3d &pose);
+
+/// The error for a pose file of `poses` poses given for `inputs` frames (--poses names the option in the CLI and the
+/// tiled map build alike): poses are matched to frames by order.
+[[nodiscard]] std::string poseCountMismatch(const std::string &poses_path, std::size_t poses, std::size_t inputs);
 
 void writeKittiPoses(const std::string &path, const std::vector<Eigen::Isometry3d> &poses);
 

@@ -1,27 +1,28 @@
-#include "InputFolders.hpp"
+#include "hpds/io/InputFolders.hpp"
 
 #include <algorithm>
 #include <cctype>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <ostream>
 #include <stdexcept>
 
 #include "hpds/io/PlyWriter.hpp"
 
-namespace hpds::cli {
+namespace hpds {
 
 namespace {
 
 bool isDigit(char c) { return std::isdigit(static_cast<unsigned char>(c)) != 0; }
 
-// The PLY writer's comment line, within the first bytes of the file.
-bool writtenByHpds(const std::filesystem::path &path) {
+// The comment line the PLY writer puts in a sampling's output, within the first bytes of the file.
+bool samplesWrittenByHpds(const std::filesystem::path &path) {
   std::ifstream in(path, std::ios::binary);
   std::string head(256, '\0');
   in.read(head.data(), static_cast<std::streamsize>(head.size()));
   head.resize(static_cast<std::size_t>(in.gcount()));
-  return head.rfind("ply", 0) == 0 && head.find(std::string("\n") + kPlyWriterComment + "\n") != std::string::npos;
+  return head.rfind("ply", 0) == 0 && head.find(std::string("\n") + kPlySamplesComment + "\n") != std::string::npos;
 }
 
 }  // namespace
@@ -68,9 +69,9 @@ std::vector<std::string> expandInputFolders(const std::vector<std::string> &give
       if (!(ext == ".pcd" || ext == ".ply" || ext == ".bin") || !e.is_regular_file(ec)) continue;
       if (name.front() == '.') {
         notes << "hpds: note: '" << e.path().string() << "' left out of folder '" << in << "': a hidden file\n";
-      } else if (ext == ".ply" && writtenByHpds(e.path())) {
+      } else if (ext == ".ply" && samplesWrittenByHpds(e.path())) {
         notes << "hpds: note: '" << e.path().string() << "' left out of folder '" << in
-              << "': written by hpds (an output, not a frame)\n";
+              << "': samples written by hpds (an output, not a frame; name it to take it)\n";
       } else {
         files.push_back(e.path().string());
       }
@@ -86,4 +87,24 @@ std::vector<std::string> expandInputFolders(const std::vector<std::string> &give
   return inputs;
 }
 
-}  // namespace hpds::cli
+std::string inputOrderWarning(const std::vector<std::string> &inputs) {
+  namespace fs = std::filesystem;
+  // Each file against the previous one of its folder: frames of several folders may come folder after folder.
+  std::map<std::string, std::string> last_in_folder;
+  for (const std::string &in : inputs) {
+    const fs::path path(in);
+    const std::string folder = path.parent_path().string(), name = path.filename().string();
+    const auto [it, first] = last_in_folder.try_emplace(folder, name);
+    if (!first && naturalLess(name, it->second)) {
+      const std::string shown = folder.empty() ? "." : folder;
+      return "'" + (fs::path(folder) / it->second).string() + "' is given before '" + in +
+             "': frames are taken in the order given, and pose line K goes to frame K (a shell glob such as " +
+             (fs::path(shown) / "*.pcd").string() + " sorts names as text, f_10 before f_2); give the folder '" +
+             shown + "' itself to take its frames in name order";
+    }
+    it->second = name;
+  }
+  return "";
+}
+
+}  // namespace hpds
