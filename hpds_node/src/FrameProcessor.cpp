@@ -3,8 +3,10 @@
 #include <tf2/exceptions.h>
 
 #include <algorithm>
+#include <cctype>
 #include <chrono>
 #include <cmath>
+#include <cstdlib>
 #include <sstream>
 #include <stdexcept>
 
@@ -172,9 +174,24 @@ bool lookupViewpoint(const tf2::BufferCore &buffer, const std::string &cloud_fra
   return true;
 }
 
+// [s] A transform this far behind a cloud (and over ten times ros/tf_timeout) is no lag that waiting longer mends.
+constexpr double kStoppedTransformSeconds = 1.0;
+
 std::string noTransformAdvice(const std::string &why, double tf_timeout) {
-  if (why.find("into the future") == std::string::npos) return {};
+  const std::size_t future = why.find("s into the future");
+  if (future == std::string::npos) return {};
+  // tf2 says "Lookup would require extrapolation 6.04s into the future": how far behind the cloud tf's newest
+  // transform is. Odometry lags by tens of milliseconds; seconds mean the transform stopped coming.
+  std::size_t start = future;
+  while (start > 0 && (std::isdigit(static_cast<unsigned char>(why[start - 1])) || why[start - 1] == '.')) --start;
+  const double lag = start < future ? std::strtod(why.c_str() + start, nullptr) : 0.0;
   std::ostringstream s;
+  if (lag > std::max(kStoppedTransformSeconds, 10.0 * tf_timeout)) {
+    s << "; tf's newest transform is " << lag << " s older than the cloud: the transform has stopped coming "
+      << "(its publisher, odometry or a driver, is down or stalled), or the clouds are stamped by another clock "
+      << "than tf's";
+    return s.str();
+  }
   s << "; the transform at the cloud's stamp had not arrived when ros/tf_timeout (" << tf_timeout
     << " s) ran out: if the odometry lags the clouds, raise ros/tf_timeout above that lag";
   return s.str();

@@ -62,11 +62,17 @@ void KeepUpCheck::arrived(double wall_seconds) {
 }
 
 std::string KeepUpCheck::processed(double seconds, double waited) {
+  first_done_ = true;
   if (waited > 0.0) keep(waits_, waited);
-  // A drop came before anything was measured: said with the first measurement (a wait that matters, or a cost
-  // after the first).
+  // A drop came before enough was measured: said with a wait that matters, or with the verdict's count of costs;
+  // then not at all when only the start-up dropped frames and the frames since keep up.
   auto pendingDrop = [this]() -> std::string {
-    if (!drop_pending_ || warned_ || (costs_.empty() && !waitsMatter())) return "";
+    if (!drop_pending_ || warned_) return "";
+    if (!waitsMatter() && costs_.size() < judge_after_) return "";
+    drop_pending_ = false;
+    if (!waitsMatter() && !dropped_after_start_ && !gaps_.empty() &&
+        !(median(costs_) > double(workers_) * median(gaps_)))
+      return "";
     warned_ = true;
     return warning(true);
   };
@@ -87,9 +93,10 @@ std::string KeepUpCheck::processed(double seconds, double waited) {
 
 std::string KeepUpCheck::dropped() {
   if (warned_) return "";
-  // Nothing measured yet (the first frame still running, or waiting for its transform): a warning now could name
-  // neither the cost nor the wait, and it is said once. processed() says it with the first measurement.
-  if (costs_.empty() && !waitsMatter()) {
+  if (first_done_) dropped_after_start_ = true;
+  // Too little measured (the first frame still running, or a few after it): a share of lost frames quoted now
+  // could be far off, and it is said once. processed() says it when there is enough.
+  if (costs_.size() < judge_after_ && !waitsMatter()) {
     drop_pending_ = true;
     return "";
   }
@@ -118,7 +125,7 @@ std::string KeepUpCheck::warning(bool on_drop) const {
     const double capacity = double(workers_) * period;
     text += "frames arrive every " + format("%.0f ms (%.1f Hz)", 1e3 * period, 1.0 / period) +
             (on_drop ? " and take " : " but take ") + format("%.0f ms each", 1e3 * cost) + " (median of " +
-            std::to_string(costs_.size()) + " frames, " + format("%.0f ms at most", 1e3 * worst) + ", " + workers + ")";
+            std::to_string(costs_.size()) + (costs_.size() == 1 ? " frame, " : " frames, ") + format("%.0f ms at most", 1e3 * worst) + ", " + workers + ")";
     if (cost > capacity) text += ", so about " + format("%.0f%%", 100.0 * (1.0 - capacity / cost)) + " of the frames will be dropped";
     if (on_drop && keeps_up)
       text += ", which keeps up: frames came faster than that (a burst) or one took longer. A larger ros/queue_size "

@@ -531,6 +531,12 @@ TEST(FrameProcessor, LookupSensorPoseFromABufferCore) {
   const std::string advice = hpds_node::noTransformAdvice(why, 0.1);
   EXPECT_NE(advice.find("ros/tf_timeout (0.1 s)"), std::string::npos) << advice;
   EXPECT_NE(advice.find("raise ros/tf_timeout"), std::string::npos) << advice;
+  // A trial stopped the odometry: 6 s behind, the advice to raise ros/tf_timeout misled.
+  EXPECT_FALSE(hpds_node::lookupSensorPose(buffer, "odom", "lidar", ros::Time(12, 40000000), pose, &why));
+  const std::string stopped = hpds_node::noTransformAdvice(why, 0.1);
+  EXPECT_NE(stopped.find("tf's newest transform is 6.04 s older than the cloud"), std::string::npos) << why << stopped;
+  EXPECT_NE(stopped.find("stopped coming"), std::string::npos) << stopped;
+  EXPECT_EQ(stopped.find("raise ros/tf_timeout"), std::string::npos) << stopped;
 }
 
 // ros/sensor_frame: the sensor's origin in the cloud's frame, from tf at the stamp; nothing to look up without it.

@@ -74,6 +74,7 @@ config_file: ignored.yaml
   EXPECT_EQ(c.ros.local_map_rate, 2.5);
   EXPECT_EQ(c.ros.publish_levels, (std::vector<int>{1, 3}));
   EXPECT_EQ(c.ros.queue_size, 3);
+  EXPECT_EQ(c.diagnostic_period, 0.5) << "the node reports at the file's period unless its parameter is set";
 }
 
 TEST(NodeConfig, PublishLevelsFromALaunchString) {

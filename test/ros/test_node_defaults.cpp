@@ -41,6 +41,14 @@ std::vector<std::string> keepUpWarnings(const std::string &node) {
   return found;
 }
 
+// The node's lines for drops behind its first frame (which pays for the node's allocations), said at INFO.
+std::size_t startUpDropLines(const std::string &node) {
+  std::size_t n = 0;
+  for (const auto &m : rosout().messages())
+    if (m->name == node && hpds_test::contains(m->msg, "while the first frame was processed")) ++n;
+  return n;
+}
+
 // Publishes `frames` (in turn) `count` times at 10 Hz of wall time, each with a fresh stamp, and checks every output.
 void playAndCheck(const std::vector<PointCloud2Ptr> &frames, int count) {
   ros::NodeHandle nh, pnh("~");
@@ -100,13 +108,19 @@ void playAndCheck(const std::vector<PointCloud2Ptr> &frames, int count) {
             << diagnostics.value("processing time mean, all frames [ms]") << " / "
             << diagnostics.value("processing time max, all frames [ms]") << " ms\n";
 
-  // Drops only after the node said, once, that it cannot keep up.
-  ASSERT_TRUE(hpds_test::waitFor([&] { return dropped == 0.0 || !keepUpWarnings(target).empty(); }, 10.0))
+  // Drops only after the node said, once, that it cannot keep up, or behind its first frame, said as the start-up's
+  // (at most the queue's worth of frames that arrive while the first frame runs: a few at 10 Hz).
+  ASSERT_TRUE(hpds_test::waitFor(
+      [&] { return dropped == 0.0 || !keepUpWarnings(target).empty() || startUpDropLines(target) > 0; }, 10.0))
       << dropped << " frames dropped at 10 Hz without the node saying that it cannot keep up";
   const auto warnings = keepUpWarnings(target);
   EXPECT_LE(warnings.size(), 1u) << "the keep-up warning must come at most once";
   if (!warnings.empty()) std::cout << "[ node_defaults ] the node said: " << warnings.front() << "\n";
-  if (dropped > 0.0) {
+  if (warnings.empty() && dropped > 0.0) {
+    EXPECT_LE(dropped, 5.0) << "more than a start-up's drops, and no keep-up warning";
+    std::cout << "[ node_defaults ] " << dropped << " frame(s) dropped behind the first frame only\n";
+  }
+  if (dropped > 0.0 && !warnings.empty()) {
     EXPECT_TRUE(hpds_test::contains(warnings.front(), "output.spacing (now 0.1 m)")) << warnings.front();
   }
 

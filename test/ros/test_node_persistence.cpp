@@ -387,6 +387,32 @@ TEST(NodeParameters, DiagnosticPeriodIsBounded) {
   ros::param::del(ns);
 }
 
+// A config_file's diagnostic_period is the node's period, as its layout is the rosparams' (it was checked and then
+// ignored: /diagnostics came every second); the ~diagnostic_period parameter wins over it.
+TEST(NodeParameters, DiagnosticPeriodFromTheConfigFile) {
+  const std::string ns = "/hpds_file_period";
+  const fs::path file = fs::temp_directory_path() / ("hpds_file_period_" + std::to_string(::getpid()) + ".yaml");
+  const std::string text = "diagnostic_period: 0.25\n";
+  hpds_test::writeBytes(file, std::vector<std::uint8_t>(text.begin(), text.end()));
+  ros::NodeHandle nh;
+  ros::param::set(ns + "/config_file", file.string());
+  {
+    hpds_node::HpdsServer server(nh, ros::NodeHandle(ns), "hpds_file_period");
+    double period = 0.0;
+    EXPECT_TRUE(ros::param::get(ns + "/diagnostic_period", period)) << "diagnostic_updater reads the parameter";
+    EXPECT_EQ(period, 0.25);
+  }
+  ros::param::set(ns + "/diagnostic_period", 2.0);
+  {
+    hpds_node::HpdsServer server(nh, ros::NodeHandle(ns), "hpds_file_period");
+    double period = 0.0;
+    EXPECT_TRUE(ros::param::get(ns + "/diagnostic_period", period));
+    EXPECT_EQ(period, 2.0) << "the parameter wins over the file";
+  }
+  ros::param::del(ns);
+  fs::remove(file);
+}
+
 // Parameter mistakes a ROS user makes, each refused with what to do instead.
 TEST(NodeParameters, CommonMistakesSayWhatWasMeant) {
   const std::string ns = "/hpds_mistakes";

@@ -260,7 +260,7 @@ void applyNodeConfigYaml(const std::string &yaml_text, NodeConfig &config, const
                          entry.second.Scalar() + "': the topic is not a parameter, remap it: ~input:=" +
                          entry.second.Scalar());
         } else if (name == "diagnostic_period") {
-          checkDiagnosticPeriod(parseNumber(entry.second, name));
+          result.diagnostic_period = checkDiagnosticPeriod(parseNumber(entry.second, name));
         } else if (std::find(ignored_keys.begin(), ignored_keys.end(), name) == ignored_keys.end()) {
           rest[entry.first] = entry.second;
         }

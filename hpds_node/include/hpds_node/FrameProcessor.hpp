@@ -182,7 +182,9 @@ bool lookupViewpoint(const tf2::BufferCore &buffer, const std::string &cloud_fra
 
 /// What to set when a frame was dropped for want of a transform (`why`: lookupSensorPose's reason): a transform that
 /// tf can only extrapolate into the future arrived later than ros/tf_timeout (`tf_timeout` seconds) waited, which a
-/// user fixes by raising it, not by looking for a missing frame. Empty for other reasons.
+/// user fixes by raising it, not by looking for a missing frame; unless tf's newest transform is over 1 s (and ten
+/// times `tf_timeout`) behind the cloud: then the transform stopped coming, which no timeout mends, and it says so.
+/// Empty for other reasons.
 [[nodiscard]] std::string noTransformAdvice(const std::string &why, double tf_timeout);
 
 /// Whether a cloud in `cloud_frame` has no known sensor position in map mode: it arrives in the fixed frame itself and

@@ -92,6 +92,8 @@ class HpdsServer {
   /// The node's counts so far, for a log line written on `worker`: its own processor's live counts plus the other
   /// workers' as of their last frame (each worker counts only the frames it handled).
   [[nodiscard]] ProcessorStats statsSoFar(std::size_t worker) const;
+  /// The throttled WARN line for an overload drop.
+  void logOverload(std::uint64_t overload_total);
   /// Feeds a frame's processing time and its wait for a transform to keep_up_ and logs its one warning, if any.
   void checkKeepUp(double frame_seconds, double waited);
   void diagnose(diagnostic_updater::DiagnosticStatusWrapper &status);
@@ -144,6 +146,9 @@ class HpdsServer {
   // Whether the workers keep up with the input: said once, within the first frames.
   std::mutex keep_up_mutex_;
   std::unique_ptr<KeepUpCheck> keep_up_;  // guarded by keep_up_mutex_
+  /// Overload drops while the first frame ran, logged when it ends (guarded by keep_up_mutex_): at INFO when it was
+  /// processed without waiting for tf (its cost is the node's allocations), else as any overload drop.
+  std::uint64_t startup_drops_ = 0;
 
   // What the diagnostics see: a copy the worker refreshes after every frame.
   struct Snapshot {

@@ -14,10 +14,13 @@
 // - Verdict: with the `judge_after`-th processed frame after the first (the first pays for allocations and is left
 //   out), the cost is the median processing time. When cost > workers * period the queue must drop frames:
 //   processed() returns the warning. The verdict is taken once.
-// - dropped() returns the warning at the first overload drop, whatever the verdict (a load spike, a frame larger
-//   than the first ones), with the current period and the costs measured so far. A drop before anything is
-//   measured (no cost after the first frame's, no transform wait that matters: see below) is said by processed() with
-//   the first measurement.
+// - An overload drop is said whatever the verdict (a load spike, a frame larger than the first ones), with the
+//   current period and costs, once there are as many costs as a verdict takes (`judge_after`): dropped() then
+//   returns the warning at once; a drop before that is said by processed() with the `judge_after`-th cost, so that
+//   no share of lost frames is quoted from one or two frames. A transform wait that matters is said at once.
+// - Drops while the first frame runs (it pays for the node's allocations: several times the later frames' cost)
+//   are the start-up's: warmingUp() is true for them. When every drop was one of those and the frames since keep
+//   up, nothing is said (the caller logs those drops as start-up, not as overload).
 // - Each returns a non-empty text at most once over both: the warning names the measured period and cost, the share
 //   of frames lost and the settings that lower the cost, with their current values; when frames wait for their
 //   transforms for more than half the input period (10 ms while no period is known), it says that too (a missing
@@ -47,6 +50,9 @@ class KeepUpCheck {
   /// The warning at the first overload drop (see contract), else "".
   [[nodiscard]] std::string dropped();
 
+  /// No frame has been processed (or dropped after its wait for a transform) yet: a drop now is the start-up's
+  /// (see contract).
+  [[nodiscard]] bool warmingUp() const { return !first_done_; }
   [[nodiscard]] bool judged() const { return judged_; }
   [[nodiscard]] bool warned() const { return warned_; }
 
@@ -60,7 +66,8 @@ class KeepUpCheck {
   std::size_t judge_after_;
   std::size_t rate_change_gaps_;
   double tf_timeout_;
-  bool judged_ = false, warned_ = false, first_skipped_ = false, drop_pending_ = false;
+  bool judged_ = false, warned_ = false, first_skipped_ = false, first_done_ = false, drop_pending_ = false,
+       dropped_after_start_ = false;
   std::size_t costs_seen_ = 0;
   double last_arrival_ = -1.0;
   std::deque<double> gaps_, costs_, waits_;

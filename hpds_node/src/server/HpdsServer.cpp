@@ -16,11 +16,21 @@ namespace hpds_node {
 
 namespace {
 
-// diagnostic_period: a wall timer period, which ros::WallDuration must be able to hold.
-double diagnosticPeriod(const ros::NodeHandle &pnh) {
+// [s] A first frame that waited longer than this for its transform was slow for want of tf, not for allocations.
+constexpr double kStartupWaitSeconds = 0.01;
+
+// diagnostic_period: a wall timer period, which ros::WallDuration must be able to hold. The parameter, else the
+// config_file's key (`from_file`, 0 when it has none), else 1 s.
+double diagnosticPeriod(const ros::NodeHandle &pnh, double from_file) {
   double period = 1.0;
   XmlRpc::XmlRpcValue value;
-  if (!pnh.getParam("diagnostic_period", value)) return period;
+  if (!pnh.getParam("diagnostic_period", value)) {
+    if (!(from_file > 0.0)) return period;
+    // Set as the parameter, which diagnostic_updater reads itself (in its constructor, which runs next, and on
+    // every update): the file's value was checked and then ignored, and /diagnostics came every second.
+    pnh.setParam("diagnostic_period", from_file);
+    return from_file;
+  }
   if (value.getType() == XmlRpc::XmlRpcValue::TypeDouble) {
     period = static_cast<double>(value);
   } else if (value.getType() == XmlRpc::XmlRpcValue::TypeInt) {
@@ -41,7 +51,7 @@ HpdsServer::HpdsServer(ros::NodeHandle nh, ros::NodeHandle private_nh, const std
     : nh_(nh),
       pnh_(private_nh),
       config_(loadNodeConfigFromParams(private_nh)),
-      diagnostic_period_(diagnosticPeriod(private_nh)),
+      diagnostic_period_(diagnosticPeriod(private_nh, config_.diagnostic_period)),
       updater_(nh, private_nh, name),
       tag_("hpds " + name),
       tf_buffer_(ros::Duration(tfCacheSeconds(config_.ros))) {
@@ -340,18 +350,25 @@ void HpdsServer::onCloud(const ros::MessageEvent<const sensor_msgs::PointCloud2>
                                            << lost_total << " so far, counted in /diagnostics as 'frames lost "
                                            << "upstream'; a throttle, drop or filter upstream skips numbers on "
                                            << "purpose, and then this is expected)");
-  if (dropped && logAllowed("overload"))
+  std::string warning;
+  bool starting = false;
+  {
+    std::lock_guard<std::mutex> lock(keep_up_mutex_);
+    starting = keep_up_->warmingUp();
+    if (dropped && starting) ++startup_drops_;  // said when the first frame ends (checkKeepUp)
+    keep_up_->arrived(now);
+    if (dropped) warning = keep_up_->dropped();
+  }
+  if (dropped && !starting) logOverload(overload_total);
+  if (!warning.empty()) ROS_WARN_STREAM_NAMED("hpds", tagged(warning));
+}
+
+void HpdsServer::logOverload(std::uint64_t overload_total) {
+  if (logAllowed("overload"))
     ROS_WARN_STREAM_NAMED("hpds", tag_ << ": dropped the oldest queued frame: frames arrive faster than they are "
                                   "processed ("
                                       << overload_total << " so far, counted as overload; ros.queue_size "
                                       << config_.ros.queue_size << ")");
-  std::string warning;
-  {
-    std::lock_guard<std::mutex> lock(keep_up_mutex_);
-    keep_up_->arrived(now);
-    if (dropped) warning = keep_up_->dropped();
-  }
-  if (!warning.empty()) ROS_WARN_STREAM_NAMED("hpds", tagged(warning));
 }
 
 void HpdsServer::onInternalError(std::size_t worker, const std::string &what) {
@@ -502,9 +519,29 @@ void HpdsServer::handle(const sensor_msgs::PointCloud2::ConstPtr &msg, std::size
 
 void HpdsServer::checkKeepUp(double frame_seconds, double waited) {
   std::string warning;
+  std::uint64_t startup_drops = 0;
   {
     std::lock_guard<std::mutex> lock(keep_up_mutex_);
     warning = keep_up_->processed(frame_seconds, waited);
+    if (!keep_up_->warmingUp()) std::swap(startup_drops, startup_drops_);
+  }
+  if (startup_drops > 0) {
+    std::uint64_t overload_total = 0;
+    {
+      std::lock_guard<std::mutex> lock(input_mutex_);
+      overload_total = overload_;
+    }
+    // The first frame pays for the node's allocations (several times a later frame's cost): the frames dropped
+    // behind it are the start-up's, and KeepUpCheck says more only if the frames after it do not keep up. A first
+    // frame that waited for its transform (or never got one) is no such cost: those drops are overload as any.
+    if (frame_seconds > 0.0 && waited < kStartupWaitSeconds) {
+      ROS_INFO_STREAM_NAMED("hpds", tag_ << ": " << startup_drops << " frame(s) dropped while the first frame was "
+                                         << "processed (it took " << int(1e3 * frame_seconds + 0.5)
+                                         << " ms: the first frame pays for the node's allocations; counted as "
+                                         << "overload)");
+    } else {
+      logOverload(overload_total);
+    }
   }
   if (!warning.empty()) ROS_WARN_STREAM_NAMED("hpds", tagged(warning));
 }

@@ -42,11 +42,14 @@ struct RosConfig {
 struct NodeConfig {
   HpdsConfig hpds;
   RosConfig ros;
+  /// [s] a config's top-level diagnostic_period (checked by checkDiagnosticPeriod), 0 when it sets none: the node
+  /// reports at this period when its ~diagnostic_period parameter is not set.
+  double diagnostic_period = 0.0;
 };
 
 /// Top-level keys that belong to the node's namespace but not to HpdsConfig or RosConfig: `config_file` (read by the
 /// node itself, skipped here) and `diagnostic_period` (diagnostic_updater's; checked here with
-/// checkDiagnosticPeriod, not stored), so that one YAML file serves `<rosparam load>`, ~config_file and
+/// checkDiagnosticPeriod, kept as NodeConfig::diagnostic_period), so that one YAML file serves `<rosparam load>`, ~config_file and
 /// `hpds replay --config` alike.
 [[nodiscard]] const std::vector<std::string> &nodeOnlyKeys();
 
