@@ -2,10 +2,11 @@
 #   make demo   synthetic lidar stream -> map-mode sampling with normals -> PLY -> verify -> per-level summary
 #   make test   every test (GoogleTest suites and ROS tests) through ctest
 #   make test-sanitize   the same tests, node and ROS tests included, built with AddressSanitizer +
-#                        UndefinedBehaviorSanitizer (in build-asan/)
-#   make test-tsan   the core's tests (no ROS node) built with ThreadSanitizer (in build-tsan/): the pipeline's
+#                        UndefinedBehaviorSanitizer (in build/asan/: under build/,
+#                        which rosrun does not search, so `rosrun hpds hpds_node` never finds a sanitized binary)
+#   make test-tsan   the core's tests (no ROS node) built with ThreadSanitizer (in build/tsan/): the pipeline's
 #                    second thread, the parallel normals, scan-mode workers, the tiled builds
-#   make fuzz   libFuzzer targets for every parser of outside data, FUZZ_SECONDS each (in build-fuzz/)
+#   make fuzz   libFuzzer targets for every parser of outside data, FUZZ_SECONDS each (in build/fuzz/)
 #   make registration   scan matching (PCL ICP/GICP) on hpds levels vs voxel grids at equal point count
 # catkin and rostest need Debian's python3, not a pyenv one that may come first on PATH.
 export PATH := /usr/bin:/bin:$(PATH)
@@ -13,9 +14,9 @@ export PATH := /usr/bin:/bin:$(PATH)
 BUILD ?= build
 JOBS ?= 2
 DEMO_DIR ?= $(BUILD)/demo
-ASAN_BUILD ?= build-asan
-TSAN_BUILD ?= build-tsan
-FUZZ_BUILD ?= build-fuzz
+ASAN_BUILD ?= build/asan
+TSAN_BUILD ?= build/tsan
+FUZZ_BUILD ?= build/fuzz
 FUZZ_SECONDS ?= 60
 # The node, the nodelet and their ROS tests are sanitized too whenever ROS is installed (the tests that start Debian's
 # uninstrumented nodelet manager preload the sanitizer runtimes for it); ASAN_NODE=OFF leaves them out.
