@@ -38,8 +38,8 @@ struct Samples {
   std::vector<std::uint32_t> index;  ///< position of the sample in the input
   std::vector<std::uint8_t> level;   ///< hierarchy level 0..D of the sample
   /// With config.normals.enabled (else empty): unit normal facing the sensor (except a near-horizontal one nearly
-  /// perpendicular to the ray, a single scan line's, which faces up where the sample is below the sensor:
-  /// hpds/normals/NormalEstimator.hpp), and curvature l0 / (l0 + l1 + l2); NaN where a normal could not be estimated
+  /// perpendicular to the ray, a single scan line's, which faces up where the sample is below the sensor; thresholds
+  /// in hpds/normals/NormalEstimator.hpp), and curvature l0 / (l0 + l1 + l2); NaN where a normal could not be estimated
   /// (too few neighbours, degenerate neighbourhood), as in PCL.
   std::vector<Eigen::Vector3f> normal;
   std::vector<float> curvature;

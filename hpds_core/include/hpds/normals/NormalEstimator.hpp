@@ -10,9 +10,11 @@
 // - PCA by LocalPca's solveNormal (eigenvalues and normal agree with an iterative eigensolver to ~1e-15).
 // - The normal is oriented toward the viewpoint of the frame that contributed the sample. Where it is nearly
 //   perpendicular to the view (a neighbourhood on one scan line: its plane holds the ray, so the view cannot tell its
-//   sides apart) and the sample lies below the viewpoint, a normal near `up` (the frame's z) faces up: a surface
-//   below the sensor with such a normal is seen from above (ground, roofs). Above the sensor the view decides, as
-//   ceilings face down and rising ground up. See orientTowardViewpoints.
+//   sides apart: |cos(normal, view)| < 0.2) and the sample lies below the viewpoint, a normal near `up` (the frame's
+//   z; |cos| >= 0.5) faces up: a surface below the sensor with such a normal is seen from above (ground, roofs).
+//   Above the sensor the view decides, as ceilings face down and rising ground up; so does a sample level with the
+//   sensor (its view within 1e-3 rad of horizontal, the view direction's own error), whose normal is then nearly
+//   perpendicular to the view and may face either way. See orientTowardViewpoints.
 // - Fewer than `min_neighbors` neighbours (the sample included) or a degenerate neighbourhood gives valid = false
 //   and NaN normal/curvature (PCL's convention for "not estimated"); never a garbage direction marked valid.
 // - curvature = l0 / (l0 + l1 + l2). Results are per id, independent of the thread count.
