@@ -7,6 +7,8 @@
 #include <ros/xmlrpc_manager.h>
 
 #include <csignal>
+#include <cstring>
+#include <iostream>
 #include <stdexcept>
 
 #include "hpds/util/FrameMemory.hpp"
@@ -23,9 +25,34 @@ void onShutdownRequest(XmlRpc::XmlRpcValue &, XmlRpc::XmlRpcValue &result) {
   result = ros::xmlrpc::responseInt(1, "", 0);
 }
 
+// A trial's `hpds_node --help` started a node named /hpds, which took the name from a running one and shut it down.
+bool asksForHelp(int argc, char **argv) {
+  for (int i = 1; i < argc; ++i)
+    if (std::strcmp(argv[i], "--help") == 0 || std::strcmp(argv[i], "-h") == 0) return true;
+  return false;
+}
+
+void printHelp() {
+  std::cout << "hpds_node: hierarchical Poisson-disk downsampling of sensor_msgs/PointCloud2 clouds, with normals.\n"
+               "Usage: rosrun hpds hpds_node ~input:=TOPIC [_KEY:=VALUE ...]\n"
+               "   or: roslaunch hpds hpds.launch input:=TOPIC [spacing:=0.1] [normals:=true] [mode:=map "
+               "fixed_frame:=odom]\n"
+               "Subscribes ~input; publishes ~output (the samples with every input field and normals), and in map "
+               "mode ~new_samples and ~local_map; services ~save_map, ~load_map, ~clear_map; status on "
+               "/diagnostics.\n"
+               "Parameters: the keys of config/hpds.yaml in the node's namespace (_output/spacing:=0.2, _mode:=map "
+               "_ros/fixed_frame:=odom, _threads:=2), or a YAML file as _config_file:=PATH. A node started with rosrun "
+               "keeps the parameters an earlier launch left on the master.\n"
+               "Manual: docs/ros.md in the hpds package.\n";
+}
+
 }  // namespace
 
 int main(int argc, char **argv) {
+  if (asksForHelp(argc, argv)) {
+    printHelp();
+    return 0;
+  }
   // Every frame's scratch is freed and allocated again: keep it in the process (a dense frame otherwise spent a
   // tenth of its time in page faults). The nodelet lives in a manager's process, whose policy is not its to set.
   hpds::keepFreedFrameMemory();
