@@ -66,9 +66,8 @@ std::vector<Eigen::Vector3d> loadInputs(const std::vector<std::string> &inputs, 
   std::vector<Eigen::Isometry3d> poses;
   if (!poses_file.empty()) {
     poses = readKittiPoses(poses_file);
-    if (poses.size() != inputs.size())
-      throw std::invalid_argument(poseCountMismatch(poses_file, poses.size(), inputs.size()));
-    if (const std::string w = inputOrderWarning(inputs); !w.empty()) std::cerr << "hpds: warning: --poses: " << w << "\n";
+    if (const std::string w = checkPosesMatchInputs(poses_file, poses.size(), inputs); !w.empty())
+      std::cerr << "hpds: warning: " << w << "\n";
   }
   std::vector<Eigen::Vector3d> out;
   for (std::size_t i = 0; i < inputs.size(); ++i) {

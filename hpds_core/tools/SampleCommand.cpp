@@ -99,9 +99,8 @@ int runSample(const SampleArgs &a) {
   std::vector<Eigen::Isometry3d> poses;
   if (!a.poses.empty()) {
     poses = readKittiPoses(a.poses);
-    if (poses.size() != a.inputs.size())
-      throw std::invalid_argument(poseCountMismatch(a.poses, poses.size(), a.inputs.size()));
-    if (const std::string w = inputOrderWarning(a.inputs); !w.empty()) std::cerr << "hpds: warning: --poses: " << w << "\n";
+    if (const std::string w = checkPosesMatchInputs(a.poses, poses.size(), a.inputs); !w.empty())
+      std::cerr << "hpds: warning: " << w << "\n";
     double largest_translation = 0.0;
     for (const Eigen::Isometry3d &pose : poses)
       largest_translation = std::max(largest_translation, pose.translation().cwiseAbs().maxCoeff());

@@ -174,10 +174,9 @@ void addVerifyCommand(CLI::App &app) {
           throw std::invalid_argument("--poses: '" + a->poses + "' has " + std::to_string(poses.size()) +
                                       " poses, none for frame " + std::to_string(a->frame));
         poses = {poses[static_cast<std::size_t>(a->frame)]};
-      } else if (poses.size() != a->inputs.size()) {
-        throw std::invalid_argument(poseCountMismatch(a->poses, poses.size(), a->inputs.size()));
+      } else if (const std::string w = checkPosesMatchInputs(a->poses, poses.size(), a->inputs); !w.empty()) {
+        std::cerr << "hpds: warning: " << w << "\n";
       }
-      if (const std::string w = inputOrderWarning(a->inputs); !w.empty()) std::cerr << "hpds: warning: --poses: " << w << "\n";
     } else if (a->frame >= 0 && a->inputs.size() > 1) {
       throw std::invalid_argument("--frame: one --input, the frame's");
     }

@@ -178,11 +178,4 @@ def merge(paths, out_path):
         if part.dtype != parts[0].dtype:
             raise ValueError("merge: '%s' has other fields than '%s'" % (p, paths[0]))
     # The merged tiles of a build are a sampling's output as each tile is; anything else merged is not marked.
-    write(out_path, np.concatenate(parts), samples=all(_marked_as_samples(p) for p in paths))
-
-
-def _marked_as_samples(path):
-    """Whether a PLY file's header carries the comment `hpds sample` and the map build mark their outputs with."""
-    with open(path, "rb") as f:
-        head = f.read(256)
-    return head.startswith(b"ply") and ("\n%s\n" % _hpds.PLY_SAMPLES_COMMENT).encode("ascii") in head
+    write(out_path, np.concatenate(parts), samples=all(_hpds.ply_marked_as_samples(os.fspath(p)) for p in paths))

@@ -253,13 +253,14 @@ def build(inputs, poses_path, outdir, tile_size, config_yaml, runner, chunk_fram
         raise BuildError(str(e)) from None
     for note in notes.splitlines():
         log(note[len("hpds: "):] if note.startswith("hpds: ") else note)
-    order = _hpds.input_order_warning(inputs)  # before abspath: in the paths as the user gave them
-    inputs = [os.path.abspath(p) for p in inputs]  # workers elsewhere see the same shared paths
     poses = _hpds.read_poses(os.fspath(poses_path))
-    if len(poses) != len(inputs):
-        raise BuildError(_hpds.pose_count_mismatch(os.fspath(poses_path), len(poses), len(inputs)))
+    try:
+        order = _hpds.check_poses_match_inputs(os.fspath(poses_path), len(poses), inputs)  # as the user gave them
+    except ValueError as e:
+        raise BuildError(str(e)) from None
     if order:
-        log("warning: --poses: " + order)
+        log("warning: " + order)
+    inputs = [os.path.abspath(p) for p in inputs]  # workers elsewhere see the same shared paths
     if len(poses):
         # Georeferenced poses: float64 x y z unless the config chose a type, as `hpds sample` does.
         config_yaml, note = _hpds.widen_xyz_for_poses(config_yaml, float(np.abs(poses[:, :3, 3]).max()),

@@ -143,10 +143,12 @@ void bindIo(py::module_ &m) {
         return py::make_tuple(inputs, notes.str());
       },
       py::arg("paths"), "(inputs, notes): every folder of `paths` replaced by its frames in natural name order.");
-  m.def("input_order_warning", &inputOrderWarning, py::arg("inputs"),
-        "'' or a warning that files of one folder are not in natural name order.");
-  m.def("pose_count_mismatch", &poseCountMismatch, py::arg("poses_path"), py::arg("poses"), py::arg("inputs"),
-        "The error text for a pose file whose pose count is not the input count.");
+  m.def("check_poses_match_inputs", &checkPosesMatchInputs, py::arg("poses_path"), py::arg("poses"),
+        py::arg("inputs"),
+        "ValueError when the pose count is not the input count; else '' or a warning that the files of one folder "
+        "are not in natural name order.");
+  m.def("ply_marked_as_samples", &plyMarkedAsSamples, py::arg("path"),
+        "Whether a PLY file carries the header comment of a sampling's output.");
   m.attr("PLY_SAMPLES_COMMENT") = kPlySamplesComment;
 }
 

@@ -9,6 +9,7 @@
 #include <stdexcept>
 
 #include "hpds/io/PlyWriter.hpp"
+#include "hpds/io/PoseFile.hpp"
 
 namespace hpds {
 
@@ -16,16 +17,15 @@ namespace {
 
 bool isDigit(char c) { return std::isdigit(static_cast<unsigned char>(c)) != 0; }
 
-// The comment line the PLY writer puts in a sampling's output, within the first bytes of the file.
-bool samplesWrittenByHpds(const std::filesystem::path &path) {
+}  // namespace
+
+bool plyMarkedAsSamples(const std::string &path) {
   std::ifstream in(path, std::ios::binary);
   std::string head(256, '\0');
   in.read(head.data(), static_cast<std::streamsize>(head.size()));
   head.resize(static_cast<std::size_t>(in.gcount()));
   return head.rfind("ply", 0) == 0 && head.find(std::string("\n") + kPlySamplesComment + "\n") != std::string::npos;
 }
-
-}  // namespace
 
 bool naturalLess(const std::string &a, const std::string &b) {
   std::size_t i = 0, j = 0;
@@ -69,7 +69,7 @@ std::vector<std::string> expandInputFolders(const std::vector<std::string> &give
       if (!(ext == ".pcd" || ext == ".ply" || ext == ".bin") || !e.is_regular_file(ec)) continue;
       if (name.front() == '.') {
         notes << "hpds: note: '" << e.path().string() << "' left out of folder '" << in << "': a hidden file\n";
-      } else if (ext == ".ply" && samplesWrittenByHpds(e.path())) {
+      } else if (ext == ".ply" && plyMarkedAsSamples(e.path().string())) {
         notes << "hpds: note: '" << e.path().string() << "' left out of folder '" << in
               << "': samples written by hpds (an output, not a frame; name it to take it)\n";
       } else {
@@ -105,6 +105,13 @@ std::string inputOrderWarning(const std::vector<std::string> &inputs) {
     it->second = name;
   }
   return "";
+}
+
+std::string checkPosesMatchInputs(const std::string &poses_path, std::size_t poses,
+                                  const std::vector<std::string> &inputs) {
+  if (poses != inputs.size()) throw std::invalid_argument(poseCountMismatch(poses_path, poses, inputs.size()));
+  const std::string order = inputOrderWarning(inputs);
+  return order.empty() ? order : "--poses: " + order;
 }
 
 }  // namespace hpds

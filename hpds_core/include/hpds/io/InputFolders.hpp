@@ -8,6 +8,7 @@
 // - Thread-safety: reentrant.
 #pragma once
 
+#include <cstddef>
 #include <iosfwd>
 #include <string>
 #include <vector>
@@ -29,5 +30,15 @@ namespace hpds {
 /// first pair that does not (a shell glob such as frames/*.pcd sorts names as text: f_10 before f_2), for callers
 /// that match frames to pose lines by order.
 [[nodiscard]] std::string inputOrderWarning(const std::vector<std::string> &inputs);
+
+/// The check of every caller that matches the `poses` poses of the file `poses_path` to `inputs` by order (the CLI's
+/// --poses, the tiled map build): std::invalid_argument (poseCountMismatch) when the counts differ; else "" or the
+/// warning of inputOrderWarning, prefixed "--poses: ".
+[[nodiscard]] std::string checkPosesMatchInputs(const std::string &poses_path, std::size_t poses,
+                                                const std::vector<std::string> &inputs);
+
+/// Whether the PLY file at `path` carries kPlySamplesComment in its first 256 bytes: a sampling's output, which
+/// expandInputFolders leaves out of a folder.
+[[nodiscard]] bool plyMarkedAsSamples(const std::string &path);
 
 }  // namespace hpds
