@@ -354,6 +354,7 @@ TEST_F(HostileTest, ZeroStampsAreProcessedAndWarnedAboutOnce) {
   ASSERT_TRUE(
       hpds_test::waitFor([&] { return pub.getNumSubscribers() > 0 && logs.connected() && diag.updates() > 0; }, 30.0));
   const double before = diag.value("frames processed");
+  const double zero_before = diag.value("frames with zero stamp");
   for (int i = 0; i < 2; ++i) {
     auto m = validCloud(500, 950 + std::uint32_t(i), ros::Time(0, 0));
     m->header.frame_id = "odom";
@@ -368,6 +369,39 @@ TEST_F(HostileTest, ZeroStampsAreProcessedAndWarnedAboutOnce) {
       << logs.dump();
   ros::WallDuration(0.5).sleep();
   EXPECT_EQ(logs.count(rosgraph_msgs::Log::WARN, {"zero header.stamp"}), 1u) << logs.dump();
+  EXPECT_TRUE(hpds_test::waitFor([&] { return diag.value("frames with zero stamp") == zero_before + 2; }, 10.0))
+      << "frames with zero stamp " << diag.value("frames with zero stamp") << " after " << zero_before;
+}
+
+// Scan mode: a cloud without header.frame_id is processed (its outputs keep the empty frame), warned about once
+// and counted, so that a driver that never sets it shows in /diagnostics as well as in the log.
+TEST_F(HostileTest, EmptyFrameIdsAreProcessedCountedAndWarnedAboutOnce) {
+  // A node no other test sends an empty frame_id, so that its one warning is this test's.
+  const std::string target = ros::NodeHandle("~").param<std::string>("seq_target", "/hpds_seq");
+  LogCollector logs(nh_, target);
+  hpds_test::DiagnosticsReader diag(nh_, target.substr(1));
+  ros::Publisher pub = nh_.advertise<PointCloud2>(target + "/input", 10);
+  Collector<PointCloud2> output(nh_, target + "/output");
+  ASSERT_TRUE(hpds_test::waitFor(
+      [&] { return pub.getNumSubscribers() > 0 && output.connected() && logs.connected() && diag.updates() > 0; },
+      30.0));
+  const double before = diag.value("frames processed");
+  const double counted_before = diag.value("frames without frame_id");
+  for (int i = 0; i < 3; ++i) {
+    auto m = validCloud(500, 970 + std::uint32_t(i), ros::Time(100 + i, 0));
+    m->header.frame_id.clear();
+    pub.publish(m);
+    ros::WallDuration(0.05).sleep();
+  }
+  ASSERT_TRUE(hpds_test::waitFor([&] { return diag.value("frames processed") == before + 3; }, 30.0))
+      << "processed " << diag.value("frames processed") << " after " << before;
+  EXPECT_TRUE(hpds_test::waitFor([&] { return diag.value("frames without frame_id") == counted_before + 3; }, 10.0))
+      << "frames without frame_id " << diag.value("frames without frame_id") << " after " << counted_before;
+  EXPECT_TRUE(hpds_test::waitFor(
+      [&] { return logs.has(rosgraph_msgs::Log::WARN, {"empty header.frame_id", "frames without frame_id"}); }, 10.0))
+      << logs.dump();
+  ros::WallDuration(0.5).sleep();
+  EXPECT_EQ(logs.count(rosgraph_msgs::Log::WARN, {"empty header.frame_id"}), 1u) << logs.dump();
 }
 
 }  // namespace

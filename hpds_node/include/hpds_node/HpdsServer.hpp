@@ -139,6 +139,8 @@ class HpdsServer {
   // Said once per instance (not ROS_*_ONCE, whose flag is shared by every nodelet of the process).
   std::atomic<bool> warned_sensor_at_origin_{false}, warned_rounding_{false}, warned_empty_frame_id_{false},
       warned_zero_stamp_{false};
+  // Frames processed in spite of a header the driver must fix, warned about once and counted in /diagnostics.
+  std::atomic<std::uint64_t> zero_stamps_{0}, empty_frame_ids_{0};
   std::mutex log_mutex_;
   std::map<std::string, double> last_logged_;  // logAllowed: wall time [s] of the last line per key
   static constexpr double kLogThrottleSeconds = 5.0;

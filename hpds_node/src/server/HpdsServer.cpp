@@ -479,17 +479,21 @@ void HpdsServer::handle(const sensor_msgs::PointCloud2::ConstPtr &msg, std::size
                                                                       "the one of their capture (a moving sensor's "
                                                                       "map smears)")
                                                         : std::string())
-                                          << ". Fix the driver's stamps");
+                                          << " (counted in /diagnostics as 'frames with zero stamp'). Fix the "
+                                             "driver's stamps");
       // Processed all the same (the output keeps the input's frame), but tf, RViz and PCL's tools cannot place it.
       if (msg->header.frame_id.empty() && target_frame_.empty() && !warned_empty_frame_id_.exchange(true))
         ROS_WARN_STREAM_NAMED("hpds", tag_ << ": input clouds have an empty header.frame_id, which the outputs "
-                                              "keep: tf and RViz cannot place them. Fix the driver's frame_id");
+                                              "keep: tf and RViz cannot place them (counted in /diagnostics as "
+                                              "'frames without frame_id'). Fix the driver's frame_id");
       ProcessedFrame frame = processor.process(*msg, pose, wants, viewpoint);
       if (!frame.processed) {
         if (logAllowed(std::string("dropped ") + toString(frame.drop)))
           ROS_ERROR_STREAM_NAMED("hpds", tag_ << ": dropped frame (" << toString(frame.drop) << ", " << count(frame.drop)
                                                                  << " so far): " << frame.why);
       } else {
+        if (msg->header.stamp.isZero()) ++zero_stamps_;
+        if (msg->header.frame_id.empty() && target_frame_.empty()) ++empty_frame_ids_;
         if (frame.counters.out_of_range > 0 && logAllowed("out_of_range"))
           ROS_WARN_STREAM_NAMED("hpds", tag_ << ": " << frame.counters.out_of_range << " of the frame's "
                                                                 << frame.counters.input
