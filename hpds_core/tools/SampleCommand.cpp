@@ -23,6 +23,7 @@
 #include "hpds/pipeline/OutputCloud.hpp"
 #include "hpds/pipeline/Pipeline.hpp"
 #include "hpds/pipeline/ScanFrames.hpp"
+#include "hpds/points/FarViewpoint.hpp"
 #include "hpds/io/PlyWriter.hpp"
 #include "hpds/pcl/PointCloudFile.hpp"
 #include "hpds/io/PoseFile.hpp"
@@ -41,23 +42,6 @@ struct SampleArgs {
   std::vector<double> viewpoint;  // empty: each input's own (a PCD's VIEWPOINT), else the origin
   SamplingOptions sampling;
 };
-
-// A sensor is never a kilometre from every point it measured: where the viewpoint is, the input is not in its
-// sensor's frame (a georeferenced PLY), and normals would face a point far off instead of the sensor.
-constexpr double kFarViewpoint = 1000.0;
-
-// [m] The distance from `viewpoint` to the nearest finite point of `points` (infinity when there is none).
-double nearestPointDistance(const PointBuffer &points, const Eigen::Vector3d &viewpoint) {
-  const PointField *f[3] = {points.layout().find("x"), points.layout().find("y"), points.layout().find("z")};
-  if (!f[0] || !f[1] || !f[2]) return std::numeric_limits<double>::infinity();
-  double nearest = std::numeric_limits<double>::infinity();
-  for (std::size_t i = 0; i < points.size(); ++i) {
-    const std::uint8_t *r = points.record(i);
-    const Eigen::Vector3d p(readAsDouble(r, *f[0]), readAsDouble(r, *f[1]), readAsDouble(r, *f[2]));
-    if (p.allFinite()) nearest = std::min(nearest, (p - viewpoint).squaredNorm());
-  }
-  return std::sqrt(nearest);
-}
 
 double since(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
@@ -140,7 +124,7 @@ int runSample(const SampleArgs &a) {
     frame.points = readPointCloud(a.inputs[i], &frame.viewpoint);
     if (!a.viewpoint.empty()) frame.viewpoint = Eigen::Vector3d(a.viewpoint[0], a.viewpoint[1], a.viewpoint[2]);
     if (!frame.viewpoint.isZero(0.0)) any_viewpoint = true;
-    if (const double d = nearestPointDistance(frame.points, frame.viewpoint); d > kFarViewpoint && std::isfinite(d)) {
+    if (const double d = nearestPointDistance(frame.points, frame.viewpoint); isFarViewpoint(d)) {
       const std::lock_guard<std::mutex> lock(far_viewpoint_mutex);
       if (far_viewpoint.empty()) {
         std::ostringstream w;

@@ -111,7 +111,7 @@ def downsample(points, config=None, viewpoint=None):
     except (TypeError, ValueError):
         raise ValueError("viewpoint: expected 3 numbers (x, y, z), got %r" % (viewpoint,)) from None
     xyz = _xyz_of(points)
-    arrays, skipped, rounding, resolution = _hpds.downsample(xyz, text, path, viewpoint)
+    arrays, skipped, rounding, resolution, far = _hpds.downsample(xyz, text, path, viewpoint)
     result = Samples(arrays)
     result.skipped = skipped
     result.resolution = resolution
@@ -126,8 +126,7 @@ def downsample(points, config=None, viewpoint=None):
                       RuntimeWarning, stacklevel=2)
     if rounding:
         warnings.warn("hpds.downsample: " + rounding, RuntimeWarning, stacklevel=2)
-    far = _nearest_distance(xyz, viewpoint)
-    if far > _FAR_VIEWPOINT:
+    if far:
         # As `hpds sample` warns: world coordinates given without the sensor's position orient the normals toward a
         # point a kilometre or more away, about half of them the wrong way, and range limits measure from it.
         warnings.warn("hpds.downsample: the nearest point is %.1f m from the viewpoint (%g, %g, %g), where normals are "
@@ -135,26 +134,6 @@ def downsample(points, config=None, viewpoint=None):
                       "sensor's frame; pass the sensor's position as viewpoint=(x, y, z)" % ((far,) + tuple(viewpoint)),
                       RuntimeWarning, stacklevel=2)
     return result
-
-
-# [m] Farther than this from every point, a viewpoint is no sensor's position (a lidar's nearest return is metres
-# away): the same threshold as `hpds sample`'s warning.
-_FAR_VIEWPOINT = 1000.0
-
-
-def _nearest_distance(xyz, viewpoint):
-    """The distance from `viewpoint` to the nearest finite point of an (N, 3) array; 0 when there is none."""
-    xyz = np.asarray(xyz)
-    if xyz.ndim != 2 or xyz.shape[0] == 0:
-        return 0.0
-    vp = np.asarray(viewpoint, dtype=np.float64)
-    nearest = np.inf
-    for start in range(0, xyz.shape[0], 1 << 20):  # in chunks: a few temporaries of 24 MB, whatever the cloud
-        d2 = np.sum((xyz[start:start + (1 << 20)].astype(np.float64) - vp) ** 2, axis=1)
-        d2 = d2[np.isfinite(d2)]
-        if d2.size:
-            nearest = min(nearest, float(d2.min()))
-    return float(np.sqrt(nearest)) if np.isfinite(nearest) else 0.0
 
 
 def load_config(config=None):

@@ -14,6 +14,7 @@
 #include "Bindings.hpp"
 #include "hpds/hpds.hpp"
 #include "hpds/pipeline/OutputCloud.hpp"
+#include "hpds/points/FarViewpoint.hpp"
 
 namespace py = pybind11;
 
@@ -136,9 +137,11 @@ void bindDownsample(py::module_ &m) {
             },
             interrupt);
         std::string rounding;
+        double nearest = 0.0;
         {
           py::gil_scoped_release unlocked;
           rounding = inputRoundingWarning(points, config);
+          nearest = points.is_f64 ? nearestPointDistance(points.f64, at) : nearestPointDistance(points.f32, at);
         }
         py::dict out;
         out["index"] = arrayOf(s.index);
@@ -166,14 +169,15 @@ void bindDownsample(py::module_ &m) {
         resolution["output_level"] = s.output_level;
         resolution["radius"] = s.radius;
         resolution["cell_size"] = s.cell_size;
-        return py::make_tuple(out, skipped, rounding, resolution);
+        return py::make_tuple(out, skipped, rounding, resolution, isFarViewpoint(nearest) ? nearest : 0.0);
       },
       py::arg("points"), py::arg("config_yaml"), py::arg("config_path"), py::arg("viewpoint"),
       "Samples of `points` ((N, 3) float32/float64) with the config (file `config_path` if not empty, else "
       "`config_yaml`) and normals facing `viewpoint` (x, y, z in the points' frame): (dict of index, level and, with "
       "normals, normal and curvature, with covariances covariance; dict of the points left out by reason; the "
       "warning for float32 points rounded by more than 1 % of the output radius, or ''; the resolution: output_level, "
-      "radius, cell_size).");
+      "radius, cell_size; the distance from `viewpoint` to the nearest point when it is too far to be the sensor's "
+      "position (isFarViewpoint), else 0).");
 }
 
 }  // namespace hpds::python
