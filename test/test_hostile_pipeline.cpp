@@ -382,6 +382,61 @@ TEST(HostilePipeline, AFarOutlierReturnLeavesTheFramesNormalsAndMapOutput) {
   EXPECT_EQ(hit, map.outputSamples());
 }
 
+TEST(HostilePipeline, AReturnBeyondTheKeyRangeChangesNothingButItsCount) {
+  // A glitched return at -1e30 (a no-return with a flipped byte) has no cell key: it is counted as out of range. As
+  // the corner of the scan-mode centroid grids it put every real point beyond their reach, and no sample of the frame
+  // got a normal. The frame with it must give what the frame without it gives, sample for sample, in both modes and
+  // on 1 and 2 threads, wherever in the frame it stands and on whichever axis, whatever its sign.
+  std::mt19937_64 rng(5);
+  std::uniform_real_distribution<double> u(-5.0, 5.0);
+  std::vector<std::array<double, 3>> clean;
+  for (int i = 0; i < 3000; ++i) {
+    const double a = u(rng), b = u(rng);
+    clean.push_back(i % 3 == 0 ? std::array<double, 3>{a, b, -1.5} : i % 3 == 1 ? std::array<double, 3>{6.0, a, b}
+                                                                                 : std::array<double, 3>{a, 6.0, b});
+  }
+  const auto run = [](const HpdsConfig &c, const std::vector<std::array<double, 3>> &pts, std::uint64_t &out_of_range) {
+    Pipeline p(c);
+    out_of_range = p.addFrame(frameOf(typedCloud(FieldType::Float32, pts))).counters.out_of_range;
+    std::vector<std::array<float, 7>> got;  // position, normal, valid
+    const std::vector<SampleId> ids = p.outputSamples();
+    const std::vector<SampleNormal> normals = p.normals(ids);
+    for (std::size_t k = 0; k < ids.size(); ++k) {
+      const double *q = p.hierarchy().position(ids[k]);
+      const SampleNormal &n = normals[k];
+      got.push_back({float(q[0]), float(q[1]), float(q[2]), n.valid ? n.normal[0] : 0.0f, n.valid ? n.normal[1] : 0.0f,
+                     n.valid ? n.normal[2] : 0.0f, n.valid ? 1.0f : 0.0f});
+    }
+    return got;
+  };
+  for (const Mode mode : {Mode::Scan, Mode::Map})
+    for (int threads : {1, 2}) {
+      HpdsConfig c;
+      c.mode = mode;
+      c.threads = threads;
+      c.map.evict_distance = 0.0;
+      std::uint64_t none = 0;
+      const auto expected = run(c, clean, none);
+      ASSERT_EQ(none, 0u);
+      std::size_t valid = 0;
+      for (const auto &e : expected) valid += e[6] > 0.0f ? 1 : 0;
+      ASSERT_GT(valid, expected.size() * 9 / 10) << "the clean frame's normals";
+      for (const std::size_t at : {std::size_t(0), std::size_t(1234), clean.size()})
+        for (int axis = 0; axis < 3; ++axis)
+          for (const double value : {-1e30, 1e30, -1.7e38f + 0.0}) {
+            SCOPED_TRACE(testing::Message() << (mode == Mode::Scan ? "scan" : "map") << ", " << threads
+                                            << " threads, outlier " << value << " on axis " << axis << " at " << at);
+            std::vector<std::array<double, 3>> pts = clean;
+            std::array<double, 3> bad{0.0, 0.0, 0.0};
+            bad[std::size_t(axis)] = value;
+            pts.insert(pts.begin() + std::ptrdiff_t(at), bad);
+            std::uint64_t out_of_range = 0;
+            EXPECT_EQ(run(c, pts, out_of_range), expected);
+            EXPECT_EQ(out_of_range, 1u);
+          }
+    }
+}
+
 TEST(HostilePipeline, TenMillionPointFrameInBoundedTimeAndMemory) {
   // 10 M records of 16 bytes (160 MB) plus the pipeline's per-point scratch; max_depth 2 keeps the hierarchy tiny.
   constexpr std::size_t kPoints = 10'000'000;

@@ -200,7 +200,16 @@ TEST(BadInput, PcdHeaderProblems) {
   check("header_cut.pcd", "# .PCD v0.7\nVERSION 0.7\nFIELDS x y z\nSIZE 4 4", {"SIZE"});
   check("truncated_body.pcd", xyzPcdHeader(100, "binary") + xyzBody(99) + "abc",
         {"truncated: header says 100 points of 12 bytes but data holds 1191 bytes"});
+  // A header that under-states the count: PCL read the declared points and ignored the rest without a word.
+  check("binary_extra_points.pcd", xyzPcdHeader(500, "binary") + xyzBody(1000),
+        {"binary data holds 6000 bytes (500 points of 12 bytes) beyond the header's POINTS 500", "under-states"});
+  check("binary_extra_point.pcd", xyzPcdHeader(2, "binary") + xyzBody(3), {"beyond the header's POINTS 2"});
   // Absurd sizes must be refused before anything is allocated.
+  // Less than a point more (a final newline) is no point: read as declared.
+  writeBytes(dir / "binary_newline.pcd", xyzPcdHeader(2, "binary") + xyzBody(2) + "\n");
+  EXPECT_EQ(readPointCloud((dir / "binary_newline.pcd").string()).size(), 2u);
+  writeBytes(dir / "binary_11_bytes.pcd", xyzPcdHeader(2, "binary") + xyzBody(2) + std::string(11, 'x'));
+  EXPECT_EQ(readPointCloud((dir / "binary_11_bytes.pcd").string()).size(), 2u);
   check("huge_points.pcd",
         pcdHeader("x y z", "4 4 4", "F F F", "1 1 1", "4000000000", "1", "4000000000", "binary") + xyzBody(10),
         {"truncated", "4000000000 points"});

@@ -357,6 +357,14 @@ TEST(BadInput, PlyProblems) {
         "ply\nformat binary_little_endian 1.0\nelement vertex 4\n" + xyz_props +
             "obj_info num_cols 299999999999\nend_header\n" + four,
         {"3647256575 x 1"});
+  // A binary header that under-states the vertex count: PCL read the declared vertices and ignored the rest.
+  check("binary_extra_vertices.ply",
+        "ply\nformat binary_little_endian 1.0\nelement vertex 2\n" + xyz_props + "end_header\n" + four,
+        {"binary data holds 24 bytes (2 vertices of 12 bytes) beyond the header's 2 vertices", "under-states"});
+  // Less than a vertex more (a final newline) is no vertex; what follows a list element is not counted.
+  writeBytes(dir / "binary_newline.ply",
+             "ply\nformat binary_little_endian 1.0\nelement vertex 4\n" + xyz_props + "end_header\n" + four + "\n");
+  EXPECT_EQ(readPointCloud((dir / "binary_newline.ply").string()).size(), 4u);
   // What PCL leaves alone is fine: a lone num_cols before the vertex (reset to count x 1), a complete pair after it,
   // an obj_info value PCL does not split off (carriage return inside the line).
   for (const std::string &info : {std::string("obj_info num_cols 7\nelement vertex 4\n") + xyz_props,

@@ -321,6 +321,13 @@ void checkPcdBody(const std::string &path, const FileBytes &file, const PcdHeade
   switch (h.data) {
     case PcdData::Binary:
       if (data_bytes < need) fail(path, pcdTruncated(h, data_bytes));
+      // PCL reads the declared points and ignores the rest: a header that under-states the count would lose the points
+      // after it without a word, as in ascii data. Fewer bytes than a point (a final newline) are let pass.
+      if (h.point_step > 0 && data_bytes - need >= h.point_step)
+        fail(path, "binary data holds " + std::to_string(data_bytes - need) + " bytes (" +
+                       std::to_string((data_bytes - need) / h.point_step) + " points of " +
+                       std::to_string(h.point_step) + " bytes) beyond the header's POINTS " +
+                       std::to_string(h.points) + ": the header under-states the count (fix POINTS, WIDTH and HEIGHT)");
       return;
     case PcdData::BinaryCompressed: {
       if (data_bytes < 8)

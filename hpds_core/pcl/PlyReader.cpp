@@ -263,6 +263,18 @@ void checkPlyBinary(const std::string &path, const FileBytes &file, const PlyHea
                      " bytes but data holds " + std::to_string(data_bytes) + " bytes");
     }
   }
+  // PCL reads the declared vertices and ignores the rest: with nothing declared after them, a whole vertex more means
+  // a header that under-states the count, whose last points would be lost without a word (as in ascii data). Fewer
+  // bytes than a vertex (a final newline) are let pass.
+  if (exact && !h.elements.empty() && h.elements.back().name == "vertex") {
+    std::uint64_t record = 0;
+    for (const auto &p : h.elements.back().properties) record += fieldTypeSize(p.type);
+    if (record > 0 && data_bytes - need >= record)
+      fail(path, "binary data holds " + std::to_string(data_bytes - need) + " bytes (" +
+                     std::to_string((data_bytes - need) / record) + " vertices of " + std::to_string(record) +
+                     " bytes) beyond the header's " + std::to_string(h.elements.back().count) +
+                     " vertices: the header under-states the count (fix 'element vertex')");
+  }
 }
 
 // A float or double parsed from text, locale-independently: from_chars, and for values beyond the type's range

@@ -164,6 +164,19 @@ FrameResult Pipeline::addFrame(const Frame &frame) {
   c.input = pts.size();
   SkippedPoints skipped;
   poseFramePoints(frame, config_.input, xyz_, candidates_, skipped);
+  // Out-of-key-range points (a glitched return at -1e30) are counted here and go no further: every later step takes
+  // candidates_ as the frame's extent, and one such point as the corner of the normals' centroid grids put every
+  // real point beyond their reach (no sample of the frame got a normal).
+  std::uint64_t out_of_key_range = 0;
+  {
+    std::size_t kept = 0;
+    for (const std::uint32_t i : candidates_)
+      if (hierarchy_.inKeyRange(&xyz_[3 * std::size_t(i)]))
+        candidates_[kept++] = i;
+      else
+        ++out_of_key_range;
+    candidates_.resize(kept);
+  }
   c.skipped_invalid = skipped.invalid;
   c.skipped_zero = skipped.zero;
   c.skipped_range = skipped.range;
@@ -326,7 +339,7 @@ FrameResult Pipeline::addFrame(const Frame &frame) {
       if (hierarchy_.level(id) <= output_level_ && k < early_done_) early_slot_[id] = static_cast<std::uint32_t>(k++);
   }
 
-  c.out_of_range = inserted.out_of_range;
+  c.out_of_range = out_of_key_range + inserted.out_of_range;
   c.dropped_depth = inserted.dropped_depth;
   c.accepted = inserted.accepted.size();
   c.accepted_per_level = inserted.accepted_per_level;

@@ -112,6 +112,11 @@ class Hierarchy {
   void shrink();
 
   [[nodiscard]] int maxDepth() const { return max_depth_; }
+  /// Whether `p` has exact cell keys at every level: the points insert() takes rather than counts as out_of_range.
+  [[nodiscard]] bool inKeyRange(const double p[3]) const {
+    const double ie = inv_edge_[static_cast<std::size_t>(max_depth_)];
+    return inCellRange(p[0], ie) && inCellRange(p[1], ie) && inCellRange(p[2], ie);
+  }
   [[nodiscard]] double cellSize() const { return cell_size_; }
   [[nodiscard]] double edge(int level) const { return edge_[static_cast<std::size_t>(level)]; }
   [[nodiscard]] double radius(int level) const { return radius_[static_cast<std::size_t>(level)]; }
