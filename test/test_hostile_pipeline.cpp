@@ -68,12 +68,30 @@ TEST(HostilePipeline, BrokenLayoutsThrowBeforeAnythingChanges) {
   vector_x.append("x", FieldType::Float32, 2);
   vector_x.append("y", FieldType::Float32);
   vector_x.append("z", FieldType::Float32);
-  for (const PointLayout &l : {beyond, dup, bad_type, vector_x}) {
+  PointLayout shared_xy = vector_x;  // x and y read from the same bytes: every point would lie on x = y
+  shared_xy.fields[0].count = 1;
+  shared_xy.fields[1].offset = 0;
+  PointLayout z_in_extra;  // z starting inside another field
+  for (const char *name : {"x", "y", "intensity", "w"}) z_in_extra.append(name, FieldType::Float32);
+  z_in_extra.fields[3].name = "z";
+  z_in_extra.fields[3].offset = 10;
+  for (const PointLayout &l : {beyond, dup, bad_type, vector_x, shared_xy, z_in_extra}) {
     Frame f;
     f.points = PointBuffer(l, 0);
     f.points.bytes().assign(3 * l.point_step, 0);
     EXPECT_THROW(p.addFrame(f), std::invalid_argument);
   }
+  try {
+    shared_xy.validate();
+    ADD_FAILURE() << "x and y at one offset passed";
+  } catch (const std::invalid_argument &e) {
+    EXPECT_NE(std::string(e.what()).find("field 'x' (bytes 0..3) overlaps field 'y' (bytes 0..3)"), std::string::npos)
+        << e.what();
+  }
+  PointLayout rgb_in_rgba;  // overlaps away from x y z are a cloud's own business
+  for (const char *name : {"x", "y", "z", "rgba"}) rgb_in_rgba.append(name, FieldType::UInt32);
+  rgb_in_rgba.fields.push_back(PointField{"rgb", 12, FieldType::Float32, 1});
+  EXPECT_NO_THROW(rgb_in_rgba.validate());
   // An empty frame whose last field is 4 GB long: every size matches, but its count is no real field's, and the
   // output layout's 32-bit point_step would wrap around.
   PointLayout huge;

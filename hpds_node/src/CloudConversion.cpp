@@ -56,6 +56,8 @@ CloudError checkLayout(const sensor_msgs::PointCloud2 &msg, hpds::PointLayout &l
       return fail(CloudError::BadXyz, why,
                   std::string("field '") + axis + "' has count " + std::to_string(f->count) + " (must be 1)");
   }
+  if (std::string overlap = hpds::xyzOverlap(layout); !overlap.empty())
+    return fail(CloudError::OverlappingXyz, why, overlap);
   return CloudError::None;
 }
 
@@ -101,6 +103,8 @@ const char *toString(CloudError error) {
       return "bad_row_step";
     case CloudError::DataSize:
       return "data_size";
+    case CloudError::OverlappingXyz:
+      return "overlapping_xyz";
   }
   return "unknown";
 }

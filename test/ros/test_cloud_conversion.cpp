@@ -280,6 +280,10 @@ const MalformedCase kMalformed[] = {
     {"no z", CloudError::MissingXyz, [](PointCloud2 &m) { m.fields[2].name = "w"; }},
     {"no fields", CloudError::MissingXyz, [](PointCloud2 &m) { m.fields.clear(); }},
     {"x count 2", CloudError::BadXyz, [](PointCloud2 &m) { m.fields[0].count = 2; }},
+    {"x and y at one offset", CloudError::OverlappingXyz, [](PointCloud2 &m) { m.fields[1].offset = 0; }},
+    {"y starting inside x", CloudError::OverlappingXyz, [](PointCloud2 &m) { m.fields[1].offset = 2; }},
+    {"z over another field", CloudError::OverlappingXyz, [](PointCloud2 &m) { m.fields[2].offset = m.fields[3].offset; }},
+    {"another field inside y", CloudError::OverlappingXyz, [](PointCloud2 &m) { m.fields[5].offset = 5; }},
     {"row_step too small", CloudError::BadRowStep, [](PointCloud2 &m) { m.row_step -= 1; }},
     {"truncated data", CloudError::DataSize, [](PointCloud2 &m) { m.data.resize(m.data.size() - 1); }},
     {"trailing data", CloudError::DataSize, [](PointCloud2 &m) { m.data.push_back(0); }},
@@ -313,6 +317,17 @@ TEST(CloudConversion, MalformedMessagesAreRefusedAndOutputUntouched) {
     EXPECT_NE(buf.layout().find("sentinel"), nullptr) << c.name;
     EXPECT_STRNE(hpds_node::toString(c.expected), "unknown");
   }
+}
+
+// Fields other than x y z may share bytes (PCL's rgb inside rgba, a driver's packed flags): taken as they are.
+TEST(CloudConversion, OverlapsAwayFromXyzAreKept) {
+  PointCloud2 msg = makeCloud(PointField::FLOAT32, 6, 2);
+  msg.fields[4].offset = msg.fields[3].offset;
+  hpds::PointBuffer buf;
+  std::string why;
+  ASSERT_EQ(hpds_node::fromRosCloud(msg, buf, &why), CloudError::None) << why;
+  EXPECT_EQ(buf.layout().find(msg.fields[4].name)->offset, msg.fields[3].offset);
+  EXPECT_EQ(hpds::xyzOverlap(buf.layout()), "");
 }
 
 // Random header mutations: every outcome is either a refusal or a buffer consistent with the message.

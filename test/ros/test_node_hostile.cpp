@@ -99,6 +99,7 @@ TEST_F(HostileTest, MalformedAndFuzzedMessagesAreCountedAndTheNodeSurvives) {
       {"bad_xyz", [](PointCloud2 &m) { m.fields[0].count = 3; }},
       {"bad_row_step", [](PointCloud2 &m) { m.row_step = 7; }},
       {"data_size", [](PointCloud2 &m) { m.data.resize(m.data.size() - 3); }},
+      {"overlapping_xyz", [](PointCloud2 &m) { m.fields[1].offset = 0; }},
   };
   for (const auto &[reason, mutate] : malformed) {
     auto m = validCloud(500, 1, next());

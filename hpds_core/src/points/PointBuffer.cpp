@@ -5,6 +5,7 @@
 #include <set>
 #include <stdexcept>
 #include <string>
+#include <utility>
 
 namespace hpds {
 
@@ -100,6 +101,29 @@ void PointLayout::validate() const {
                                   " beyond point_step " + std::to_string(point_step));
     if (!names.insert(f.name).second) throw std::invalid_argument("field '" + f.name + "' appears twice");
   }
+  if (std::string overlap = xyzOverlap(*this); !overlap.empty()) throw std::invalid_argument(overlap);
+}
+
+std::string xyzOverlap(const PointLayout &layout) {
+  const auto bytes = [](const PointField &f) {
+    const std::uint64_t begin = f.offset;
+    return std::pair<std::uint64_t, std::uint64_t>(begin, begin + std::uint64_t(f.count) * fieldTypeSize(f.type));
+  };
+  for (std::size_t i = 0; i < layout.fields.size(); ++i) {
+    const PointField &a = layout.fields[i];
+    if (a.name != "x" && a.name != "y" && a.name != "z") continue;
+    const auto [a0, a1] = bytes(a);
+    for (std::size_t j = 0; j < layout.fields.size(); ++j) {
+      const PointField &b = layout.fields[j];
+      if (j == i || ((b.name == "x" || b.name == "y" || b.name == "z") && j < i)) continue;  // each pair once
+      const auto [b0, b1] = bytes(b);
+      if (a0 < b1 && b0 < a1)
+        return "field '" + a.name + "' (bytes " + std::to_string(a0) + ".." + std::to_string(a1 - 1) +
+               ") overlaps field '" + b.name + "' (bytes " + std::to_string(b0) + ".." + std::to_string(b1 - 1) +
+               "): a position read through shared bytes is garbage";
+    }
+  }
+  return {};
 }
 
 void PointBuffer::setOrganization(std::uint32_t width, std::uint32_t height) {

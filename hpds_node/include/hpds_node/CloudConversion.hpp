@@ -39,8 +39,9 @@ enum class CloudError {
   BadXyz,             ///< x, y or z with count != 1
   BadRowStep,         ///< row_step < width * point_step (or the product overflows)
   DataSize,           ///< data.size() != row_step * height (truncated or trailing bytes)
+  OverlappingXyz,     ///< x, y or z sharing bytes with another field (hpds::xyzOverlap)
 };
-inline constexpr int kCloudErrorCount = 10;
+inline constexpr int kCloudErrorCount = 11;
 
 /// Short snake_case name ("big_endian", "data_size", ...) for logs and diagnostics keys.
 [[nodiscard]] const char *toString(CloudError error);
