@@ -160,8 +160,11 @@ TEST(TileBucket, FilesEveryKeptPointOnceInItsTileAndRoundTrips) {
   config.input.min_range = 0.01;
   const TileGrid grid(config.hierarchy, 1.0);
   std::vector<Frame> frames = test::denseFrames(3, 3000, 11);
-  // Points the pipeline skips: NaN, a no-return, one closer than min_range.
-  for (Frame &f : frames) {
+  // Points the pipeline skips: NaN, a no-return, one closer than min_range (to a viewpoint off the origin, which
+  // the buckets keep).
+  for (std::size_t k = 0; k < frames.size(); ++k) {
+    Frame &f = frames[k];
+    f.viewpoint = Eigen::Vector3d(0.0, 0.0005 * double(k + 1), 0.0);
     const float bad[3][3] = {{NAN, 0, 0}, {0, 0, 0}, {0.001f, 0, 0}};
     for (int b = 0; b < 3; ++b) std::memcpy(f.points.record(static_cast<std::size_t>(b)), bad[b], 12);
   }
@@ -188,6 +191,8 @@ TEST(TileBucket, FilesEveryKeptPointOnceInItsTileAndRoundTrips) {
     for (std::size_t k = 0; k < back.size(); ++k) {
       EXPECT_EQ(back[k].frame_index, mine[k].frame_index);
       EXPECT_TRUE(back[k].sensor_to_fixed.matrix() == mine[k].sensor_to_fixed.matrix());
+      EXPECT_TRUE(back[k].viewpoint == mine[k].viewpoint);
+      EXPECT_EQ(back[k].viewpoint.y(), 0.0005 * double(back[k].frame_index - 9));
       EXPECT_EQ(back[k].points.layout(), mine[k].points.layout());
       EXPECT_EQ(back[k].points.bytes(), mine[k].points.bytes());
       // Each point posed again, as the tile's pipeline will, lies in this tile.
@@ -197,6 +202,7 @@ TEST(TileBucket, FilesEveryKeptPointOnceInItsTileAndRoundTrips) {
       Frame f;
       f.points = back[k].points;
       f.sensor_to_fixed = back[k].sensor_to_fixed;
+      f.viewpoint = back[k].viewpoint;
       poseFramePoints(f, config.input, xyz, idx, s);
       ASSERT_EQ(idx.size(), f.points.size());
       for (std::uint32_t i : idx) {
@@ -285,6 +291,7 @@ void checkBuildAgainstOracles(const HpdsConfig &config, double tile, int frames,
           Frame frame;
           frame.points = std::move(f.points);
           frame.sensor_to_fixed = f.sensor_to_fixed;
+          frame.viewpoint = f.viewpoint;
           oracle.setNextFrameIndex(f.frame_index);
           oracle.addFrame(frame);
         }

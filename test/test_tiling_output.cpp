@@ -3,6 +3,8 @@
 // border samples are read for them); without the neighbours they are not (the negative control).
 #include <gtest/gtest.h>
 
+#include <cstring>
+
 #include "TestData.hpp"
 #include "TiledRun.hpp"
 #include "hpds/normals/NormalEstimator.hpp"
@@ -211,6 +213,74 @@ TEST(TiledOutput, CovariancesAreWrittenWhenAskedAsTheWholeMapGivesThem) {
     EXPECT_EQ(written, ids.size());
     EXPECT_GT(planes, 100u);
   }
+}
+
+// Frames already in the fixed frame (a georeferenced survey) with identity poses give a tiled build the normals of the
+// same points in their sensor's frame with poses, when each frame's viewpoint says where its sensor was. Bucket files
+// used to keep the pose only, and the build refused such frames; without the viewpoint the normals face the origin.
+TEST(TiledOutput, WorldFramesWithTheirViewpointsGiveTheSensorFramesNormals) {
+  const HpdsConfig config = normalsConfig();
+  const TileGrid grid(config.hierarchy, 1.0);
+  const std::vector<Frame> sensor = test::denseFrames(3, 6000, 41);
+  std::vector<Frame> world, world_at_origin;
+  PointLayout l;
+  for (const char *axis : {"x", "y", "z"}) l.append(axis, FieldType::Float64);
+  l.append("intensity", FieldType::Float32);
+  for (const Frame &f : sensor) {
+    // Each point where the pipeline poses it, to the bit (R p + t in double): identity poses then give the same map.
+    std::vector<double> xyz;
+    std::vector<std::uint32_t> kept;
+    SkippedPoints skipped;
+    poseFramePoints(f, config.input, xyz, kept, skipped);
+    ASSERT_EQ(kept.size(), f.points.size());
+    Frame w;
+    w.points = PointBuffer(l, f.points.size());
+    for (std::size_t i = 0; i < f.points.size(); ++i) {
+      std::memcpy(w.points.record(i), &xyz[3 * i], 24);
+      std::memcpy(w.points.record(i) + 24, f.points.record(i) + 12, 4);
+    }
+    w.viewpoint = f.sensor_to_fixed.translation();
+    world.push_back(w);
+    w.viewpoint = Eigen::Vector3d::Zero();
+    world_at_origin.push_back(std::move(w));
+  }
+  const auto normalsOf = [&](const std::vector<Frame> &frames, const std::string &tag) {
+    const test::TiledRun run = test::runTiled(config, grid, frames, test::scratchDir(tag));
+    std::map<std::array<float, 3>, std::array<float, 3>> out;
+    for (const TileKey &key : run.tiles) {
+      const PointBuffer cloud = readPointCloud(run.plys.at(key).string());
+      const PointLayout &c = cloud.layout();
+      for (std::size_t i = 0; i < cloud.size(); ++i) {
+        const std::uint8_t *r = cloud.record(i);
+        out[{float(readAsDouble(r, *c.find("x"))), float(readAsDouble(r, *c.find("y"))),
+             float(readAsDouble(r, *c.find("z")))}] = {float(readAsDouble(r, *c.find("normal_x"))),
+                                                       float(readAsDouble(r, *c.find("normal_y"))),
+                                                       float(readAsDouble(r, *c.find("normal_z")))};
+      }
+    }
+    return out;
+  };
+  const auto posed = normalsOf(sensor, "tiled_vp_sensor");
+  const auto given = normalsOf(world, "tiled_vp_world");
+  const auto origin = normalsOf(world_at_origin, "tiled_vp_origin");
+  ASSERT_GT(posed.size(), 500u);
+  ASSERT_EQ(given.size(), posed.size());
+  std::size_t same = 0, flipped_at_origin = 0;
+  for (const auto &[at, n] : posed) {
+    const auto it = given.find(at);
+    ASSERT_NE(it, given.end()) << "a sample of the posed build is missing from the world-frame one";
+    const bool valid = std::isfinite(n[0]);
+    EXPECT_EQ(std::isfinite(it->second[0]), valid);
+    if (valid && it->second == n) ++same;
+    const auto o = origin.find(at);
+    ASSERT_NE(o, origin.end());
+    if (valid && n[0] * o->second[0] + n[1] * o->second[1] + n[2] * o->second[2] < 0.0f) ++flipped_at_origin;
+  }
+  std::size_t valid = 0;
+  for (const auto &[at, n] : posed) valid += std::isfinite(n[0]) ? 1 : 0;
+  EXPECT_EQ(same, valid) << "normals differ between the posed and the world-frame builds";
+  // The negative control: the viewpoint matters (the sensors stand 1.2 m above the ground, away from the origin).
+  EXPECT_GT(flipped_at_origin, valid / 20) << "the viewpoint changed no normal";
 }
 
 }  // namespace

@@ -318,6 +318,16 @@ def _run(inputs, poses, poses_path, outdir, plan, tile_size, config_yaml, runner
             buckets.setdefault((i, j), []).append(path)
             points[(i, j)] = points.get((i, j), 0) + n
     tiles = sorted(buckets, key=lambda k: (k[1], k[0]))
+    far = next((bucketed["bucket-%d" % c]["far_viewpoint"] for c in range(len(chunks))
+                if bucketed["bucket-%d" % c]["far_viewpoint"] is not None), None)
+    if far is not None:
+        # As `hpds sample` warns: frames in world coordinates without their sensor's position get normals that face
+        # a point kilometres away (about half of them turned around), and range limits measure from it.
+        path, distance, vp = far
+        log("warning: the nearest point of '%s' is %.1f m from its viewpoint (%.12g, %.12g, %.12g), where normals are "
+            "made to face and input.min_range/max_range measure from: the frames seem not to be in their sensor's "
+            "frame; give them in the sensor's frame with --poses, or set each PCD's VIEWPOINT to its sensor's "
+            "position" % (path, distance, vp[0], vp[1], vp[2]))
 
     # 2. Tiles: phase by phase, each after its neighbours of earlier phases; 3. outputs, after all neighbours.
     def map_path(k):

@@ -5,12 +5,14 @@
 #include <pybind11/stl.h>
 
 #include <filesystem>
+#include <optional>
 #include <tuple>
 
 #include "Bindings.hpp"
 #include "hpds/util/FrameMemory.hpp"
 #include "hpds/config/ConfigYaml.hpp"
 #include "hpds/pipeline/OutputCloud.hpp"
+#include "hpds/points/FarViewpoint.hpp"
 #include "hpds/tiling/TileBucket.hpp"
 #include "hpds/tiling/TileBuild.hpp"
 
@@ -119,6 +121,9 @@ void bindTiling(py::module_ &m) {
         std::size_t bytes = 0;
         PointLayout layout;
         bool has_layout = false;
+        // The first frame whose viewpoint is no sensor's position (isFarViewpoint): its input, the distance to its
+        // nearest point and the viewpoint, for the build's warning.
+        std::optional<std::tuple<std::string, double, std::vector<double>>> far_viewpoint;
         {
           py::gil_scoped_release unlocked;
           TileBucketer bucketer(config, grid);
@@ -126,6 +131,10 @@ void bindTiling(py::module_ &m) {
             Frame frame;
             frame.points = readCloudFile(inputs[f], &frame.viewpoint);
             frame.sensor_to_fixed = iso[f];
+            if (!far_viewpoint)
+              if (const double d = nearestPointDistance(frame.points, frame.viewpoint); isFarViewpoint(d))
+                far_viewpoint.emplace(inputs[f], d,
+                                      std::vector<double>{frame.viewpoint.x(), frame.viewpoint.y(), frame.viewpoint.z()});
             try {
               totals += bucketer.addFrame(frame, first_frame + static_cast<std::uint32_t>(f));
             } catch (const std::invalid_argument &e) {
@@ -146,6 +155,7 @@ void bindTiling(py::module_ &m) {
         d["tiles"] = tiles;
         d["counters"] = countersDict(totals);
         d["memory_bytes"] = bytes;
+        d["far_viewpoint"] = far_viewpoint ? py::object(py::cast(*far_viewpoint)) : py::object(py::none());
         // The frames' point fields, which every bucketing task of one build must share (map mode's rule); None when
         // every frame of the task was empty (those take any fields).
         py::list fields;
@@ -157,7 +167,8 @@ void bindTiling(py::module_ &m) {
       py::arg("config_yaml"), py::arg("tile_size"), py::arg("inputs"), py::arg("poses"), py::arg("first_frame"),
       py::arg("out_dir"),
       "Bucketing task: reads the inputs (frames first_frame, ...), files their points per tile into "
-      "out_dir/tile_<i>_<j>.bkt; returns the tiles [(i, j, points, path)] and the skip counters.");
+      "out_dir/tile_<i>_<j>.bkt; returns the tiles [(i, j, points, path)], the skip counters and the first frame "
+      "whose viewpoint lies too far from all its points to be its sensor's: (input, distance, viewpoint) or None.");
   m.def(
       "build_tile",
       [](const std::string &yaml, double tile_size, std::int32_t i, std::int32_t j,

@@ -459,22 +459,47 @@ class MapBuild(unittest.TestCase):
             self.assertEqual(manifest["counts"]["input_points"], sum(len(hpds.read_points(p)) for p in self.frames[:2]))
             self.assertEqual(manifest["frames"], 4)
 
-    def test_a_pcd_viewpoint_is_refused_not_dropped(self):
-        # `hpds sample` turns normals toward a PCD's VIEWPOINT; bucket files keep only the pose, so a tiled build
-        # refuses such a frame rather than turn its normals toward the pose's origin without a word.
+    def test_a_pcd_viewpoint_turns_the_normals_and_a_far_one_is_warned(self):
+        # `hpds sample` turns normals toward a PCD's VIEWPOINT (the sensor's position in the frame's coordinates); the
+        # bucket files keep it beside the pose, so a tiled build does the same. A viewpoint a kilometre from every
+        # point (world coordinates without the sensor's position) is warned about, as `hpds sample` warns.
         with open(self.frames[1], "rb") as f:
             data = f.read()
         start = data.index(b"VIEWPOINT")
         end = data.index(b"\n", start)
-        moved = self.out("moved_viewpoint.pcd")
-        with open(moved, "wb") as f:
-            f.write(data[:start] + b"VIEWPOINT 5 0 0 1 0 0 0" + data[end:])
-        with self.assertRaises(BuildError) as e:
-            build([self.frames[0], moved], self.two_poses("poses_viewpoint.txt"), self.out("viewpoint"), TILE,
-                  self.config_yaml, SerialRunner(), chunk_frames=1, log=lambda m: None)
-        self.assertIn("moved_viewpoint.pcd", str(e.exception))
-        self.assertIn("viewpoint", str(e.exception))
-        self.assertEqual(tile_files(self.out("viewpoint")), [])
+
+        def moved(name, viewpoint):
+            path = self.out(name)
+            with open(path, "wb") as f:
+                f.write(data[:start] + b"VIEWPOINT " + viewpoint + b" 1 0 0 0" + data[end:])
+            return path
+
+        def run(second, tag):
+            lines = []
+            out = self.out(tag)
+            build([self.frames[0], second], self.two_poses("poses_%s.txt" % tag), out, TILE, self.config_yaml,
+                  SerialRunner(), chunk_frames=1, log=lines.append)
+            tiles = [hpds.ply.read(os.path.join(out, n)) for n in tile_files(out)]
+            samples = np.concatenate(tiles)
+            samples = samples[np.lexsort((samples["z"], samples["y"], samples["x"]))]
+            return samples, "\n".join(lines)
+
+        plain, plain_log = run(self.frames[1], "vp_plain")
+        turned, turned_log = run(moved("vp_above.pcd", b"0 0 40"), "vp_above")
+        far, far_log = run(moved("vp_far.pcd", b"5000 0 0"), "vp_far")
+        for log in (plain_log, turned_log):
+            self.assertNotIn("from its viewpoint", log)
+        self.assertIn("vp_far.pcd' is ", far_log)
+        self.assertIn("from its viewpoint (5000, 0, 0)", far_log)
+        self.assertIn("set each PCD's VIEWPOINT", far_log)
+        for other in (turned, far):
+            # The same samples; only the direction the normals face may differ.
+            for axis in ("x", "y", "z"):
+                np.testing.assert_array_equal(other[axis], plain[axis])
+        dot = lambda a, b: a["normal_x"] * b["normal_x"] + a["normal_y"] * b["normal_y"] + a["normal_z"] * b["normal_z"]
+        valid = np.isfinite(plain["normal_x"])
+        self.assertGreater(int(np.sum(dot(turned, plain)[valid] < 0)), 10, "a viewpoint 40 m up turned no normal")
+        self.assertGreater(int(np.sum(dot(far, plain)[valid] < 0)), 10)
 
     def test_far_poses_write_float64_unless_float32_is_asked_and_then_warn(self):
         # 1e7 m along x: float32 x y z round by 0.6 m, against an output radius of 0.11 m.

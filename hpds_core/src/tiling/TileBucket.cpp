@@ -16,7 +16,7 @@ namespace hpds {
 namespace {
 
 constexpr char kMagic[8] = {'H', 'P', 'D', 'S', 'B', 'K', 'T', '\0'};
-constexpr std::uint32_t kVersion = 1;
+constexpr std::uint32_t kVersion = 2;  // 2: a viewpoint per frame
 // Far above any real layout; they keep the sizes computed while reading from overflowing.
 constexpr std::uint32_t kMaxPointStep = 1u << 24;
 constexpr std::uint32_t kMaxFields = 1u << 16;
@@ -76,10 +76,7 @@ FrameCounters TileBucketer::addFrame(const Frame &frame, std::uint32_t frame_ind
   if (fx->count != 1 || fy->count != 1 || fz->count != 1) throw std::invalid_argument("x/y/z fields must have count 1");
   layout.validate();
   if (!frame.sensor_to_fixed.matrix().allFinite()) throw std::invalid_argument("frame pose is not finite");
-  // Bucket files keep the pose only; a viewpoint dropped here would silently turn the frame's normals around.
-  if (frame.viewpoint != Eigen::Vector3d::Zero())
-    throw std::invalid_argument(
-        "frame.viewpoint: tiled builds take points in the sensor frame (viewpoint at the origin)");
+  if (!frame.viewpoint.allFinite()) throw std::invalid_argument("frame viewpoint is not finite");
 
   FrameCounters c;
   c.input = frame.points.size();
@@ -110,6 +107,7 @@ FrameCounters TileBucketer::addFrame(const Frame &frame, std::uint32_t frame_ind
     BucketFrame f;
     f.frame_index = frame_index;
     f.sensor_to_fixed = frame.sensor_to_fixed;
+    f.viewpoint = frame.viewpoint;
     f.points = PointBuffer(layout, idx.size());
     for (std::size_t t = 0; t < idx.size(); ++t) std::memcpy(f.points.record(t), frame.points.record(idx[t]), step);
     bytes_ += f.points.bytes().size();
@@ -166,6 +164,7 @@ void writeTileBucket(const std::string &path, const PointLayout &layout, const s
       put(fh, f.frame_index);
       for (int r = 0; r < 3; ++r)
         for (int col = 0; col < 4; ++col) put(fh, f.sensor_to_fixed.matrix()(r, col));
+      for (int a = 0; a < 3; ++a) put(fh, f.viewpoint[a]);
       put(fh, static_cast<std::uint64_t>(f.points.size()));
       crc = crc32(fh.data(), fh.size(), crc);
       out.write(fh.data(), fh.size());
@@ -192,8 +191,8 @@ std::vector<BucketFrame> readTileBucket(const std::string &path) {
 
   Reader r(bytes, bytes.size() - 4, path);
   r.take(sizeof kMagic);
-  if (const auto version = r.get<std::uint32_t>(); version != kVersion)
-    fail(path, "unsupported bucket file version " + std::to_string(version));
+  const auto version = r.get<std::uint32_t>();
+  if (version != kVersion && version != 1) fail(path, "unsupported bucket file version " + std::to_string(version));
   PointLayout layout;
   layout.point_step = r.get<std::uint32_t>();
   const auto fields = r.get<std::uint32_t>();
@@ -226,6 +225,8 @@ std::vector<BucketFrame> readTileBucket(const std::string &path) {
     for (int row = 0; row < 3; ++row)
       for (int col = 0; col < 4; ++col) m(row, col) = r.get<double>();
     f.sensor_to_fixed.matrix() = m;
+    if (version >= 2)
+      for (int a = 0; a < 3; ++a) f.viewpoint[a] = r.get<double>();
     const auto n = r.get<std::uint64_t>();
     if (n > r.left() / layout.point_step) fail(path, "truncated or corrupt bucket file");
     f.points = PointBuffer(layout, static_cast<std::size_t>(n));

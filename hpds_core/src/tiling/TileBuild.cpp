@@ -111,6 +111,7 @@ TileBuildStats buildTile(const HpdsConfig &given, const TileGrid &grid, const Ti
         frame.points = std::move(f.points);
         frame.stamp = static_cast<double>(f.frame_index);
         frame.sensor_to_fixed = f.sensor_to_fixed;
+        frame.viewpoint = f.viewpoint;
         pipeline.setNextFrameIndex(f.frame_index);
         FrameResult r;
         try {

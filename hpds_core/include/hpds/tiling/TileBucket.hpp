@@ -6,14 +6,14 @@
 //   filed under grid.tileOf of that position: the tile's pipeline re-poses the same record with the same pose and
 //   gets the same bits, so it inserts exactly the points of its own tile. Skipped points and points with no tile
 //   (beyond the exact key range, counted as out_of_range) are counted, never filed.
-// - A bucket keeps, per frame with points in the tile, the frame index, its pose and the kept points' input records
-//   (sensor frame, bytes as read) in input order.
+// - A bucket keeps, per frame with points in the tile, the frame index, its pose, its viewpoint (in the frame's own
+//   coordinates, as Frame::viewpoint) and the kept points' input records (bytes as read) in input order.
 // - TileBucketer holds what its frames file (a bucketing task's frames); frames are added in increasing frame
-//   index and must share one point layout, as map mode requires (std::invalid_argument otherwise). A frame with a
-//   viewpoint other than the origin is refused the same way: bucket files keep the pose only.
-// - Bucket file (version 1, little-endian): magic "HPDSBKT\0", u32 version, the layout (u32 point_step, u32 field
+//   index and must share one point layout, as map mode requires (std::invalid_argument otherwise).
+// - Bucket file (version 2, little-endian): magic "HPDSBKT\0", u32 version, the layout (u32 point_step, u32 field
 //   count, per field u32 name length, name, u32 offset, u8 datatype, u32 count), u32 frame count, per frame u32 frame
-//   index, f64[12] pose (row-major 3x4), u64 point count, the records; then the CRC-32 of all bytes before it.
+//   index, f64[12] pose (row-major 3x4), f64[3] viewpoint, u64 point count, the records; then the CRC-32 of all bytes
+//   before it. Version 1 (no viewpoint: the origin) is read too.
 //   writeTileBucket writes atomically (AtomicFile.hpp). readTileBucket checks size,
 //   structure and checksum before returning anything: std::runtime_error "<path>: <problem>" otherwise.
 // - Not thread-safe for mutation; the file functions are reentrant.
@@ -37,7 +37,8 @@ namespace hpds {
 struct BucketFrame {
   std::uint32_t frame_index = 0;
   Eigen::Isometry3d sensor_to_fixed = Eigen::Isometry3d::Identity();
-  PointBuffer points;  ///< input records (sensor frame), input order
+  Eigen::Vector3d viewpoint = Eigen::Vector3d::Zero();  ///< the sensor's position in the records' frame (Frame::viewpoint)
+  PointBuffer points;  ///< input records, input order
 };
 
 class TileBucketer {
