@@ -7,7 +7,9 @@
 #include <filesystem>
 #include <limits>
 #include <random>
+#include <sstream>
 #include <string>
+#include <tuple>
 #include <vector>
 
 #include "IoTestSupport.hpp"
@@ -140,6 +142,67 @@ TEST(Poses, KittiPrecisionIsAcceptedAndMadeExactlyOrthonormal) {
   }
   EXPECT_DOUBLE_EQ(poses[1].translation().z(), 8.586941e-01);
   EXPECT_NEAR(poses[1].linear()(0, 1), 5.272628e-04, 1e-6);
+}
+
+// The nearest-rotation projection moves points: by as much as printing rounds (no word), or, for a scaled or cut-short
+// rotation, by more (a warning naming the line and how far a point 100 m out moves). The reported correction is the
+// largest distance a unit vector moves, checked against a brute force over many directions.
+TEST(Poses, RotationCorrectionsAreMeasuredAndWarnedAboutBeyondRounding) {
+  const ScratchDir scratch("io_poses_correction");
+  const std::string path = (scratch.path / "poses.txt").string();
+  const auto line = [](const Eigen::Matrix3d &r) {
+    std::ostringstream o;
+    o.precision(17);
+    for (int row = 0; row < 3; ++row) o << r(row, 0) << " " << r(row, 1) << " " << r(row, 2) << " " << row << " ";
+    return o.str() + "\n";
+  };
+  const Eigen::Matrix3d exact = Eigen::AngleAxisd(0.7, Eigen::Vector3d(1, 2, 3).normalized()).toRotationMatrix();
+  Eigen::Matrix3d printed = exact;  // 6 significant digits
+  for (int i = 0; i < 9; ++i) printed(i / 3, i % 3) = std::round(exact(i / 3, i % 3) * 1e6) / 1e6;
+  Eigen::Matrix3d scaled = exact;
+  scaled.row(1) *= 1.0003;  // off by 3e-4: within the 1e-3 the reader accepts
+  for (const auto &[text, warned, expected_line] :
+       {std::tuple<std::string, bool, std::size_t>{line(exact) + line(printed), false, 2},
+        {line(exact) + line(printed) + "# scaled\n" + line(scaled) + line(printed), true, 4}}) {
+    writeBytes(path, text);
+    PoseCorrection c;
+    const std::vector<Eigen::Isometry3d> poses = readKittiPoses(path, c);
+    // Brute force: the largest distance any of many unit vectors moves between the file's matrix and the pose.
+    std::vector<Eigen::Matrix3d> written;
+    std::istringstream in(text);
+    for (std::string l; std::getline(in, l);) {
+      if (l.empty() || l[0] == '#') continue;
+      std::istringstream v(l);
+      Eigen::Matrix3d m;
+      double t;
+      for (int row = 0; row < 3; ++row) v >> m(row, 0) >> m(row, 1) >> m(row, 2) >> t;
+      written.push_back(m);
+    }
+    ASSERT_EQ(written.size(), poses.size());
+    double largest = 0.0;
+    std::mt19937 rng(3);
+    std::normal_distribution<double> g;
+    for (std::size_t k = 0; k < poses.size(); ++k)
+      for (int trial = 0; trial < 20000; ++trial) {
+        const Eigen::Vector3d u = Eigen::Vector3d(g(rng), g(rng), g(rng)).normalized();
+        largest = std::max(largest, ((written[k] - poses[k].linear()) * u).norm());
+      }
+    EXPECT_LE(largest, c.largest * (1.0 + 1e-9));
+    EXPECT_GT(largest, c.largest * 0.99);
+    EXPECT_EQ(c.line, expected_line);
+    const std::string w = poseCorrectionWarning(path, c);
+    EXPECT_EQ(!w.empty(), warned) << w;
+    if (warned) {
+      EXPECT_NE(w.find("line 4"), std::string::npos) << w;
+      EXPECT_NE(w.find("by up to 0.03 m"), std::string::npos) << w;
+    }
+  }
+  // A rotation exact to double precision is kept bit for bit and corrects nothing.
+  writeBytes(path, "1 0 0 0 0 1 0 0 0 0 1 0\n");
+  PoseCorrection none;
+  (void)readKittiPoses(path, none);
+  EXPECT_EQ(none.largest, 0.0);
+  EXPECT_EQ(none.line, 0u);
 }
 
 // A TUM trajectory (time x y z qx qy qz qw, '#' comment lines, as evo and SLAM tools write them) gives the poses of the

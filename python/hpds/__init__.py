@@ -175,7 +175,13 @@ def read_poses(path):
     """A pose file (KITTI: one 3x4 sensor-to-world matrix per line; or TUM: time x y z qx qy qz qw) as an
     (N, 4, 4) float64 array.
 
+    A KITTI rotation that is not orthonormal to double precision is replaced by the nearest true rotation; beyond
+    what printing rounds (it would move a point 100 m out by more than 1 mm) a RuntimeWarning says so.
+
     Raises FileNotFoundError / IsADirectoryError for a path that is no file, RuntimeError for a malformed one."""
     path = os.fspath(path)
     _refuse_unreadable(path, "pose file")
-    return _hpds.read_poses(path)
+    poses, corrected = _hpds.read_poses(path)
+    if corrected:
+        warnings.warn("hpds.read_poses: " + corrected, RuntimeWarning, stacklevel=2)
+    return poses

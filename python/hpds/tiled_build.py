@@ -253,7 +253,9 @@ def build(inputs, poses_path, outdir, tile_size, config_yaml, runner, chunk_fram
         raise BuildError(str(e)) from None
     for note in notes.splitlines():
         log(note[len("hpds: "):] if note.startswith("hpds: ") else note)
-    poses = _hpds.read_poses(os.fspath(poses_path))
+    poses, corrected = _hpds.read_poses(os.fspath(poses_path))
+    if corrected:
+        log("warning: " + corrected)
     try:
         order = _hpds.check_poses_match_inputs(os.fspath(poses_path), len(poses), inputs)  # as the user gave them
     except ValueError as e:

@@ -125,15 +125,18 @@ void bindIo(py::module_ &m) {
   m.def(
       "read_poses",
       [](const std::string &path) {
-        const std::vector<Eigen::Isometry3d> poses = readKittiPoses(path);
+        PoseCorrection correction;
+        const std::vector<Eigen::Isometry3d> poses = readKittiPoses(path, correction);
         py::array_t<double> out({static_cast<py::ssize_t>(poses.size()), py::ssize_t(4), py::ssize_t(4)});
         double *o = out.mutable_data();
         for (std::size_t k = 0; k < poses.size(); ++k)
           for (int r = 0; r < 4; ++r)
             for (int c = 0; c < 4; ++c) o[16 * k + 4 * r + c] = poses[k].matrix()(r, c);
-        return out;
+        return py::make_tuple(out, poseCorrectionWarning(path, correction));
       },
-      py::arg("path"), "Poses of a KITTI pose file as an (N, 4, 4) float64 array of sensor-to-world matrices.");
+      py::arg("path"),
+      "Poses of a KITTI or TUM pose file as an (N, 4, 4) float64 array of sensor-to-world matrices, and the warning "
+      "for rotations the reading had to correct by more than printing rounds, or ''.");
   // The input list rules of `hpds sample`, for the tiled map build: one implementation, the same order and texts.
   m.def(
       "expand_inputs",

@@ -504,6 +504,20 @@ class Poses(support.ScratchCase):
             hpds.read_poses(self.path("mixed.txt"))
         self.assertIn("one format per file", str(e.exception))
 
+    def test_a_rotation_corrected_beyond_rounding_is_warned_about(self):
+        # A row scaled by 1.0003: accepted (within 1e-3), made a true rotation, which moves a point 100 m out by 3 cm.
+        for text, warned in (("1 0 0 0 0 1 0 0 0 0 1 0\n", False), ("1 0 0 0 0 1.0003 0 0 0 0 1 0\n", True)):
+            with open(self.path("scaled.txt"), "w") as f:
+                f.write(text)
+            with warnings.catch_warnings(record=True) as caught:
+                warnings.simplefilter("always")
+                poses = hpds.read_poses(self.path("scaled.txt"))
+            np.testing.assert_allclose(poses[0, :3, :3], np.eye(3), atol=1e-15)
+            self.assertEqual(len(caught), int(warned), [str(w.message) for w in caught])
+            if warned:
+                self.assertIn("line 1", str(caught[0].message))
+                self.assertIn("by up to 0.03 m", str(caught[0].message))
+
 
 class Viewpoint(support.ScratchCase):
     """A PCD's VIEWPOINT is where its sensor was: normals face it in hpds sample, and in Python when passed on."""

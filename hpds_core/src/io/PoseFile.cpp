@@ -2,6 +2,7 @@
 
 #include "io/FileAccess.hpp"
 
+#include <Eigen/Eigenvalues>
 #include <Eigen/SVD>
 #include <array>
 #include <cerrno>
@@ -62,6 +63,23 @@ std::string rigidPoseProblem(const Eigen::Isometry3d &pose) {
 }
 
 std::vector<Eigen::Isometry3d> readKittiPoses(const std::string &path) {
+  PoseCorrection ignored;
+  return readKittiPoses(path, ignored);
+}
+
+std::string poseCorrectionWarning(const std::string &path, const PoseCorrection &correction) {
+  if (!(correction.largest > kPoseCorrectionWarning)) return {};
+  char buf[480];
+  std::snprintf(buf, sizeof buf,
+                "--poses: '%s' line %zu: the rotation part is off a true rotation by %.2g (scaled or printed with too "
+                "few digits); it was replaced by the nearest rotation, which moves a point 100 m from the sensor by "
+                "up to %.3g m against the matrix as written. Write the poses with more digits",
+                path.c_str(), correction.line, correction.largest, 100.0 * correction.largest);
+  return buf;
+}
+
+std::vector<Eigen::Isometry3d> readKittiPoses(const std::string &path, PoseCorrection &correction) {
+  correction = PoseCorrection{};
   requireRegularFile(path);
   std::ifstream in(path, std::ios::binary);
   if (!in) fail(path, std::string("cannot open: ") + std::strerror(errno));
@@ -123,6 +141,11 @@ std::vector<Eigen::Isometry3d> readKittiPoses(const std::string &path) {
       if (const std::string why = rotationProblem(r, &err); !why.empty()) failLine(path, line_no, why);
       if (err > kExactTolerance) {
         // Nearest rotation in the Frobenius sense; det stays +1 because R was already within 1e-3 of a rotation.
+        // R - UV^T = U (S - I) V^T: a point at distance d moves by at most d max|s - 1|, the singular values s being
+        // the square roots of R^T R's eigenvalues.
+        const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> gram(r.transpose() * r, Eigen::EigenvaluesOnly);
+        const double moved = (gram.eigenvalues().array().max(0.0).sqrt() - 1.0).abs().maxCoeff();
+        if (moved > correction.largest) correction = PoseCorrection{moved, line_no};
         const Eigen::JacobiSVD<Eigen::Matrix3d> svd(r, Eigen::ComputeFullU | Eigen::ComputeFullV);
         r = svd.matrixU() * svd.matrixV().transpose();
       }

@@ -9,7 +9,8 @@
 // - Each KITTI rotation must be orthonormal with determinant +1 within 1e-3 (KITTI prints ~7 significant digits, so
 //   real files deviate by ~1e-6). A rotation that is not orthonormal to double precision is then replaced by the nearest
 //   true rotation (SVD projection), so callers always get an exact isometry; one that already is orthonormal is kept
-//   bit for bit, so a write/read round trip is exact. Each TUM quaternion must have norm 1 within 1e-3 and is
+//   bit for bit, so a write/read round trip is exact. How far the projection moves points is reported
+//   (PoseCorrection) and warned about beyond what printing rounds (poseCorrectionWarning). Each TUM quaternion must have norm 1 within 1e-3 and is
 //   normalised.
 // - writeKittiPoses writes each number in the shortest decimal form that parses back to the identical double
 //   (std::to_chars, independent of the global locale), so a write/read round trip is exact.
@@ -28,6 +29,24 @@
 namespace hpds {
 
 [[nodiscard]] std::vector<Eigen::Isometry3d> readKittiPoses(const std::string &path);
+
+/// What reading a pose file changed: the largest correction of a KITTI rotation replaced by the nearest true rotation,
+/// as the distance it moves a point 1 m from the sensor (the largest |sigma - 1| of the rotation part's singular
+/// values: exact, the spectral norm of the change), and the 1-based line of that pose (0: nothing corrected).
+struct PoseCorrection {
+  double largest = 0.0;
+  std::size_t line = 0;
+};
+/// readKittiPoses, reporting its rotation corrections in `correction`.
+[[nodiscard]] std::vector<Eigen::Isometry3d> readKittiPoses(const std::string &path, PoseCorrection &correction);
+
+/// [m per m] Corrections up to this are the rounding of a printed pose (KITTI prints ~7 significant digits: ~1e-7;
+/// 6 digits: ~1e-6); above it the file's rotations were scaled or cut short, and the correction moves far points by
+/// more than a lidar's noise at 100 m.
+inline constexpr double kPoseCorrectionWarning = 1e-5;
+/// The warning for a file whose largest correction passes kPoseCorrectionWarning (it names the line and what the
+/// correction moves a point 100 m out by), else "".
+[[nodiscard]] std::string poseCorrectionWarning(const std::string &path, const PoseCorrection &correction);
 
 /// Empty when `pose` is rigid as the readers accept it (finite; rotation orthonormal with determinant +1 within
 /// 1e-3; bottom row exactly 0 0 0 1), else a sentence saying what is wrong. Pipeline::addFrame applies it to
