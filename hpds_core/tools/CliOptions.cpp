@@ -123,7 +123,8 @@ void addSamplingOptions(CLI::App &app, SamplingOptions &o) {
   app.add_option("--seed", o.seed, "seed of the random order (order.seed)")->check(unsigned64());
   app.add_option("--mode", o.mode, "scan | map (mode)")->check(CLI::IsMember({"scan", "map"}));
   app.add_option("--evict-distance", o.evict_distance,
-                 "[m] map mode: drop samples farther than this from the latest sensor, 0 = never (map.evict_distance)")
+                 "[m] map mode: before each frame, drop samples farther than this from its sensor, 0 = never "
+                 "(map.evict_distance)")
       ->check(finiteIn(0.0, 1e9));
   app.add_option("--max-samples", o.max_samples,
                  "map mode: cap on stored samples, the farthest from the sensor go first, 0 = none (map.max_samples)")

@@ -31,7 +31,8 @@ std::string evictionWarning(const HpdsConfig &config, std::uint64_t evicted, std
   std::ostringstream w;
   w << "hpds: warning: " << evicted << " samples were evicted from the map (" << remaining
     << " remain): map.evict_distance (" << config.map.evict_distance
-    << " m, 0 = off) drops those farther from the latest sensor position and map.max_samples ("
+    << " m, 0 = off) drops, before each frame, those farther from its sensor position (the last frame's own "
+       "samples stay, as far as the sensor reached) and map.max_samples ("
     << config.map.max_samples << ", 0 = no cap) caps the count, so the map written is what was left around the last "
     << "frame; give --evict-distance 0 --max-samples 0 to keep every sample";
   if (sensor_at_origin)

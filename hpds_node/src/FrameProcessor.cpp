@@ -193,7 +193,9 @@ std::string noTransformAdvice(const std::string &why, double tf_timeout) {
     return s.str();
   }
   s << "; the transform at the cloud's stamp had not arrived when ros/tf_timeout (" << tf_timeout
-    << " s) ran out: if the odometry lags the clouds, raise ros/tf_timeout above that lag";
+    << " s) ran out: if the odometry lags the clouds, raise ros/tf_timeout above that lag, and ros/queue_size to at "
+       "least that lag over the sensor period (a worker waits for one frame's transform at a time, and the frames "
+       "that arrive meanwhile must queue)";
   return s.str();
 }
 

@@ -45,7 +45,8 @@ KeepUpCheck::KeepUpCheck(const hpds::HpdsConfig &config, std::size_t workers, st
       // A back-to-back delivery makes the queue overflow by its (workers + queue_size + 1)-th frame at the latest,
       // one gap short of this: its drop is never taken for a new rate.
       rate_change_gaps_(std::max<std::size_t>(1, workers) + std::max<std::size_t>(1, queue_size) + 1),
-      tf_timeout_(tf_timeout) {}
+      tf_timeout_(tf_timeout),
+      queue_size_(std::max<std::size_t>(1, queue_size)) {}
 
 void KeepUpCheck::arrived(double wall_seconds) {
   // A burst (several messages at one instant) gives no period: only positive gaps count.
@@ -142,8 +143,17 @@ std::string KeepUpCheck::warning(bool on_drop) const {
     const double wait = median(waits_);
     text += ". Frames also wait " + format("%.0f ms", 1e3 * wait) +
             " each for their transforms (up to ros/tf_timeout, now " + format("%.3g s", tf_timeout_) +
-            "): check that tf has the sensor's frame in the fixed frame at the frames' stamps (frames without one "
-            "are counted as no_transform), or lower ros/tf_timeout; no sampling setting shortens that wait";
+            "). If tf never has the sensor's frame in the fixed frame at the frames' stamps, check tf (frames without "
+            "one are counted as no_transform) or lower ros/tf_timeout. If the transforms come late (odometry lagging "
+            "the clouds), the frames that arrive while a worker waits need room in the queue: ";
+    // Each worker waits for one frame's transform at a time; the frames of that wait must queue behind it.
+    if (!gaps_.empty())
+      text += "a ros/queue_size of at least " +
+              std::to_string(static_cast<std::size_t>(std::ceil(wait / median(gaps_))) + 1) + " (now " +
+              std::to_string(queue_size_) + ")";
+    else
+      text += "a ros/queue_size above that wait over the input period (now " + std::to_string(queue_size_) + ")";
+    text += " keeps them instead of dropping them; no sampling setting shortens that wait";
   }
   const hpds::OutputResolution out = hpds::resolveOutput(config_);
   text += ". Dropped frames are counted in /diagnostics. To keep up, lower the cost of a frame: a larger output.spacing (now " +

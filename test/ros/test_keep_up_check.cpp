@@ -50,6 +50,19 @@ TEST(KeepUpCheck, WaitingForTransformsIsNamedWhenItTakesThePeriod) {
   const std::string w = check.dropped();
   EXPECT_TRUE(contains(w, "wait 100 ms each for their transforms")) << w;
   EXPECT_TRUE(contains(w, "ros/tf_timeout, now 0.1 s")) << w;
+  // A transform that comes late needs room for the frames that arrive during the wait: 100 ms at 50 ms periods.
+  EXPECT_TRUE(contains(w, "a ros/queue_size of at least 3 (now 1)")) << w;
+
+  // 465 ms waits at 10 Hz, the queue of 1 (a lidar odometry half a second behind): 6 keeps every frame.
+  KeepUpCheck late(hpds::HpdsConfig{}, 1, 8, 0.7, 1);
+  for (int i = 0; i < 3; ++i) {
+    late.arrived(0.1 * i);
+    EXPECT_EQ(late.processed(0.02, 0.465), "") << i;
+  }
+  late.arrived(0.3);
+  const std::string said = late.dropped();
+  EXPECT_TRUE(contains(said, "wait 465 ms each")) << said;
+  EXPECT_TRUE(contains(said, "a ros/queue_size of at least 6 (now 1)")) << said;
 
   // A transform lagging 90 ms behind 10 Hz frames that take 14 ms: the worker keeps up, nothing is said.
   KeepUpCheck lagging(hpds::HpdsConfig{}, 1, 8, 0.1);

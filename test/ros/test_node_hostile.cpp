@@ -374,6 +374,43 @@ TEST_F(HostileTest, ZeroStampsAreProcessedAndWarnedAboutOnce) {
       << "frames with zero stamp " << diag.value("frames with zero stamp") << " after " << zero_before;
 }
 
+// Map mode forgets samples by design (map/evict_distance, 100 m by default): counted in /diagnostics and said once at
+// INFO, so that a map saved or shown later is not taken for the whole drive. Frames in the fixed frame have their
+// sensor at its origin: a frame 150 m out is evicted before the next one.
+TEST_F(HostileTest, EvictionsAreCountedAndSaidOnce) {
+  const std::string target = ros::NodeHandle("~").param<std::string>("slash_target", "/hpds_slash");
+  LogCollector logs(nh_, target);
+  hpds_test::DiagnosticsReader diag(nh_, target.substr(1));
+  ros::Publisher pub = nh_.advertise<PointCloud2>(target + "/input", 10);
+  Collector<PointCloud2> output(nh_, target + "/output");
+  ASSERT_TRUE(hpds_test::waitFor(
+      [&] { return pub.getNumSubscribers() > 0 && output.connected() && logs.connected() && diag.updates() > 0; },
+      30.0));
+  const double processed = diag.value("frames processed"), evicted = diag.value("samples evicted");
+  for (int i = 0; i < 3; ++i) {
+    auto m = validCloud(500, 990 + std::uint32_t(i), ros::Time(2000 + i, 0));
+    m->header.frame_id = "odom";
+    for (std::size_t k = 0; k < 500; ++k) {  // x += 150 m
+      float x;
+      std::memcpy(&x, m->data.data() + k * m->point_step, 4);
+      x += 150.0f;
+      std::memcpy(m->data.data() + k * m->point_step, &x, 4);
+    }
+    pub.publish(m);
+    ros::WallDuration(0.1).sleep();
+  }
+  ASSERT_TRUE(hpds_test::waitFor([&] { return diag.value("frames processed") == processed + 3; }, 30.0))
+      << "processed " << diag.value("frames processed") << " after " << processed;
+  EXPECT_TRUE(hpds_test::waitFor([&] { return diag.value("samples evicted") > evicted + 100; }, 10.0))
+      << "samples evicted " << diag.value("samples evicted") << " after " << evicted;
+  EXPECT_TRUE(hpds_test::waitFor(
+      [&] { return logs.has(rosgraph_msgs::Log::INFO, {"the map evicts samples from now on", "samples evicted"}); },
+      10.0))
+      << logs.dump();
+  ros::WallDuration(0.5).sleep();
+  EXPECT_EQ(logs.count(rosgraph_msgs::Log::INFO, {"the map evicts samples from now on"}), 1u) << logs.dump();
+}
+
 // Scan mode: a cloud without header.frame_id is processed (its outputs keep the empty frame), warned about once
 // and counted, so that a driver that never sets it shows in /diagnostics as well as in the log.
 TEST_F(HostileTest, EmptyFrameIdsAreProcessedCountedAndWarnedAboutOnce) {

@@ -227,6 +227,11 @@ TEST_F(NodePersistence, SaveAndLoadServicesOnARunningNode) {
   EXPECT_TRUE(hpds_test::waitFor([&] { return diag.value("samples stored") == 0.0; }, 30.0))
       << "samples stored: " << diag.value("samples stored");
   EXPECT_TRUE(readBytes(file) == last_save) << "a clear leaves the file alone";
+  // Nor may a save of the now empty map replace the file's: refused, with the reason, the file unchanged.
+  r = call(target_ + "/save_map");
+  EXPECT_FALSE(r.success);
+  EXPECT_TRUE(contains(r.message, "holds no sample") && contains(r.message, file.string())) << r.message;
+  EXPECT_TRUE(readBytes(file) == last_save) << "an empty save replaced the map file";
   FrameProcessor cleared(config_);
   cleared.setNextFrameIndex(5);
   {

@@ -138,7 +138,7 @@ class HpdsServer {
   std::set<std::string> fields_not_carried_;  // already warned about
   // Said once per instance (not ROS_*_ONCE, whose flag is shared by every nodelet of the process).
   std::atomic<bool> warned_sensor_at_origin_{false}, warned_rounding_{false}, warned_empty_frame_id_{false},
-      warned_zero_stamp_{false};
+      warned_zero_stamp_{false}, told_evicting_{false};
   // Frames processed in spite of a header the driver must fix, warned about once and counted in /diagnostics.
   std::atomic<std::uint64_t> zero_stamps_{0}, empty_frame_ids_{0};
   std::mutex log_mutex_;

@@ -66,6 +66,7 @@ class KeepUpCheck {
   std::size_t judge_after_;
   std::size_t rate_change_gaps_;
   double tf_timeout_;
+  std::size_t queue_size_;
   bool judged_ = false, warned_ = false, first_skipped_ = false, first_done_ = false, drop_pending_ = false,
        dropped_after_start_ = false;
   std::size_t costs_seen_ = 0;

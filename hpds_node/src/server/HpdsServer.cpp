@@ -169,6 +169,14 @@ bool HpdsServer::shutdown() {
                      "' is left as it is");
       return shutdown_ok_;
     }
+    if (processors_.front()->pipeline().hierarchy().sampleCount() == 0) {
+      std::error_code ec;
+      if (std::filesystem::is_regular_file(config_.ros.map_file, ec) &&
+          std::filesystem::file_size(config_.ros.map_file, ec) > 0 && !ec) {
+        say(false, tag_ + ": shutdown: the map holds no sample: '" + config_.ros.map_file + "' is left as it is");
+        return shutdown_ok_;
+      }
+    }
     const auto [ok, message] = runMapCommand(true);
     shutdown_ok_ = ok;
     say(!ok, ok ? tag_ + ": shutdown: " + message : tag_ + ": shutdown: the map was not saved: " + message);
@@ -218,6 +226,13 @@ std::pair<bool, std::string> HpdsServer::runMapCommand(bool save) {
   std::ostringstream msg;
   try {
     if (save) {
+      // An empty map over a file that holds one (a save called before any frame or load, or after ~clear_map) would
+      // destroy it: the file stays, and the caller hears why.
+      std::error_code ec;
+      if (pipeline.hierarchy().sampleCount() == 0 && std::filesystem::is_regular_file(path, ec) &&
+          std::filesystem::file_size(path, ec) > 0 && !ec)
+        return {false, "the running map holds no sample: '" + path + "' is left as it is (an empty save would replace "
+                       "the map it holds; ~load_map takes it up, or remove the file to save an empty map)"};
       processor.saveMap(path);
       msg << "saved " << pipeline.hierarchy().sampleCount() << " samples (next frame index "
           << pipeline.framesProcessed() << ") to '" << path << "'";
@@ -492,6 +507,17 @@ void HpdsServer::handle(const sensor_msgs::PointCloud2::ConstPtr &msg, std::size
           ROS_ERROR_STREAM_NAMED("hpds", tag_ << ": dropped frame (" << toString(frame.drop) << ", " << count(frame.drop)
                                                                  << " so far): " << frame.why);
       } else {
+        // Map mode forgets samples by design (a local map); said once, so that a map saved or shown later is not
+        // taken for the whole drive. Counted in /diagnostics as 'samples evicted'.
+        if (frame.counters.evicted > 0 && !told_evicting_.exchange(true))
+          ROS_INFO_STREAM_NAMED("hpds", tag_ << ": the map evicts samples from now on ("
+                                            << frame.counters.evicted << " at this frame; counted in /diagnostics as "
+                                               "'samples evicted'): map/evict_distance ("
+                                            << config_.hpds.map.evict_distance
+                                            << " m, 0 = off) forgets those farther from the sensor before each frame, "
+                                               "map/max_samples ("
+                                            << config_.hpds.map.max_samples
+                                            << ", 0 = no cap) caps the count; set both to 0 to keep every sample");
         if (msg->header.stamp.isZero()) ++zero_stamps_;
         if (msg->header.frame_id.empty() && target_frame_.empty()) ++empty_frame_ids_;
         if (frame.counters.out_of_range > 0 && logAllowed("out_of_range"))

@@ -91,6 +91,7 @@ void HpdsServer::diagnose(diagnostic_updater::DiagnosticStatusWrapper &status) {
   status.add("points dropped past the deepest level", t.points.dropped_depth);
   status.add("deepest level built", s.samples_per_level.empty() ? 0 : s.samples_per_level.size() - 1);
   status.add("samples stored", s.samples_total);
+  status.add("samples evicted", t.points.evicted);
   for (std::size_t d = 0; d < s.samples_per_level.size(); ++d)
     status.add("samples level " + std::to_string(d), s.samples_per_level[d]);
   status.add("memory in use [bytes]", memory_bytes);
