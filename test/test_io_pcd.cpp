@@ -210,6 +210,9 @@ TEST(BadInput, PcdHeaderProblems) {
   EXPECT_EQ(readPointCloud((dir / "binary_newline.pcd").string()).size(), 2u);
   writeBytes(dir / "binary_11_bytes.pcd", xyzPcdHeader(2, "binary") + xyzBody(2) + std::string(11, 'x'));
   EXPECT_EQ(readPointCloud((dir / "binary_11_bytes.pcd").string()).size(), 2u);
+  // A WIDTH of 0 is named as such (the message used to say that no WIDTH was given).
+  check("width_0.pcd", pcdHeader("x y z", "4 4 4", "F F F", "1 1 1", "0", "1", "2", "binary") + xyzBody(2),
+        {"WIDTH 0 x HEIGHT 1 != POINTS 2"});
   check("huge_points.pcd",
         pcdHeader("x y z", "4 4 4", "F F F", "1 1 1", "4000000000", "1", "4000000000", "binary") + xyzBody(10),
         {"truncated", "4000000000 points"});

@@ -123,6 +123,12 @@ TEST(OutputResolution, AnExplicitLevelUsesTheCellOrFourMetres) {
   EXPECT_EQ(r.cell_size, kDefaultCellSize);
   EXPECT_EQ(r.spacing_asked, 0.0);
   EXPECT_TRUE(contains(r.reason, "output.level 4")) << r.reason;
+  // A spacing beside the level is named as not used, not as missing.
+  c.output.spacing = 0.2;
+  EXPECT_TRUE(contains(resolveOutput(c).reason, "output.spacing 0.2 m is not used, as output.level is set"))
+      << resolveOutput(c).reason;
+  c.output.spacing = 0.0;
+  EXPECT_TRUE(contains(resolveOutput(c).reason, "no output.spacing to derive it from")) << resolveOutput(c).reason;
   c.hierarchy.cell_size = 2.0;
   r = resolveOutput(c);
   EXPECT_EQ(r.cell_size, 2.0);

@@ -280,6 +280,28 @@ TEST_F(OutputSafety, AtomicFileReplacesOnlyOnCommit) {
   EXPECT_TRUE(temporariesIn(dir_).empty());
 }
 
+// Any name the file system takes is an output name, up to 255 bytes: the temporary keeps only as much of it as fits
+// beside its marker, and a writer killed in the middle leaves one that the next run still recognises and removes.
+TEST_F(OutputSafety, NamesUpToTheFileSystemsLimitAreWritten) {
+  for (const std::size_t length : {std::size_t(200), std::size_t(241), std::size_t(255)}) {
+    SCOPED_TRACE(length);
+    const fs::path target = dir_ / (std::string(length - 4, 'n') + ".ply");
+    {
+      AtomicFile f(target.string());
+      EXPECT_LE(fs::path(f.writingPath()).filename().string().size(), 255u);
+      f.write("content");
+      f.commit();
+    }
+    EXPECT_EQ(test::readText(target), "content");
+    EXPECT_TRUE(temporariesIn(dir_).empty());
+  }
+  // A temporary of a long name whose writer is gone (pid 2^22 + 1 is above Linux's pid_max default) is removed.
+  const std::string stale = std::string(230, 'n') + ".hpds-tmp.4194305.0";
+  writeText(dir_ / stale, "left by a killed writer");
+  EXPECT_EQ(removeStaleTemporaries(dir_.string()), 1u);
+  EXPECT_FALSE(fs::exists(dir_ / stale));
+}
+
 TEST_F(OutputSafety, AtomicFileFollowsLinksWritesDevicesInPlaceAndRefusesDirectories) {
   fs::create_directory(dir_ / "real");
   writeText(dir_ / "real" / "data.txt", "old");

@@ -199,7 +199,9 @@ PcdHeader parsePcdHeader(const std::string &path, const FileBytes &file) {
     h.height = 1;
     if (h.width == 0) h.width = h.points;
   } else if (h.width == 0 && h.points != 0) {
-    fail(path, "bad PCD header: HEIGHT given but no WIDTH");
+    fail(path, width_read ? "bad PCD header: WIDTH 0 x HEIGHT " + std::to_string(h.height) + " != POINTS " +
+                                std::to_string(h.points)
+                          : std::string("bad PCD header: HEIGHT given but no WIDTH"));
   }
   constexpr std::uint64_t kU32 = std::numeric_limits<std::uint32_t>::max();
   if (h.width > kU32 || h.height > kU32 || h.points > kU32)

@@ -223,10 +223,12 @@ OutputResolution resolveOutput(const HpdsConfig &c) {
   if (by_spacing) r.spacing_asked = c.output.spacing;
   const std::string result = "output level " + std::to_string(r.level) + ", r_" + std::to_string(r.level) + " = " +
                              metres(r.radius) + ", level-0 cell " + metres(r.cell_size);
-  const std::string cell = derived
-                               ? "hierarchy.cell_size 0 (no output.spacing to derive it from: " +
-                                     metres(kDefaultCellSize) + ")"
-                                   : "hierarchy.cell_size " + metres(c.hierarchy.cell_size);
+  const std::string cell =
+      !derived ? "hierarchy.cell_size " + metres(c.hierarchy.cell_size)
+      : c.output.spacing > 0.0
+          ? "hierarchy.cell_size 0 (" + spacing + " is not used, as output.level is set: the default " +
+                metres(kDefaultCellSize) + ")"
+          : "hierarchy.cell_size 0 (no output.spacing to derive it from: " + metres(kDefaultCellSize) + ")";
   if (by_spacing && derived) {
     r.reason = result + ": the spacing asked (" + spacing + "), with the cell derived from it (hierarchy.cell_size 0)";
   } else if (clamped) {

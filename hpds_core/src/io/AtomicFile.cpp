@@ -27,6 +27,7 @@ constexpr const char *kMarker = ".hpds-tmp.";
 constexpr const char *kLegacyMarker = ".tmp.";
 constexpr char kLegacyMapMagic[8] = {'H', 'P', 'D', 'S', 'M', 'A', 'P', '\0'};
 constexpr std::size_t kBufferBytes = std::size_t(1) << 20;
+constexpr std::size_t kNameMax = 255;  // bytes of one path component on Linux's file systems (NAME_MAX)
 
 std::string errnoText(int err) { return std::strerror(err); }
 
@@ -148,7 +149,13 @@ AtomicFile::AtomicFile(const std::string &target) : target_(target), final_(foll
   removeStaleTemporariesOnce(folderOf(final_));
   static std::atomic<unsigned> counter{0};
   for (int attempt = 0;; ++attempt) {
-    writing_ = final_ + kMarker + std::to_string(::getpid()) + "." + std::to_string(counter++);
+    const std::string suffix = kMarker + std::to_string(::getpid()) + "." + std::to_string(counter++);
+    // A name of up to NAME_MAX bytes is a valid output: its temporary keeps only as much of it as fits (what marks a
+    // temporary, for removeStaleTemporaries, is the suffix).
+    const fs::path at(final_);
+    std::string name = at.filename().string();
+    if (name.size() + suffix.size() > kNameMax) name.resize(kNameMax > suffix.size() ? kNameMax - suffix.size() : 0);
+    writing_ = (at.parent_path() / (name + suffix)).string();
     fd_ = ::open(writing_.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0666);
     if (fd_ >= 0) break;
     if (errno != EEXIST || attempt == 100) fail("cannot create a temporary file beside it: " + errnoText(errno));
