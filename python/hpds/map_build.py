@@ -132,8 +132,16 @@ def _dask_runner(a):
         client = Client(a.scheduler)
         return DaskRunner(client), [client]
     workers = a.workers if a.workers is not None else (os.cpu_count() or 1)
-    cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
-                           silence_logs=logging.ERROR)
+    # Ctrl-C goes to the whole process group: each worker process printed two screens of KeyboardInterrupt tracebacks
+    # after the build's own message. The workers start with SIGINT ignored (inherited through exec, and Python and
+    # asyncio leave an ignored SIGINT alone); this process stops them when it is interrupted.
+    previous = {s: signal.signal(s, signal.SIG_IGN) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
+                               silence_logs=logging.ERROR)
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, handler)
     client = Client(cluster)
     return DaskRunner(client), [client, cluster]
 

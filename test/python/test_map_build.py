@@ -15,6 +15,8 @@ import math
 import os
 import shutil
 import signal
+import subprocess
+import sys
 import tempfile
 import threading
 import time
@@ -637,6 +639,31 @@ class MapBuild(unittest.TestCase):
                 self.assertFalse(os.path.exists(os.path.join(out, ".hpds_work")))
                 self.assertFalse(os.path.exists(os.path.join(out, "manifest.json")))
         self.assertEqual(signal.getsignal(signal.SIGTERM), signal.SIG_DFL)
+
+    def test_ctrl_c_and_sigterm_to_the_process_group_stop_dask_workers_quietly(self):
+        # A terminal's Ctrl-C, `timeout` and systemd signal the whole process group: the Dask worker processes printed
+        # two screens of tracebacks after the build's own message. They now leave the stopping to this process.
+        drive = self.out("group_drive")
+        support.run([support.CLI, "synth", "-o", drive, "--frames", "80"])
+        for sig, code in ((signal.SIGINT, 130), (signal.SIGTERM, 128 + signal.SIGTERM)):
+            with self.subTest(signal=sig.name):
+                out = self.out("group_" + sig.name)
+                p = subprocess.Popen([sys.executable, "-m", "hpds.map_build", drive, "--poses",
+                                      os.path.join(drive, "poses.txt"), "-o", out, "--tile-size", "32",
+                                      "--workers", "2"], stderr=subprocess.PIPE, text=True, start_new_session=True)
+                lines = []
+                for line in p.stderr:
+                    lines.append(line)
+                    if line.startswith("hpds.map_build: bucketing"):
+                        os.killpg(p.pid, sig)
+                        break
+                _, rest = p.communicate(timeout=120)
+                err = "".join(lines) + rest
+                self.assertEqual(p.returncode, code, err)
+                self.assertIn("no manifest was written", err)
+                self.assertNotIn("Traceback", err)
+                self.assertNotIn("ERROR", err)
+                self.assertFalse(os.path.exists(os.path.join(out, "manifest.json")))
 
     def test_tiles_of_an_incomplete_build_are_named_as_such(self):
         out = self.out("incomplete")
