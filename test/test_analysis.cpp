@@ -294,6 +294,23 @@ TEST(PlanarPatch, MostPointsOnThePlaneWinNotMostPoints) {
   EXPECT_EQ(patch.inliers, 1000u);
 }
 
+// A long drive's map: its most populated squares are walls (every ring hits them), more than the 64 tried first.
+// The ground further down the list is still found; and where one of the first 64 qualifies, the rest are not read.
+TEST(PlanarPatch, GroundBeyondTheSixtyFourMostPopulatedSquaresIsFound) {
+  std::mt19937_64 rng(9);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  std::vector<Eigen::Vector3d> pts;
+  for (int w = 0; w < 80; ++w)  // 80 walls, 8 m apart along x, 4 m high: 2 000 points each
+    for (int i = 0; i < 2000; ++i) pts.emplace_back(8.0 * w + 0.01 * u(rng), 200.0 + 4 * u(rng), 4 * u(rng));
+  for (int i = 0; i < 1200; ++i) pts.emplace_back(-40 + 4 * u(rng), 4 * u(rng), 0.3 + 0.002 * (u(rng) - 0.5));
+  const PlanarPatch patch = findPlanarPatch(pts, 4.0, 0.05);
+  ASSERT_TRUE(patch.found);
+  EXPECT_NEAR(patch.center.x(), -38.0, 1e-9);
+  EXPECT_NEAR(patch.center.y(), 2.0, 1e-9);
+  EXPECT_NEAR(patch.plane.centroid.z(), 0.3, 0.01);
+  EXPECT_EQ(patch.inliers, 1200u);
+}
+
 // ------------------------------------------------------------------------------------------------ baselines
 
 TEST(GridSubsampling, OnePointPerOccupiedCell) {

@@ -5,6 +5,7 @@
 #include <Eigen/Eigenvalues>
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <limits>
 #include <map>
 #include <stdexcept>
@@ -268,20 +269,21 @@ PlanarPatch findPlanarPatch(const std::vector<Eigen::Vector3d> &points, double s
                             double max_tilt_deg) {
   PlanarPatch best;
   if (!(size > 0.0) || points.empty()) return best;
-  // Candidates are 2x2 blocks of half-size cells, i.e. patches overlapping by half their edge.
+  // Candidates are 2x2 blocks of half-size cells, i.e. patches overlapping by half their edge. Each cell's points
+  // are listed once, so that a candidate reads only its own.
   const double half = 0.5 * size;
-  std::map<std::pair<long, long>, std::size_t> cell_count;
+  std::map<std::pair<long, long>, std::vector<std::uint32_t>> cell_points;
   auto cellOf = [&](const Eigen::Vector3d &p) {
     return std::make_pair(static_cast<long>(std::floor(p.x() / half)), static_cast<long>(std::floor(p.y() / half)));
   };
-  for (const auto &p : points) ++cell_count[cellOf(p)];
+  for (std::size_t i = 0; i < points.size(); ++i) cell_points[cellOf(points[i])].push_back(static_cast<std::uint32_t>(i));
   std::vector<std::pair<std::size_t, std::pair<long, long>>> candidates;
-  for (const auto &kv : cell_count) {
+  for (const auto &kv : cell_points) {
     std::size_t n = 0;
     for (long dy = 0; dy <= 1; ++dy)
       for (long dx = 0; dx <= 1; ++dx) {
-        auto it = cell_count.find({kv.first.first + dx, kv.first.second + dy});
-        if (it != cell_count.end()) n += it->second;
+        auto it = cell_points.find({kv.first.first + dx, kv.first.second + dy});
+        if (it != cell_points.end()) n += it->second.size();
       }
     candidates.emplace_back(n, kv.first);
   }
@@ -290,13 +292,23 @@ PlanarPatch findPlanarPatch(const std::vector<Eigen::Vector3d> &points, double s
     return a.first != b.first ? a.first > b.first : a.second < b.second;
   });
   const double cos_tilt = std::cos(max_tilt_deg * kPi / 180.0);
-  const std::size_t tries = std::min<std::size_t>(candidates.size(), 64);
-  for (std::size_t c = 0; c < tries; ++c) {
+  // The 64 most populated candidates, and only when none of them qualifies the rest in the same order: on a long
+  // drive's map the most populated squares are walls (many rings hit them), and the ground lies further down.
+  constexpr std::size_t kFirstTries = 64;
+  for (std::size_t c = 0; c < candidates.size(); ++c) {
+    if (c == kFirstTries && best.found) break;
     const double x0 = candidates[c].second.first * half, y0 = candidates[c].second.second * half;
+    std::vector<std::uint32_t> ids;
+    for (long dy = 0; dy <= 1; ++dy)
+      for (long dx = 0; dx <= 1; ++dx) {
+        auto it = cell_points.find({candidates[c].second.first + dx, candidates[c].second.second + dy});
+        if (it != cell_points.end()) ids.insert(ids.end(), it->second.begin(), it->second.end());
+      }
+    if (ids.size() < 16) break;
+    std::sort(ids.begin(), ids.end());  // input order: the fits sum in the same order whichever cells hold them
     std::vector<Eigen::Vector3d> in;
-    for (const auto &p : points)
-      if (p.x() >= x0 && p.x() < x0 + size && p.y() >= y0 && p.y() < y0 + size) in.push_back(p);
-    if (in.size() < 16) break;
+    in.reserve(ids.size());
+    for (std::uint32_t i : ids) in.push_back(points[i]);
     // Objects standing on the ground would pull a plain least-squares fit off the ground, so the fit starts from
     // the most populated height band (the ground, for a street patch) and is refined on the points near it.
     const double band = std::max(inlier_distance, 1e-3);

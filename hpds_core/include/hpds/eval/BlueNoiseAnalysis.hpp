@@ -94,7 +94,7 @@ struct PlanarPatch {
 };
 
 /// The square xy patch of edge `size` holding the most points that lie on one near-horizontal plane: candidates on a
-/// grid of step size/2 (the 64 most populated) qualify when their plane fit is within `max_tilt_deg` of horizontal
+/// grid of step size/2 (the 64 most populated; when none of them qualifies, the others in order of population) qualify when their plane fit is within `max_tilt_deg` of horizontal
 /// and keeps >= 80 % of their points within `inlier_distance`; the one with the most such inliers wins (ties: the
 /// more populated, then the lower cell index). Meant for lidar ground, the densest flat region of a street scan.
 [[nodiscard]] PlanarPatch findPlanarPatch(const std::vector<Eigen::Vector3d> &points, double size,
