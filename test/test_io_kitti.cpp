@@ -261,6 +261,8 @@ TEST(BadInput, PoseFiles) {
   check("thirteen.txt", good + good + "1 0 0 0 0 1 0 0 0 0 1 0 5\n", {":3:", "found 13"});
   check("abc.txt", good + "\n1 0 0 0 0 1 0 abc 0 0 1 0\n", {":3:", "'abc' is not a number"});
   check("comma.txt", "1,0 0 0 0 1 0 0 0 0 1 0\n", {":1:", "'1,0'"});
+  // A NUL in a token is shown as '?': it cut the message short ("'3.5" and nothing more).
+  check("nul.txt", good + "1 0 0 0 0 1 0 3.5" + std::string(1, '\0') + " 0 0 1 0\n", {":2:", "'3.5?' is not a number"});
   check("nan.txt", "1 0 0 nan 0 1 0 0 0 0 1 0\n", {":1:", "non-finite"});
   check("inf.txt", "1 0 0 0 0 1 0 -inf 0 0 1 0\n", {":1:", "non-finite"});
   check("huge.txt", "1 0 0 1e999 0 1 0 0 0 0 1 0\n", {":1:", "out of range"});

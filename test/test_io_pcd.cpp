@@ -230,7 +230,12 @@ TEST(BadInput, PcdHeaderProblems) {
   check("bad_type.pcd", pcdHeader("x y z", "4 4 4", "F F Q", "1 1 1", "1", "1", "1", "binary"), {"TYPE"});
   check("bad_data.pcd", xyzPcdHeader(1, "zipped") + xyzBody(1), {"DATA"});
   check("no_xyz.pcd", pcdHeader("a b c", "4 4 4", "F F F", "1 1 1", "2", "1", "2", "binary") + xyzBody(2),
-        {"no x/y/z fields", "a b c"});
+        {"no x/y/z fields", "'a' 'b' 'c'"});
+  // A control byte inside a name is shown, not left to cut the message short (it read "(fields: x y z", as if z
+  // were there).
+  check("nul_in_name.pcd",
+        pcdHeader(std::string("x y z") + '\0' + "w", "4 4 4", "F F F", "1 1 1", "2", "1", "2", "binary") + xyzBody(2),
+        {"no x/y/z fields (fields: 'x' 'y' 'z?w')"});
   check("dup_field.pcd", pcdHeader("x y x", "4 4 4", "F F F", "1 1 1", "1", "1", "1", "binary") + xyzBody(1),
         {"twice"});
   check("blank_line.pcd", "# .PCD v0.7\nVERSION 0.7\n  \nFIELDS x y z\n", {"blank"});

@@ -111,7 +111,8 @@ void checkCloudLayout(const std::string &path, const PointLayout &layout) {
   }
   if (!layout.find("x") || !layout.find("y") || !layout.find("z")) {
     std::string names;
-    for (const auto &f : layout.fields) names += (names.empty() ? "" : " ") + f.name;
+    // Quoted: a name with a NUL or other control byte in it ("z\0w") cut the message short, as if z were there.
+    for (const auto &f : layout.fields) names += (names.empty() ? "" : " ") + quote(f.name);
     fail(path, "no x/y/z fields (fields: " + (names.empty() ? std::string("none") : names) + ")");
   }
   // The pipeline reads one coordinate per axis; a vector-valued x would be sampled by its first element and lost on
