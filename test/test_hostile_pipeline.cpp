@@ -26,6 +26,19 @@ using test::frameOf;
 using test::gridPoints;
 using test::typedCloud;
 
+/// `n` points on a floor at z = -1.5 and two walls (x = 6, y = 6), 10 m wide: surfaces every sample has a normal on.
+std::vector<std::array<double, 3>> wallsAndFloor(int n, std::uint64_t seed) {
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> u(-5.0, 5.0);
+  std::vector<std::array<double, 3>> pts;
+  for (int i = 0; i < n; ++i) {
+    const double a = u(rng), b = u(rng);
+    pts.push_back(i % 3 == 0 ? std::array<double, 3>{a, b, -1.5} : i % 3 == 1 ? std::array<double, 3>{6.0, a, b}
+                                                                               : std::array<double, 3>{a, 6.0, b});
+  }
+  return pts;
+}
+
 TEST(HostilePipeline, EveryNumericXyzTypeIsReadByValue) {
   const auto pts = gridPoints(6, 1.0, 1.0);
   for (FieldType t : {FieldType::UInt8, FieldType::Int8, FieldType::UInt16, FieldType::Int16, FieldType::Int32,
@@ -71,11 +84,10 @@ TEST(HostilePipeline, BrokenLayoutsThrowBeforeAnythingChanges) {
   PointLayout shared_xy = vector_x;  // x and y read from the same bytes: every point would lie on x = y
   shared_xy.fields[0].count = 1;
   shared_xy.fields[1].offset = 0;
-  PointLayout z_in_extra;  // z starting inside another field
-  for (const char *name : {"x", "y", "intensity", "w"}) z_in_extra.append(name, FieldType::Float32);
-  z_in_extra.fields[3].name = "z";
-  z_in_extra.fields[3].offset = 10;
-  for (const PointLayout &l : {beyond, dup, bad_type, vector_x, shared_xy, z_in_extra}) {
+  PointLayout z_in_y;  // z starting inside y
+  for (const char *name : {"x", "y", "z"}) z_in_y.append(name, FieldType::Float32);
+  z_in_y.fields[2].offset = 6;
+  for (const PointLayout &l : {beyond, dup, bad_type, vector_x, shared_xy, z_in_y}) {
     Frame f;
     f.points = PointBuffer(l, 0);
     f.points.bytes().assign(3 * l.point_step, 0);
@@ -88,9 +100,10 @@ TEST(HostilePipeline, BrokenLayoutsThrowBeforeAnythingChanges) {
     EXPECT_NE(std::string(e.what()).find("field 'x' (bytes 0..3) overlaps field 'y' (bytes 0..3)"), std::string::npos)
         << e.what();
   }
-  PointLayout rgb_in_rgba;  // overlaps away from x y z are a cloud's own business
+  PointLayout rgb_in_rgba;  // other overlaps are a cloud's own business: rgb inside rgba, a view of x's bits
   for (const char *name : {"x", "y", "z", "rgba"}) rgb_in_rgba.append(name, FieldType::UInt32);
   rgb_in_rgba.fields.push_back(PointField{"rgb", 12, FieldType::Float32, 1});
+  rgb_in_rgba.fields.push_back(PointField{"x_bits", 0, FieldType::UInt32, 1});
   EXPECT_NO_THROW(rgb_in_rgba.validate());
   // An empty frame whose last field is 4 GB long: every size matches, but its count is no real field's, and the
   // output layout's 32-bit point_step would wrap around.
@@ -368,14 +381,7 @@ TEST(HostilePipeline, AFarOutlierReturnLeavesTheFramesNormalsAndMapOutput) {
   // map output's neighbour searches address 2^21 cells per axis, and counted from the outlier they held nothing
   // else (every normal invalid). Every sample but the outlier keeps a valid normal, in scan mode on 1 and 2 threads,
   // and in map mode the samples the frame hit are still found.
-  std::mt19937_64 rng(4);
-  std::uniform_real_distribution<double> u(-5.0, 5.0);
-  std::vector<std::array<double, 3>> pts;
-  for (int i = 0; i < 6000; ++i) {
-    const double a = u(rng), b = u(rng);
-    pts.push_back(i % 3 == 0 ? std::array<double, 3>{a, b, -1.5} : i % 3 == 1 ? std::array<double, 3>{6.0, a, b}
-                                                                               : std::array<double, 3>{a, 6.0, b});
-  }
+  std::vector<std::array<double, 3>> pts = wallsAndFloor(6000, 4);
   pts.push_back({-2e6, 1.0, 0.0});
   for (int threads : {1, 2}) {
     HpdsConfig c;
@@ -405,14 +411,7 @@ TEST(HostilePipeline, AReturnBeyondTheKeyRangeChangesNothingButItsCount) {
   // the corner of the scan-mode centroid grids it put every real point beyond their reach, and no sample of the frame
   // got a normal. The frame with it must give what the frame without it gives, sample for sample, in both modes and
   // on 1 and 2 threads, wherever in the frame it stands and on whichever axis, whatever its sign.
-  std::mt19937_64 rng(5);
-  std::uniform_real_distribution<double> u(-5.0, 5.0);
-  std::vector<std::array<double, 3>> clean;
-  for (int i = 0; i < 3000; ++i) {
-    const double a = u(rng), b = u(rng);
-    clean.push_back(i % 3 == 0 ? std::array<double, 3>{a, b, -1.5} : i % 3 == 1 ? std::array<double, 3>{6.0, a, b}
-                                                                                 : std::array<double, 3>{a, 6.0, b});
-  }
+  const std::vector<std::array<double, 3>> clean = wallsAndFloor(3000, 5);
   const auto run = [](const HpdsConfig &c, const std::vector<std::array<double, 3>> &pts, std::uint64_t &out_of_range) {
     Pipeline p(c);
     out_of_range = p.addFrame(frameOf(typedCloud(FieldType::Float32, pts))).counters.out_of_range;

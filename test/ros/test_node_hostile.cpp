@@ -61,6 +61,23 @@ PointCloud2Ptr validCloud(std::size_t n, std::uint32_t seed, const ros::Time &st
   return msg;
 }
 
+/// A node's log, diagnostics, input and output, connected: what a test that feeds it frames and reads its counters
+/// and log lines needs.
+struct NodeProbe {
+  NodeProbe(ros::NodeHandle &nh, const std::string &target)
+      : logs(nh, target), diag(nh, target.substr(1)), pub(nh.advertise<PointCloud2>(target + "/input", 10)),
+        output(nh, target + "/output") {}
+  [[nodiscard]] bool connected() {
+    return hpds_test::waitFor(
+        [&] { return pub.getNumSubscribers() > 0 && output.connected() && logs.connected() && diag.updates() > 0; },
+        30.0);
+  }
+  LogCollector logs;
+  hpds_test::DiagnosticsReader diag;
+  ros::Publisher pub;
+  Collector<PointCloud2> output;
+};
+
 class HostileTest : public testing::Test {
  protected:
   void SetUp() override {
@@ -378,14 +395,11 @@ TEST_F(HostileTest, ZeroStampsAreProcessedAndWarnedAboutOnce) {
 // INFO, so that a map saved or shown later is not taken for the whole drive. Frames in the fixed frame have their
 // sensor at its origin: a frame 150 m out is evicted before the next one.
 TEST_F(HostileTest, EvictionsAreCountedAndSaidOnce) {
-  const std::string target = ros::NodeHandle("~").param<std::string>("slash_target", "/hpds_slash");
-  LogCollector logs(nh_, target);
-  hpds_test::DiagnosticsReader diag(nh_, target.substr(1));
-  ros::Publisher pub = nh_.advertise<PointCloud2>(target + "/input", 10);
-  Collector<PointCloud2> output(nh_, target + "/output");
-  ASSERT_TRUE(hpds_test::waitFor(
-      [&] { return pub.getNumSubscribers() > 0 && output.connected() && logs.connected() && diag.updates() > 0; },
-      30.0));
+  NodeProbe node(nh_, ros::NodeHandle("~").param<std::string>("slash_target", "/hpds_slash"));
+  ASSERT_TRUE(node.connected());
+  LogCollector &logs = node.logs;
+  hpds_test::DiagnosticsReader &diag = node.diag;
+  ros::Publisher &pub = node.pub;
   const double processed = diag.value("frames processed"), evicted = diag.value("samples evicted");
   for (int i = 0; i < 3; ++i) {
     auto m = validCloud(500, 990 + std::uint32_t(i), ros::Time(2000 + i, 0));
@@ -415,14 +429,11 @@ TEST_F(HostileTest, EvictionsAreCountedAndSaidOnce) {
 // and counted, so that a driver that never sets it shows in /diagnostics as well as in the log.
 TEST_F(HostileTest, EmptyFrameIdsAreProcessedCountedAndWarnedAboutOnce) {
   // A node no other test sends an empty frame_id, so that its one warning is this test's.
-  const std::string target = ros::NodeHandle("~").param<std::string>("seq_target", "/hpds_seq");
-  LogCollector logs(nh_, target);
-  hpds_test::DiagnosticsReader diag(nh_, target.substr(1));
-  ros::Publisher pub = nh_.advertise<PointCloud2>(target + "/input", 10);
-  Collector<PointCloud2> output(nh_, target + "/output");
-  ASSERT_TRUE(hpds_test::waitFor(
-      [&] { return pub.getNumSubscribers() > 0 && output.connected() && logs.connected() && diag.updates() > 0; },
-      30.0));
+  NodeProbe node(nh_, ros::NodeHandle("~").param<std::string>("seq_target", "/hpds_seq"));
+  ASSERT_TRUE(node.connected());
+  LogCollector &logs = node.logs;
+  hpds_test::DiagnosticsReader &diag = node.diag;
+  ros::Publisher &pub = node.pub;
   const double before = diag.value("frames processed");
   const double counted_before = diag.value("frames without frame_id");
   for (int i = 0; i < 3; ++i) {

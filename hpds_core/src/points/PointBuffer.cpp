@@ -115,7 +115,8 @@ std::string xyzOverlap(const PointLayout &layout) {
     const auto [a0, a1] = bytes(a);
     for (std::size_t j = 0; j < layout.fields.size(); ++j) {
       const PointField &b = layout.fields[j];
-      if (j == i || ((b.name == "x" || b.name == "y" || b.name == "z") && j < i)) continue;  // each pair once
+      // Another field over x's bytes is a view of them (a uint32 of x's bits): x still reads as written.
+      if (j <= i || (b.name != "x" && b.name != "y" && b.name != "z")) continue;
       const auto [b0, b1] = bytes(b);
       if (a0 < b1 && b0 < a1)
         return "field '" + a.name + "' (bytes " + std::to_string(a0) + ".." + std::to_string(a1 - 1) +

@@ -39,7 +39,7 @@ enum class CloudError {
   BadXyz,             ///< x, y or z with count != 1
   BadRowStep,         ///< row_step < width * point_step (or the product overflows)
   DataSize,           ///< data.size() != row_step * height (truncated or trailing bytes)
-  OverlappingXyz,     ///< x, y or z sharing bytes with another field (hpds::xyzOverlap)
+  OverlappingXyz,     ///< two of x, y and z sharing bytes (hpds::xyzOverlap)
 };
 inline constexpr int kCloudErrorCount = 11;
 

@@ -63,15 +63,15 @@ struct PointLayout {
   /// of 0 or above kMaxFieldCount, or when point_step would pass 2^32 - 1 (nothing is appended then).
   void append(const std::string &name, FieldType type, std::uint32_t count = 1);
   /// Throws std::invalid_argument when a field overlaps the record end, has a bad type, count 0 or above
-  /// kMaxFieldCount, a name repeats, or x, y or z shares bytes with another field (xyzOverlap).
+  /// kMaxFieldCount, a name repeats, or two of x, y and z share bytes (xyzOverlap).
   void validate() const;
   bool operator==(const PointLayout &o) const { return fields == o.fields && point_step == o.point_step; }
   bool operator!=(const PointLayout &o) const { return !(*this == o); }
 };
 
-/// Where x, y or z shares bytes with another field (x and y at one offset, a z that starts inside y): the sentence
-/// that names the pair, or "" when they stand apart. Other fields may overlap each other (rgb inside rgba); a position
-/// read through such bytes is garbage. PointLayout::validate refuses it.
+/// Where two of x, y and z share bytes (x and y at one offset, a z that starts inside y): the sentence that names the
+/// pair, or "" when they stand apart. A position read through such bytes is garbage; PointLayout::validate refuses
+/// it. Other fields may overlap anything (rgb inside rgba, a uint32 view of x's bits).
 [[nodiscard]] std::string xyzOverlap(const PointLayout &layout);
 
 /// "x y z intensity as float32 float32 float32 float32, 16 bytes": what tells two layouts apart in an error message.
