@@ -5,7 +5,6 @@
 #include <set>
 #include <stdexcept>
 #include <string>
-#include <utility>
 
 namespace hpds {
 
@@ -105,25 +104,17 @@ void PointLayout::validate() const {
 }
 
 std::string xyzOverlap(const PointLayout &layout) {
-  const auto bytes = [](const PointField &f) {
-    const std::uint64_t begin = f.offset;
-    return std::pair<std::uint64_t, std::uint64_t>(begin, begin + std::uint64_t(f.count) * fieldTypeSize(f.type));
-  };
-  for (std::size_t i = 0; i < layout.fields.size(); ++i) {
-    const PointField &a = layout.fields[i];
-    if (a.name != "x" && a.name != "y" && a.name != "z") continue;
-    const auto [a0, a1] = bytes(a);
-    for (std::size_t j = 0; j < layout.fields.size(); ++j) {
-      const PointField &b = layout.fields[j];
-      // Another field over x's bytes is a view of them (a uint32 of x's bits): x still reads as written.
-      if (j <= i || (b.name != "x" && b.name != "y" && b.name != "z")) continue;
-      const auto [b0, b1] = bytes(b);
+  // Only x, y and z among themselves: another field over x's bytes is a view of them (a uint32 of x's bits).
+  const PointField *f[3] = {layout.find("x"), layout.find("y"), layout.find("z")};
+  for (int i = 0; i < 3; ++i)
+    for (int j = i + 1; j < 3; ++j) {
+      if (!f[i] || !f[j]) continue;
+      const std::uint64_t a0 = f[i]->offset, a1 = a0 + f[i]->byteSize(), b0 = f[j]->offset, b1 = b0 + f[j]->byteSize();
       if (a0 < b1 && b0 < a1)
-        return "field '" + a.name + "' (bytes " + std::to_string(a0) + ".." + std::to_string(a1 - 1) +
-               ") overlaps field '" + b.name + "' (bytes " + std::to_string(b0) + ".." + std::to_string(b1 - 1) +
+        return "field '" + f[i]->name + "' (bytes " + std::to_string(a0) + ".." + std::to_string(a1 - 1) +
+               ") overlaps field '" + f[j]->name + "' (bytes " + std::to_string(b0) + ".." + std::to_string(b1 - 1) +
                "): a position read through shared bytes is garbage";
     }
-  }
   return {};
 }
 

@@ -106,6 +106,8 @@ class HpdsServer {
   void loadMapOnStart();
   /// ros/map_file's folder exists and is writable (std::invalid_argument naming the parameter otherwise).
   void requireMapFolder() const;
+  /// Whether saving now would replace a map file that holds a map with an empty map (which no save may do).
+  [[nodiscard]] bool emptySaveWouldReplaceTheFile() const;
   /// False when a line with this key was logged less than 5 s ago: each drop reason gets its own throttle (ROS's
   /// throttles are per call site, so one reason would hide the others).
   bool logAllowed(const std::string &key);

@@ -169,13 +169,9 @@ bool HpdsServer::shutdown() {
                      "' is left as it is");
       return shutdown_ok_;
     }
-    if (processors_.front()->pipeline().hierarchy().sampleCount() == 0) {
-      std::error_code ec;
-      if (std::filesystem::is_regular_file(config_.ros.map_file, ec) &&
-          std::filesystem::file_size(config_.ros.map_file, ec) > 0 && !ec) {
-        say(false, tag_ + ": shutdown: the map holds no sample: '" + config_.ros.map_file + "' is left as it is");
-        return shutdown_ok_;
-      }
+    if (emptySaveWouldReplaceTheFile()) {
+      say(false, tag_ + ": shutdown: the map holds no sample: '" + config_.ros.map_file + "' is left as it is");
+      return shutdown_ok_;
     }
     const auto [ok, message] = runMapCommand(true);
     shutdown_ok_ = ok;
@@ -196,6 +192,13 @@ bool HpdsServer::logAllowed(const std::string &key) {
   if (!fresh && now - it->second < kLogThrottleSeconds) return false;
   it->second = now;
   return true;
+}
+
+bool HpdsServer::emptySaveWouldReplaceTheFile() const {
+  if (processors_.front()->pipeline().hierarchy().sampleCount() != 0) return false;
+  std::error_code ec;
+  return std::filesystem::is_regular_file(config_.ros.map_file, ec) &&
+         std::filesystem::file_size(config_.ros.map_file, ec) > 0 && !ec;
 }
 
 void HpdsServer::requireMapFolder() const {
@@ -228,9 +231,7 @@ std::pair<bool, std::string> HpdsServer::runMapCommand(bool save) {
     if (save) {
       // An empty map over a file that holds one (a save called before any frame or load, or after ~clear_map) would
       // destroy it: the file stays, and the caller hears why.
-      std::error_code ec;
-      if (pipeline.hierarchy().sampleCount() == 0 && std::filesystem::is_regular_file(path, ec) &&
-          std::filesystem::file_size(path, ec) > 0 && !ec)
+      if (emptySaveWouldReplaceTheFile())
         return {false, "the running map holds no sample: '" + path + "' is left as it is (an empty save would replace "
                        "the map it holds; ~load_map takes it up, or remove the file to save an empty map)"};
       processor.saveMap(path);
