@@ -130,10 +130,7 @@ int runSample(const SampleArgs &a) {
       const std::lock_guard<std::mutex> lock(far_viewpoint_mutex);
       if (far_viewpoint.empty()) {
         std::ostringstream w;
-        w.precision(12);
-        w << "the nearest point of '" << a.inputs[i] << "' is " << d << " m from its viewpoint ("
-          << frame.viewpoint.x() << ", " << frame.viewpoint.y() << ", " << frame.viewpoint.z()
-          << "), where normals are made to face and input.min_range/max_range measure from: ";
+        w << farViewpointWarning(a.inputs[i], d, frame.viewpoint);
         if (a.viewpoint.empty())
           w << "the input seems not to be in its sensor's frame; give the sensor's position with --viewpoint X Y Z"
             << (poses.empty() ? " (or the frames' sensor poses with --poses)" : "");

@@ -325,11 +325,8 @@ def _run(inputs, poses, poses_path, outdir, plan, tile_size, config_yaml, runner
     if far is not None:
         # As `hpds sample` warns: frames in world coordinates without their sensor's position get normals that face
         # a point kilometres away (about half of them turned around), and range limits measure from it.
-        path, distance, vp = far
-        log("warning: the nearest point of '%s' is %.1f m from its viewpoint (%.12g, %.12g, %.12g), where normals are "
-            "made to face and input.min_range/max_range measure from: the frames seem not to be in their sensor's "
-            "frame; give them in the sensor's frame with --poses, or set each PCD's VIEWPOINT to its sensor's "
-            "position" % (path, distance, vp[0], vp[1], vp[2]))
+        log("warning: " + far + "the frames seem not to be in their sensor's frame; give them in the sensor's frame "
+            "with --poses, or set each PCD's VIEWPOINT to its sensor's position")
 
     # 2. Tiles: phase by phase, each after its neighbours of earlier phases; 3. outputs, after all neighbours.
     def map_path(k):

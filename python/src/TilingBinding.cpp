@@ -5,7 +5,6 @@
 #include <pybind11/stl.h>
 
 #include <filesystem>
-#include <optional>
 #include <tuple>
 
 #include "Bindings.hpp"
@@ -121,9 +120,8 @@ void bindTiling(py::module_ &m) {
         std::size_t bytes = 0;
         PointLayout layout;
         bool has_layout = false;
-        // The first frame whose viewpoint is no sensor's position (isFarViewpoint): its input, the distance to its
-        // nearest point and the viewpoint, for the build's warning.
-        std::optional<std::tuple<std::string, double, std::vector<double>>> far_viewpoint;
+        // The first frame whose viewpoint is no sensor's position (isFarViewpoint): the start of the build's warning.
+        std::string far_viewpoint;
         {
           py::gil_scoped_release unlocked;
           TileBucketer bucketer(config, grid);
@@ -131,10 +129,9 @@ void bindTiling(py::module_ &m) {
             Frame frame;
             frame.points = readCloudFile(inputs[f], &frame.viewpoint);
             frame.sensor_to_fixed = iso[f];
-            if (!far_viewpoint)
+            if (far_viewpoint.empty())
               if (const double d = nearestPointDistance(frame.points, frame.viewpoint); isFarViewpoint(d))
-                far_viewpoint.emplace(inputs[f], d,
-                                      std::vector<double>{frame.viewpoint.x(), frame.viewpoint.y(), frame.viewpoint.z()});
+                far_viewpoint = farViewpointWarning(inputs[f], d, frame.viewpoint);
             try {
               totals += bucketer.addFrame(frame, first_frame + static_cast<std::uint32_t>(f));
             } catch (const std::invalid_argument &e) {
@@ -155,7 +152,7 @@ void bindTiling(py::module_ &m) {
         d["tiles"] = tiles;
         d["counters"] = countersDict(totals);
         d["memory_bytes"] = bytes;
-        d["far_viewpoint"] = far_viewpoint ? py::object(py::cast(*far_viewpoint)) : py::object(py::none());
+        d["far_viewpoint"] = far_viewpoint.empty() ? py::object(py::none()) : py::object(py::str(far_viewpoint));
         // The frames' point fields, which every bucketing task of one build must share (map mode's rule); None when
         // every frame of the task was empty (those take any fields).
         py::list fields;
@@ -168,7 +165,8 @@ void bindTiling(py::module_ &m) {
       py::arg("out_dir"),
       "Bucketing task: reads the inputs (frames first_frame, ...), files their points per tile into "
       "out_dir/tile_<i>_<j>.bkt; returns the tiles [(i, j, points, path)], the skip counters and the first frame "
-      "whose viewpoint lies too far from all its points to be its sensor's: (input, distance, viewpoint) or None.");
+      "whose viewpoint lies too far from all its points to be its sensor's: the start of its warning (farViewpointWarning), "
+      "or None.");
   m.def(
       "build_tile",
       [](const std::string &yaml, double tile_size, std::int32_t i, std::int32_t j,

@@ -1,5 +1,7 @@
 #include "hpds/points/FarViewpoint.hpp"
 
+#include <sstream>
+
 namespace hpds {
 
 double nearestPointDistance(const PointBuffer &points, const Eigen::Vector3d &viewpoint) {
@@ -12,6 +14,15 @@ double nearestPointDistance(const PointBuffer &points, const Eigen::Vector3d &vi
     if (p.allFinite()) nearest = std::min(nearest, (p - viewpoint).squaredNorm());
   }
   return std::sqrt(nearest);
+}
+
+std::string farViewpointWarning(const std::string &input, double nearest, const Eigen::Vector3d &viewpoint) {
+  std::ostringstream w;
+  w.precision(12);
+  w << "the nearest point of '" << input << "' is " << nearest << " m from its viewpoint (" << viewpoint.x() << ", "
+    << viewpoint.y() << ", " << viewpoint.z() << "), where normals are made to face and input.min_range/max_range "
+    << "measure from: ";
+  return w.str();
 }
 
 }  // namespace hpds

@@ -14,6 +14,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <string>
 #include <vector>
 
 namespace hpds {
@@ -39,5 +40,10 @@ template <typename Scalar>
 
 /// Whether `nearest` (from nearestPointDistance) puts the viewpoint too far from every point to be the sensor's.
 [[nodiscard]] inline bool isFarViewpoint(double nearest) { return std::isfinite(nearest) && nearest > kFarViewpoint; }
+
+/// The start of the warning for input `input` whose nearest point is `nearest` metres from `viewpoint`, ending in ": "
+/// for the caller's advice (which option gives the sensor's position depends on the tool).
+[[nodiscard]] std::string farViewpointWarning(const std::string &input, double nearest,
+                                              const Eigen::Vector3d &viewpoint);
 
 }  // namespace hpds
