@@ -19,18 +19,6 @@ std::string lowerExtension(const std::string &path) {
   return ext;
 }
 
-// Quotes text taken from a possibly binary file so that messages stay printable and short.
-std::string quote(std::string_view text) {
-  constexpr std::size_t kMax = 40;
-  std::string out = "'";
-  for (std::size_t i = 0; i < text.size() && i < kMax; ++i) {
-    const auto c = static_cast<unsigned char>(text[i]);
-    out += (c >= 0x20 && c < 0x7f) ? static_cast<char>(c) : '?';
-  }
-  if (text.size() > kMax) out += "...";
-  return out + "'";
-}
-
 bool isSpace(char c) { return c == ' ' || c == '\t' || c == '\r' || c == '\n' || c == '\v' || c == '\f'; }
 
 std::optional<std::uint64_t> nextNonBlankLine(std::istream &in) {

@@ -28,14 +28,13 @@ namespace hpds::pcl_detail {
 using io_detail::fail;
 using io_detail::kMaxFieldCount;
 using io_detail::kMaxHeaderBytes;
+using io_detail::quote;
 
 // ---------------------------------------------------------------------------------------------------------------------
 // Text of a possibly malformed file
 
 /// Lower-case extension with its dot (".pcd"), "" when there is none.
 [[nodiscard]] std::string lowerExtension(const std::string &path);
-/// Quotes text taken from a possibly binary file so that messages stay printable and short.
-[[nodiscard]] std::string quote(std::string_view text);
 [[nodiscard]] bool isSpace(char c);
 /// Reads `in` on to the first line holding more than white space and returns its number counted from where `in`
 /// stood (1 = the next line), or nothing at the end of the file: what ascii data holds beyond its header's count.

@@ -5,6 +5,17 @@
 
 namespace hpds::io_detail {
 
+std::string quote(std::string_view text) {
+  constexpr std::size_t kMax = 40;
+  std::string out = "'";
+  for (std::size_t i = 0; i < text.size() && i < kMax; ++i) {
+    const auto c = static_cast<unsigned char>(text[i]);
+    out += (c >= 0x20 && c < 0x7f) ? static_cast<char>(c) : '?';
+  }
+  if (text.size() > kMax) out += "...";
+  return out + "'";
+}
+
 void requireRegularFile(const std::string &path) {
   namespace fs = std::filesystem;
   std::error_code ec;

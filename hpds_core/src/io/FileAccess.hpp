@@ -9,6 +9,7 @@
 #include <memory>
 #include <stdexcept>
 #include <string>
+#include <string_view>
 
 #include "hpds/io/AtomicFile.hpp"
 #include "hpds/points/PointBuffer.hpp"
@@ -37,6 +38,10 @@ using FilePtr = std::unique_ptr<std::FILE, FileCloser>;
 /// Throws (via fail) unless `path` names an existing regular file: "file not found", "cannot access: ...",
 /// "not a regular file".
 void requireRegularFile(const std::string &path);
+
+/// Text taken from a possibly binary file, in single quotes, for a message: at most 40 bytes ("..." after them), and
+/// every byte outside printable ASCII (a NUL would cut the message short) as '?'.
+[[nodiscard]] std::string quote(std::string_view text);
 
 /// A file being written by one of the writers: an AtomicFile (temporary beside the target, renamed into place by
 /// close()), so a failed or interrupted write leaves whatever was at the path untouched.

@@ -22,6 +22,7 @@ namespace {
 
 using io_detail::fail;
 using io_detail::FilePtr;
+using io_detail::quote;
 using io_detail::requireRegularFile;
 
 
@@ -30,14 +31,6 @@ using io_detail::requireRegularFile;
 }
 
 bool isSpace(char c) { return c == ' ' || c == '\t' || c == '\r' || c == '\n' || c == '\v' || c == '\f'; }
-
-// A token for a message: a NUL or other control byte in it would cut the message short or garble the terminal.
-std::string printable(const std::string &token) {
-  std::string out = token.substr(0, 40);
-  for (char &c : out)
-    if (static_cast<unsigned char>(c) < 0x20 || static_cast<unsigned char>(c) >= 0x7f) c = '?';
-  return token.size() > 40 ? out + "..." : out;
-}
 
 // Deviation below which a rotation is already as orthonormal as doubles allow; re-projecting it would only move bits
 // and break the exact write/read round trip.
@@ -116,9 +109,9 @@ std::vector<Eigen::Isometry3d> readKittiPoses(const std::string &path, PoseCorre
       const char *num = (*p == '+' && tok_end - p > 1) ? p + 1 : p;
       double value = 0.0;
       const auto res = std::from_chars(num, tok_end, value);
-      if (res.ec == std::errc::result_out_of_range) failLine(path, line_no, "number '" + printable(token) + "' is out of range");
-      if (res.ec != std::errc() || res.ptr != tok_end) failLine(path, line_no, "'" + printable(token) + "' is not a number");
-      if (!std::isfinite(value)) failLine(path, line_no, "non-finite value '" + printable(token) + "'");
+      if (res.ec == std::errc::result_out_of_range) failLine(path, line_no, "number " + quote(token) + " is out of range");
+      if (res.ec != std::errc() || res.ptr != tok_end) failLine(path, line_no, quote(token) + " is not a number");
+      if (!std::isfinite(value)) failLine(path, line_no, "non-finite value " + quote(token));
       if (count < v.size()) v[count] = value;
       ++count;
       p = tok_end;
