@@ -7,6 +7,7 @@
 #include <sstream>
 
 #include "hpds/config/ConfigYaml.hpp"
+#include "hpds/io/PoseFile.hpp"
 
 namespace hpds::cli {
 
@@ -233,6 +234,13 @@ double resolveCellSize(const CellSizeOptions &o) {
   if (!(*o.spacing > 0.0)) throw std::invalid_argument("--spacing: must be > 0");
   validateConfig(c);
   return resolveOutput(c).cell_size;
+}
+
+std::vector<Eigen::Isometry3d> readPosesOption(const std::string &path) {
+  PoseCorrection correction;
+  std::vector<Eigen::Isometry3d> poses = readKittiPoses(path, correction);
+  if (const std::string w = poseCorrectionWarning(path, correction); !w.empty()) std::cerr << "hpds: warning: " << w << "\n";
+  return poses;
 }
 
 }  // namespace hpds::cli

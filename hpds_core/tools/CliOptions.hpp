@@ -3,6 +3,7 @@
 #pragma once
 
 #include <CLI/CLI.hpp>
+#include <Eigen/Geometry>
 #include <optional>
 #include <string>
 #include <vector>
@@ -65,5 +66,9 @@ void addCellSizeOptions(CLI::App &app, CellSizeOptions &options, bool depth_boun
 /// With --spacing: the output level its derived cell is made for (the deepest level such a sampling holds); with
 /// --cell-size: -1 (any level).
 [[nodiscard]] int deepestLevelFor(const CellSizeOptions &options);
+
+/// The poses of a --poses file (readKittiPoses), its rotation corrections beyond rounding warned about on stderr
+/// (poseCorrectionWarning).
+[[nodiscard]] std::vector<Eigen::Isometry3d> readPosesOption(const std::string &path);
 
 }  // namespace hpds::cli

@@ -65,10 +65,7 @@ SamplingCloud keepFrame(const SamplingCloud &c, std::uint32_t frame) {
 std::vector<Eigen::Vector3d> loadInputs(const std::vector<std::string> &inputs, const std::string &poses_file) {
   std::vector<Eigen::Isometry3d> poses;
   if (!poses_file.empty()) {
-    PoseCorrection correction;
-    poses = readKittiPoses(poses_file, correction);
-    if (const std::string w = poseCorrectionWarning(poses_file, correction); !w.empty())
-      std::cerr << "hpds: warning: " << w << "\n";
+    poses = readPosesOption(poses_file);
     if (const std::string w = checkPosesMatchInputs(poses_file, poses.size(), inputs); !w.empty())
       std::cerr << "hpds: warning: " << w << "\n";
   }

@@ -82,9 +82,7 @@ int runSample(const SampleArgs &a) {
   if (!a.sampling.config_file.empty()) validateRosSectionOfFile(a.sampling.config_file);
   std::vector<Eigen::Isometry3d> poses;
   if (!a.poses.empty()) {
-    PoseCorrection correction;
-    poses = readKittiPoses(a.poses, correction);
-    if (const std::string w = poseCorrectionWarning(a.poses, correction); !w.empty()) std::cerr << "hpds: warning: " << w << "\n";
+    poses = readPosesOption(a.poses);
     if (const std::string w = checkPosesMatchInputs(a.poses, poses.size(), a.inputs); !w.empty())
       std::cerr << "hpds: warning: " << w << "\n";
     double largest_translation = 0.0;

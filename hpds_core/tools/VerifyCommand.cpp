@@ -164,10 +164,7 @@ void addVerifyCommand(CLI::App &app) {
     std::vector<Eigen::Isometry3d> poses;
     if (!a->poses.empty()) {
       if (a->inputs.empty()) throw std::invalid_argument("--poses: give the --input frames it poses");
-      PoseCorrection correction;
-      poses = readKittiPoses(a->poses, correction);
-      if (const std::string w = poseCorrectionWarning(a->poses, correction); !w.empty())
-        std::cerr << "hpds: warning: " << w << "\n";
+      poses = readPosesOption(a->poses);
       if (a->frame >= 0) {
         // A scan-mode output: frame K was sampled from one input posed by line K.
         if (a->inputs.size() != 1)
