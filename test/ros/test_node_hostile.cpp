@@ -397,10 +397,7 @@ TEST_F(HostileTest, ZeroStampsAreProcessedAndWarnedAboutOnce) {
 TEST_F(HostileTest, EvictionsAreCountedAndSaidOnce) {
   NodeProbe node(nh_, ros::NodeHandle("~").param<std::string>("slash_target", "/hpds_slash"));
   ASSERT_TRUE(node.connected());
-  LogCollector &logs = node.logs;
-  hpds_test::DiagnosticsReader &diag = node.diag;
-  ros::Publisher &pub = node.pub;
-  const double processed = diag.value("frames processed"), evicted = diag.value("samples evicted");
+  const double processed = node.diag.value("frames processed"), evicted = node.diag.value("samples evicted");
   for (int i = 0; i < 3; ++i) {
     auto m = validCloud(500, 990 + std::uint32_t(i), ros::Time(2000 + i, 0));
     m->header.frame_id = "odom";
@@ -410,19 +407,19 @@ TEST_F(HostileTest, EvictionsAreCountedAndSaidOnce) {
       x += 150.0f;
       std::memcpy(m->data.data() + k * m->point_step, &x, 4);
     }
-    pub.publish(m);
+    node.pub.publish(m);
     ros::WallDuration(0.1).sleep();
   }
-  ASSERT_TRUE(hpds_test::waitFor([&] { return diag.value("frames processed") == processed + 3; }, 30.0))
-      << "processed " << diag.value("frames processed") << " after " << processed;
-  EXPECT_TRUE(hpds_test::waitFor([&] { return diag.value("samples evicted") > evicted + 100; }, 10.0))
-      << "samples evicted " << diag.value("samples evicted") << " after " << evicted;
+  ASSERT_TRUE(hpds_test::waitFor([&] { return node.diag.value("frames processed") == processed + 3; }, 30.0))
+      << "processed " << node.diag.value("frames processed") << " after " << processed;
+  EXPECT_TRUE(hpds_test::waitFor([&] { return node.diag.value("samples evicted") > evicted + 100; }, 10.0))
+      << "samples evicted " << node.diag.value("samples evicted") << " after " << evicted;
   EXPECT_TRUE(hpds_test::waitFor(
-      [&] { return logs.has(rosgraph_msgs::Log::INFO, {"the map evicts samples from now on", "samples evicted"}); },
+      [&] { return node.logs.has(rosgraph_msgs::Log::INFO, {"the map evicts samples from now on", "samples evicted"}); },
       10.0))
-      << logs.dump();
+      << node.logs.dump();
   ros::WallDuration(0.5).sleep();
-  EXPECT_EQ(logs.count(rosgraph_msgs::Log::INFO, {"the map evicts samples from now on"}), 1u) << logs.dump();
+  EXPECT_EQ(node.logs.count(rosgraph_msgs::Log::INFO, {"the map evicts samples from now on"}), 1u) << node.logs.dump();
 }
 
 // Scan mode: a cloud without header.frame_id is processed (its outputs keep the empty frame), warned about once
@@ -431,26 +428,23 @@ TEST_F(HostileTest, EmptyFrameIdsAreProcessedCountedAndWarnedAboutOnce) {
   // A node no other test sends an empty frame_id, so that its one warning is this test's.
   NodeProbe node(nh_, ros::NodeHandle("~").param<std::string>("seq_target", "/hpds_seq"));
   ASSERT_TRUE(node.connected());
-  LogCollector &logs = node.logs;
-  hpds_test::DiagnosticsReader &diag = node.diag;
-  ros::Publisher &pub = node.pub;
-  const double before = diag.value("frames processed");
-  const double counted_before = diag.value("frames without frame_id");
+  const double before = node.diag.value("frames processed");
+  const double counted_before = node.diag.value("frames without frame_id");
   for (int i = 0; i < 3; ++i) {
     auto m = validCloud(500, 970 + std::uint32_t(i), ros::Time(100 + i, 0));
     m->header.frame_id.clear();
-    pub.publish(m);
+    node.pub.publish(m);
     ros::WallDuration(0.05).sleep();
   }
-  ASSERT_TRUE(hpds_test::waitFor([&] { return diag.value("frames processed") == before + 3; }, 30.0))
-      << "processed " << diag.value("frames processed") << " after " << before;
-  EXPECT_TRUE(hpds_test::waitFor([&] { return diag.value("frames without frame_id") == counted_before + 3; }, 10.0))
-      << "frames without frame_id " << diag.value("frames without frame_id") << " after " << counted_before;
+  ASSERT_TRUE(hpds_test::waitFor([&] { return node.diag.value("frames processed") == before + 3; }, 30.0))
+      << "processed " << node.diag.value("frames processed") << " after " << before;
+  EXPECT_TRUE(hpds_test::waitFor([&] { return node.diag.value("frames without frame_id") == counted_before + 3; }, 10.0))
+      << "frames without frame_id " << node.diag.value("frames without frame_id") << " after " << counted_before;
   EXPECT_TRUE(hpds_test::waitFor(
-      [&] { return logs.has(rosgraph_msgs::Log::WARN, {"empty header.frame_id", "frames without frame_id"}); }, 10.0))
-      << logs.dump();
+      [&] { return node.logs.has(rosgraph_msgs::Log::WARN, {"empty header.frame_id", "frames without frame_id"}); }, 10.0))
+      << node.logs.dump();
   ros::WallDuration(0.5).sleep();
-  EXPECT_EQ(logs.count(rosgraph_msgs::Log::WARN, {"empty header.frame_id"}), 1u) << logs.dump();
+  EXPECT_EQ(node.logs.count(rosgraph_msgs::Log::WARN, {"empty header.frame_id"}), 1u) << node.logs.dump();
 }
 
 }  // namespace
