@@ -489,7 +489,10 @@ void HpdsServer::handle(const sensor_msgs::PointCloud2::ConstPtr &msg, std::size
                            "normals face and map/evict_distance and input ranges measure from (far from it, each "
                            "frame evicts the last). Set ros/sensor_frame to the sensor's tf frame");
       // Processed all the same: tf reads a zero stamp as "latest", which only a sensor at rest gets right.
-      if (msg->header.stamp.isZero() && !warned_zero_stamp_.exchange(true))
+      // Headers the driver must fix: warned about once, counted for every frame processed with them.
+      const bool zero_stamp = msg->header.stamp.isZero();
+      const bool no_frame_id = msg->header.frame_id.empty() && target_frame_.empty();
+      if (zero_stamp && !warned_zero_stamp_.exchange(true))
         ROS_WARN_STREAM_NAMED("hpds", tag_ << ": input clouds have a zero header.stamp, which the outputs keep"
                                           << (looked_up ? std::string(", and tf gives them its latest transform, not "
                                                                       "the one of their capture (a moving sensor's "
@@ -498,7 +501,7 @@ void HpdsServer::handle(const sensor_msgs::PointCloud2::ConstPtr &msg, std::size
                                           << " (counted in /diagnostics as 'frames with zero stamp'). Fix the "
                                              "driver's stamps");
       // Processed all the same (the output keeps the input's frame), but tf, RViz and PCL's tools cannot place it.
-      if (msg->header.frame_id.empty() && target_frame_.empty() && !warned_empty_frame_id_.exchange(true))
+      if (no_frame_id && !warned_empty_frame_id_.exchange(true))
         ROS_WARN_STREAM_NAMED("hpds", tag_ << ": input clouds have an empty header.frame_id, which the outputs "
                                               "keep: tf and RViz cannot place them (counted in /diagnostics as "
                                               "'frames without frame_id'). Fix the driver's frame_id");
@@ -519,8 +522,8 @@ void HpdsServer::handle(const sensor_msgs::PointCloud2::ConstPtr &msg, std::size
                                                "map/max_samples ("
                                             << config_.hpds.map.max_samples
                                             << ", 0 = no cap) caps the count; set both to 0 to keep every sample");
-        if (msg->header.stamp.isZero()) ++zero_stamps_;
-        if (msg->header.frame_id.empty() && target_frame_.empty()) ++empty_frame_ids_;
+        if (zero_stamp) ++zero_stamps_;
+        if (no_frame_id) ++empty_frame_ids_;
         if (frame.counters.out_of_range > 0 && logAllowed("out_of_range"))
           ROS_WARN_STREAM_NAMED("hpds", tag_ << ": " << frame.counters.out_of_range << " of the frame's "
                                                                 << frame.counters.input
