@@ -13,9 +13,11 @@
 #include <vector>
 
 #include "TestData.hpp"
+#include "hpds/config/Config.hpp"
 #include "hpds/io/KittiBin.hpp"
 #include "hpds/io/PlyWriter.hpp"
 #include "hpds/io/PoseFile.hpp"
+#include "hpds/io/SamplingRecord.hpp"
 #include "hpds/pcl/PointCloudFile.hpp"
 
 namespace hpds {
@@ -647,6 +649,73 @@ TEST(Cli, VerifyRefusesLevelsDeeperThanItsSpacingMakes) {
     EXPECT_NE(log.find("FAILED: "), std::string::npos) << log;
     EXPECT_NE(log.find("the sampling holds no sample"), std::string::npos) << log;
   }
+}
+
+// Found offline: verify and analyze had to be told the cell (--spacing, --max-depth) the file was sampled with,
+// which its header did not keep, and a wrong one could pass unnoticed. hpds sample records it; verify reads it.
+TEST(Cli, VerifyAndAnalyzeReadTheCellTheSamplingRecords) {
+  const auto tmp = test::scratchDir("cli_verify_record");
+  PointLayout l;
+  for (const char *axis : {"x", "y", "z"}) l.append(axis, FieldType::Float32);
+  PointBuffer plane(l, 0);
+  for (int i = 0; i < 120; ++i)
+    for (int j = 0; j < 120; ++j) {
+      plane.resize(plane.size() + 1);
+      const double p[3] = {0.025 * i, 0.025 * j, 1.0};
+      for (int a = 0; a < 3; ++a) writeFromDouble(plane.record(plane.size() - 1), l.fields[a], p[a]);
+    }
+  writePcd((tmp / "plane.pcd").string(), plane);
+  std::string log;
+  ASSERT_EQ(runHpds("sample " + shellQuote(tmp / "plane.pcd") + " --spacing 0.15 --max-depth 6 --no-normals -o " +
+                        shellQuote(tmp / "s.ply"),
+                    &log),
+            0)
+      << log;
+  const std::optional<SamplingRecord> record = readSamplingRecord((tmp / "s.ply").string());
+  ASSERT_TRUE(record.has_value());
+  EXPECT_EQ(record->max_depth, 6);
+  EXPECT_NEAR(poissonRadius(record->cell_size, record->output_level), 0.15, 1e-12);
+  const std::string input = " --input " + shellQuote(tmp / "plane.pcd");
+  EXPECT_EQ(runHpds("verify " + shellQuote(tmp / "s.ply") + input, &log), 0) << log;
+  EXPECT_EQ(log.find("warning"), std::string::npos) << log;
+  EXPECT_NE(log.find("as its header records: level-0 cell "), std::string::npos) << log;
+  EXPECT_NE(log.find("max_depth 6, output level " + std::to_string(record->output_level)), std::string::npos) << log;
+  EXPECT_EQ(runHpds("verify " + shellQuote(tmp / "s.ply") + " --spacing 0.15 --max-depth 6", &log), 0) << log;
+  EXPECT_EQ(log.find("warning"), std::string::npos) << log;
+  // Flags that disagree with the record are used, and said to disagree.
+  runHpds("verify " + shellQuote(tmp / "s.ply") + " --spacing 0.1", &log);
+  EXPECT_NE(log.find("was sampled with cell size"), std::string::npos) << log;
+  EXPECT_EQ(runHpds("analyze " + shellQuote(tmp / "s.ply") + " -o " + shellQuote(tmp / "analysis"), &log), 0) << log;
+  EXPECT_NE(readText(tmp / "analysis" / "analysis.json").find("\"cell_size\": "), std::string::npos);
+
+  // The record's output level must be reached: a file holding only levels 0..2 of it fails coverage.
+  const PointBuffer full = readPointCloud((tmp / "s.ply").string());
+  const PointField &level = *full.layout().find("level");
+  PointBuffer coarse(full.layout(), 0);
+  for (std::size_t i = 0; i < full.size(); ++i)
+    if (readAsDouble(full.record(i), level) <= 2.0) coarse.pushBack(full.record(i));
+  ASSERT_LT(coarse.size(), full.size());
+  writePly((tmp / "coarse.ply").string(), coarse, *record);
+  EXPECT_EQ(runHpds("verify " + shellQuote(tmp / "coarse.ply") + input, &log), 1) << log;
+  EXPECT_NE(log.find("FAILED"), std::string::npos) << log;
+  EXPECT_EQ(runHpds("verify " + shellQuote(tmp / "coarse.ply"), &log), 0) << log;
+  EXPECT_NE(log.find("(the output level its header records) holds no sample"), std::string::npos) << log;
+  // A file holding deeper levels than its record says is not what the record says.
+  SamplingRecord shallow = *record;
+  shallow.output_level = 2;
+  writePly((tmp / "deeper.ply").string(), full, shallow);
+  EXPECT_EQ(runHpds("verify " + shellQuote(tmp / "deeper.ply"), &log), 1) << log;
+  EXPECT_NE(log.find("but its header records levels 0..2"), std::string::npos) << log;
+  // Without a record, the flags are still required, and the message says why.
+  writePly((tmp / "bare.ply").string(), full, PlyContent::kSamples);
+  for (const std::string &cmd : {"verify " + shellQuote(tmp / "bare.ply"),
+                                "analyze " + shellQuote(tmp / "bare.ply") + " -o " + shellQuote(tmp / "a2")}) {
+    EXPECT_EQ(runHpds(cmd, &log), 1) << cmd << log;
+    EXPECT_NE(log.find("--cell-size or --spacing is required"), std::string::npos) << log;
+    EXPECT_NE(log.find("does not record the cell"), std::string::npos) << log;
+  }
+  EXPECT_EQ(runHpds("verify " + shellQuote(tmp / "bare.ply") + " --spacing 0.15 --max-depth 6" + input, &log), 0)
+      << log;
 }
 
 TEST(Cli, BadInputGivesAClearErrorAndNonZeroExit) {

@@ -270,7 +270,9 @@ TEST(OutputResolution, CliWritesTheAskedSpacingAndReportsTheChoice) {
   ASSERT_EQ(test::runHpds("verify " + test::shellQuote(tmp / "f.ply") + " --cell-size 4", &log), 0) << log;
   // verify takes one of the two, not both.
   EXPECT_NE(test::runHpds("verify " + test::shellQuote(tmp / "f.ply") + " --cell-size 4 --spacing 0.2", &log), 0) << log;
-  EXPECT_NE(test::runHpds("verify " + test::shellQuote(tmp / "f.ply"), &log), 0) << log;
+  // Without either, the cell and levels the file's header records.
+  EXPECT_EQ(test::runHpds("verify " + test::shellQuote(tmp / "f.ply"), &log), 0) << log;
+  EXPECT_TRUE(contains(log, "as its header records: level-0 cell 4 m, max_depth 8, output level 5")) << log;
 }
 
 }  // namespace

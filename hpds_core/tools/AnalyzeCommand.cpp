@@ -1,4 +1,4 @@
-// `hpds analyze SAMPLING.ply --cell-size C -o DIR [--input FRAMES... [--poses P]]`: blue-noise statistics of a
+// `hpds analyze SAMPLING.ply [--cell-size C] -o DIR [--input FRAMES... [--poses P]]`: blue-noise statistics of a
 // sampling, per level, on a planar patch (the PSA tool's RDF and radially averaged power spectrum), and with --input
 // the paper's figure-5 comparison against single-grid subsamplings of the same input at equal count.
 //
@@ -221,7 +221,9 @@ void runAnalyze(const AnalyzeArgs &a) {
   std::vector<InputPath> inputs = {{"input", a.sampling}, {"--poses", a.poses}};
   for (const std::string &in : a.inputs) inputs.push_back({"--input", in});
   checkPaths(inputs, {}, {{"-o", a.out_dir, {"analysis.json", "levels.csv", "rdf.csv", "spectrum.csv"}}});
-  const double cell_size = resolveCellSize(a.cell);
+  CellSizeOptions cell = a.cell;
+  applySamplingRecord(cell, a.sampling, cell.spacing.has_value());
+  const double cell_size = resolveCellSize(cell);
   if (!a.patch.empty() && a.patch.size() != 3) throw std::invalid_argument("--patch: expected cx,cy,size");
   SamplingCloud cloud = loadSampling(a.sampling);
   if (!cloud.has_level) throw std::invalid_argument(a.sampling + ": no `level` field (not an hpds sampling?)");

@@ -8,6 +8,7 @@
 
 #include "hpds/config/ConfigYaml.hpp"
 #include "hpds/io/PoseFile.hpp"
+#include "hpds/io/SamplingRecord.hpp"
 
 namespace hpds::cli {
 
@@ -189,7 +190,9 @@ HpdsConfig resolveConfig(const SamplingOptions &o) {
 }
 
 void addCellSizeOptions(CLI::App &app, CellSizeOptions &o, bool depth_bounds_keys) {
-  auto *cell = app.add_option("--cell-size", o.cell_size, "[m] level-0 cell edge the sampling was made with")
+  auto *cell = app.add_option("--cell-size", o.cell_size,
+                              "[m] level-0 cell edge the sampling was made with (default: the one its header "
+                              "records, as hpds sample and replay write it)")
                    ->check(positiveUpTo(1e6));
   auto *spacing = app.add_option("--spacing", o.spacing,
                                  "[m] or: the --spacing (output.spacing) the sampling was made with, the cell derived "
@@ -200,7 +203,8 @@ void addCellSizeOptions(CLI::App &app, CellSizeOptions &o, bool depth_bounds_key
                                    ? "the hierarchy.max_depth the sampling was made with: with --spacing it "
                                      "derives the cell; --input points 2^30 - 8 cells of that level or more from "
                                      "the origin were never inserted and are not checked for coverage (with "
-                                     "--cell-size and no --max-depth: the deeper of 8 and the sampling's deepest level)"
+                                     "--cell-size and no --max-depth: the deeper of 8 and the sampling's deepest "
+                                     "level; with neither flag, the one its header records)"
                                    : "with --spacing: the hierarchy.max_depth of the sampling")
                     ->capture_default_str()
                     ->check(integerIn(0, 21));
@@ -220,6 +224,7 @@ HpdsConfig spacingConfig(const CellSizeOptions &o) {
 }  // namespace
 
 int deepestLevelFor(const CellSizeOptions &o) {
+  if (o.recorded_level) return *o.recorded_level;
   if (o.cell_size || !o.spacing) return -1;
   return resolveOutput(spacingConfig(o)).level;
 }
@@ -234,6 +239,34 @@ double resolveCellSize(const CellSizeOptions &o) {
   if (!(*o.spacing > 0.0)) throw std::invalid_argument("--spacing: must be > 0");
   validateConfig(c);
   return resolveOutput(c).cell_size;
+}
+
+SamplingRecord samplingRecordOf(const Pipeline &pipeline) {
+  return {pipeline.hierarchy().cellSize(), pipeline.hierarchy().maxDepth(), pipeline.outputLevel()};
+}
+
+void applySamplingRecord(CellSizeOptions &o, const std::string &sampling, bool max_depth_given) {
+  const std::optional<SamplingRecord> record = readSamplingRecord(sampling);
+  const bool flags = o.cell_size || o.spacing;
+  if (!flags) {
+    if (!record)
+      throw std::invalid_argument("--cell-size or --spacing is required: '" + sampling +
+                                  "' does not record the cell it was sampled with (written by another tool or an "
+                                  "older hpds); give the --cell-size, or the --spacing and --max-depth, of its run");
+    o.cell_size = record->cell_size;
+    if (!max_depth_given) o.max_depth = record->max_depth;
+    o.recorded_level = record->output_level;
+    return;
+  }
+  if (!record) return;
+  const double given = resolveCellSize(o);
+  const bool same_cell = std::abs(given - record->cell_size) <= 1e-12 * record->cell_size;
+  const bool same_depth = !max_depth_given || o.max_depth == record->max_depth;
+  if (!same_cell || !same_depth)
+    std::cerr << "hpds: warning: '" << sampling << "' was sampled with cell size " << record->cell_size
+              << " m and max_depth " << record->max_depth << " (its header says so), but is checked with cell size "
+              << given << " m" << (max_depth_given ? " and max_depth " + std::to_string(o.max_depth) : std::string())
+              << " as given; leave out --cell-size, --spacing and --max-depth to use the recorded ones\n";
 }
 
 std::vector<Eigen::Isometry3d> readPosesOption(const std::string &path) {

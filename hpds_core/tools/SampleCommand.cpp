@@ -226,7 +226,7 @@ int runSample(const SampleArgs &a) {
   // failure on the way (a full disk) leaves every previous output as it was, never a new cloud beside an old map.
   auto t0 = std::chrono::steady_clock::now();
   AtomicFile ply_file(a.output);
-  writePly(ply_file, output, PlyContent::kSamples);
+  writePly(ply_file, output, samplingRecordOf(pipeline));
   ply_file.finish();
   std::optional<AtomicFile> map_file;
   if (!a.save_map.empty()) {

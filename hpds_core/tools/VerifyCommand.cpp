@@ -1,4 +1,4 @@
-// `hpds verify SAMPLING.ply (--cell-size C | --spacing S) [--max-depth M] [--input INPUT...] [--poses P]
+// `hpds verify SAMPLING.ply [--cell-size C | --spacing S] [--max-depth M] [--input INPUT...] [--poses P]
 // [--frame K]`: an independent check of a written sampling (k-d trees, not the sampler's grids). Prints a per-level
 // table; exit code 1 on any violation. A scan-mode output of several frames is checked frame by frame.
 #include <algorithm>
@@ -98,7 +98,11 @@ void addVerifyCommand(CLI::App &app) {
       throw CLI::ValidationError("SAMPLING is missing: --input takes every path after it, so '" + a->inputs.back() +
                                  "' was read as an input; give SAMPLING first: hpds verify SAMPLING --input INPUT...");
     a->inputs = expandInputFolders(a->inputs, std::cerr);
+    applySamplingRecord(a->cell, a->sampling, cmd->count("--max-depth") > 0);
     const double cell_size = resolveCellSize(a->cell);
+    if (a->cell.recorded_level)
+      std::cout << "as its header records: level-0 cell " << cell_size << " m, max_depth " << a->cell.max_depth
+                << ", output level " << *a->cell.recorded_level << "\n";
     // A scan-mode output of several frames holds one sampling per frame (each frame sampled on its own): each is
     // checked on its own, as the sampler made it.
     PointBuffer all = readPointCloud(a->sampling);
@@ -112,12 +116,17 @@ void addVerifyCommand(CLI::App &app) {
     for (std::size_t i = 0; i < all.size(); ++i) max_level = std::max(max_level, readAsDouble(all.record(i), lf));
     // A --spacing with another --max-depth than the sampling's derives another cell, against which a sampling can
     // pass unchecked (its radii all shrunk): a level deeper than that cell's output level gives it away.
-    if (const int deepest = deepestLevelFor(a->cell); deepest >= 0 && max_level > deepest)
+    if (const int deepest = deepestLevelFor(a->cell); deepest >= 0 && max_level > deepest) {
+      if (a->cell.recorded_level)
+        throw std::invalid_argument(a->sampling + ": holds level " +
+                                    std::to_string(static_cast<long long>(max_level)) +
+                                    ", but its header records levels 0.." + std::to_string(deepest));
       throw std::invalid_argument(
           a->sampling + ": holds level " + std::to_string(static_cast<long long>(max_level)) + ", but --spacing " +
           std::to_string(*a->cell.spacing) + " with --max-depth " + std::to_string(a->cell.max_depth) +
           " makes samplings of levels 0.." + std::to_string(deepest) +
           ": give the --spacing and --max-depth it was sampled with (or its --cell-size)");
+    }
     // The depth whose cells bound the coordinates the sampler inserted: --input points beyond were never inserted,
     // and counted as uncovered they failed a sampling that did all it could. hpds sample's default depth unless
     // given; a sampling holding deeper levels was built at least that deep.
@@ -218,7 +227,9 @@ void addVerifyCommand(CLI::App &app) {
       // levels is not what that spacing gives.
       if (!with_input && implied >= 0 && !report.levels.empty() && report.levels.back().union_count > 0 &&
           report.levels.back().count == 0)
-        std::cout << "note: level " << implied << " (the level --spacing gives) holds no sample"
+        std::cout << "note: level " << implied
+                  << (a->cell.recorded_level ? " (the output level its header records)" : " (the level --spacing gives)")
+                  << " holds no sample"
                   << (several ? " in frame " + std::to_string(frame) : std::string())
                   << ": the sampling may stop short of that spacing; give --input to check its coverage\n";
       if (report.levels.empty() || report.levels.back().union_count == 0)

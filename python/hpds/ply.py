@@ -85,6 +85,12 @@ def read(path):
         return data.copy()
 
 
+def read_sampling_record(path):
+    """(cell_size, max_depth, output_level) that `hpds sample`, `hpds replay` or the map build recorded in the header
+    of a sampling's PLY, or None for a file without one; RuntimeError naming the file when the line is malformed."""
+    return _hpds.read_sampling_record(os.fspath(path))
+
+
 def _property_type(vertices, name):
     base = vertices.dtype[name].base
     if vertices.dtype[name].shape:
@@ -97,11 +103,13 @@ def _property_type(vertices, name):
     return _NAMES[key]
 
 
-def write(path, vertices, samples=False):
+def write(path, vertices, samples=False, record=None):
     """Writes a structured array as binary little-endian PLY, atomically (a temporary beside `path`, renamed).
 
     samples: mark the file as a sampling's output, as `hpds sample` marks its own (its header comment), so that
-    `hpds sample FOLDER` and the map build leave it out of a folder of frames; not for frames."""
+    `hpds sample FOLDER` and the map build leave it out of a folder of frames; not for frames.
+    record: (cell_size, max_depth, output_level) the sampling was made with, as read_sampling_record gives it:
+    kept in the header (implies samples), so that `hpds verify` and `hpds analyze` need no --spacing."""
     if not os.fspath(path).lower().endswith(".ply"):
         # As `hpds sample -o out.pcd` is refused: a PLY under another format's name is read as that format.
         raise ValueError("write: '%s' is not a .ply name, and this writes PLY: name the output e.g. map.ply" % (path,))
@@ -109,8 +117,11 @@ def write(path, vertices, samples=False):
     if vertices.dtype.names is None or vertices.ndim != 1:
         raise ValueError("write: expects a 1-D structured array (fields x, y, z, ...), got shape %s and dtype %s"
                          % (vertices.shape, vertices.dtype))
-    lines = ["ply", "format binary_little_endian 1.0"] + ([_hpds.PLY_SAMPLES_COMMENT] if samples else []) + [
-        "element vertex %d" % len(vertices)]
+    marks = [_hpds.PLY_SAMPLES_COMMENT] if samples or record is not None else []
+    if record is not None:
+        cell_size, max_depth, output_level = record
+        marks.append(_hpds.sampling_record_line(float(cell_size), int(max_depth), int(output_level)))
+    lines = ["ply", "format binary_little_endian 1.0"] + marks + ["element vertex %d" % len(vertices)]
     for name in vertices.dtype.names:
         if not _NAME.match(name):
             raise ValueError("write: field name %r is not one word of printable ASCII" % name)
@@ -177,5 +188,9 @@ def merge(paths, out_path):
     for p, part in zip(paths[1:], parts[1:]):
         if part.dtype != parts[0].dtype:
             raise ValueError("merge: '%s' has other fields than '%s'" % (p, paths[0]))
-    # The merged tiles of a build are a sampling's output as each tile is; anything else merged is not marked.
-    write(out_path, np.concatenate(parts), samples=all(_hpds.ply_marked_as_samples(os.fspath(p)) for p in paths))
+    # The merged tiles of a build are a sampling's output as each tile is; anything else merged is not marked. The
+    # tiles' sampling record is kept when they all carry the same one (one build's tiles do).
+    records = {read_sampling_record(p) for p in paths}
+    record = records.pop() if len(records) == 1 else None
+    write(out_path, np.concatenate(parts), samples=all(_hpds.ply_marked_as_samples(os.fspath(p)) for p in paths),
+          record=record)

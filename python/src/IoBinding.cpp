@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cctype>
 #include <cstring>
+#include <optional>
 #include <sstream>
 #include <stdexcept>
 #include <vector>
@@ -14,6 +15,7 @@
 #include "hpds/io/KittiBin.hpp"
 #include "hpds/io/PlyWriter.hpp"
 #include "hpds/io/PoseFile.hpp"
+#include "hpds/io/SamplingRecord.hpp"
 #ifdef HPDS_PYTHON_WITH_PCL
 #include "hpds/pcl/PointCloudFile.hpp"
 #endif
@@ -153,6 +155,23 @@ void bindIo(py::module_ &m) {
   m.def("ply_marked_as_samples", &plyMarkedAsSamples, py::arg("path"),
         "Whether a PLY file carries the header comment of a sampling's output.");
   m.attr("PLY_SAMPLES_COMMENT") = kPlySamplesComment;
+  m.def(
+      "read_sampling_record",
+      [](const std::string &path) -> py::object {
+        const std::optional<SamplingRecord> r = readSamplingRecord(path);
+        if (!r) return py::none();
+        return py::make_tuple(r->cell_size, r->max_depth, r->output_level);
+      },
+      py::arg("path"),
+      "(cell_size, max_depth, output_level) recorded in a sampling's PLY header, or None; RuntimeError when the "
+      "line is malformed.");
+  m.def(
+      "sampling_record_line",
+      [](double cell_size, int max_depth, int output_level) {
+        return samplingRecordLine(SamplingRecord{cell_size, max_depth, output_level});
+      },
+      py::arg("cell_size"), py::arg("max_depth"), py::arg("output_level"),
+      "The PLY header line recording a sampling's cell, max_depth and output level.");
 }
 
 }  // namespace hpds::python

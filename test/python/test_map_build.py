@@ -156,9 +156,14 @@ class MapBuild(unittest.TestCase):
         xyz = np.zeros(len(posed), [("x", "<f4"), ("y", "<f4"), ("z", "<f4")])
         xyz["x"], xyz["y"], xyz["z"] = posed[:, 0], posed[:, 1], posed[:, 2]
         hpds.ply.write(self.out("input.ply"), xyz)
-        rc, text = support.run([support.CLI, "verify", merged, "--cell-size", str(CELL), "--input",
-                                self.out("input.ply")], check=False)
+        # The tiles' header records the sampling, and the merge keeps it: verify needs no --cell-size, and checks
+        # coverage down to the recorded output level.
+        record = hpds.ply.read_sampling_record(merged)
+        self.assertIsNotNone(record)
+        self.assertEqual((record[0], record[2]), (CELL, 4))
+        rc, text = support.run([support.CLI, "verify", merged, "--input", self.out("input.ply")], check=False)
         self.assertEqual(rc, 0, text)
+        self.assertIn("as its header records: level-0 cell", text)
         self.assertIn("OK: no violations", text)
         # The seams cut dense geometry: many samples within r_0 of a tile border, on both of its sides.
         r0 = 0.5 * np.sqrt(3.0) * CELL

@@ -160,7 +160,36 @@ class Merge(support.ScratchCase):
     def test_merges(self):
         hpds.ply.merge(self.inputs, self.path("all.ply"))
         self.assertEqual(len(hpds.ply.read(self.path("all.ply"))), 8)
+        self.assertIsNone(hpds.ply.read_sampling_record(self.path("all.ply")))
         self.assert_inputs_untouched()
+
+    def test_a_sampling_record_is_written_read_back_and_kept_by_a_merge_of_equal_ones(self):
+        cell = 0.1 * 32 / (0.5 * np.sqrt(3.0))  # a derived cell: not a short decimal
+        for name in ("r1.ply", "r2.ply"):
+            hpds.ply.write(self.path(name), cloud(), record=(cell, 6, 5))
+        self.assertEqual(hpds.ply.read_sampling_record(self.path("r1.ply")), (cell, 6, 5))
+        self.assertTrue(hpds._hpds.ply_marked_as_samples(self.path("r1.ply")))
+        self.assertEqual(len(hpds.ply.read(self.path("r1.ply"))), 4)
+        hpds.ply.merge([self.path("r1.ply"), self.path("r2.ply")], self.path("same.ply"))
+        self.assertEqual(hpds.ply.read_sampling_record(self.path("same.ply")), (cell, 6, 5))
+        # Samplings of other cells merged are no longer one sampling: no record is carried.
+        hpds.ply.write(self.path("r3.ply"), cloud(), record=(2 * cell, 6, 5))
+        hpds.ply.merge([self.path("r1.ply"), self.path("r3.ply")], self.path("mixed.ply"))
+        self.assertIsNone(hpds.ply.read_sampling_record(self.path("mixed.ply")))
+        self.assertTrue(hpds._hpds.ply_marked_as_samples(self.path("mixed.ply")))
+        # A record no reader would take is not written; one in a file is refused naming the file.
+        with self.assertRaises(ValueError) as e:
+            hpds.ply.write(self.path("bad.ply"), cloud(), record=(cell, 4, 5))
+        self.assertIn("out of range", str(e.exception))
+        self.assertFalse(os.path.exists(self.path("bad.ply")))
+        with open(self.path("r1.ply"), "rb") as f:
+            text = f.read().replace(b"max_depth 6 output_level 5", b"max_depth 4 output_level 5")
+        with open(self.path("bad.ply"), "wb") as f:
+            f.write(text)
+        with self.assertRaises(RuntimeError) as e:
+            hpds.ply.read_sampling_record(self.path("bad.ply"))
+        self.assertIn("bad.ply", str(e.exception))
+        self.assertIn("out of range", str(e.exception))
 
     def test_an_input_under_another_name_is_refused(self):
         os.symlink("md", self.path("linked_folder"))

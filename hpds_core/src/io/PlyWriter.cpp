@@ -84,7 +84,8 @@ struct PlyPlan {
   std::size_t out_step = 0;
 };
 
-PlyPlan planPly(const std::string &path, const PointBuffer &cloud, PlyContent content) {
+PlyPlan planPly(const std::string &path, const PointBuffer &cloud, PlyContent content,
+                const SamplingRecord *record = nullptr) {
   const PointLayout &layout = cloud.layout();
   try {
     layout.validate();
@@ -94,6 +95,13 @@ PlyPlan planPly(const std::string &path, const PointBuffer &cloud, PlyContent co
 
   std::string header = "ply\nformat binary_little_endian 1.0\n";
   if (content == PlyContent::kSamples) header += std::string(kPlySamplesComment) + "\n";
+  if (record) {
+    try {
+      header += samplingRecordLine(*record) + "\n";
+    } catch (const std::invalid_argument &e) {
+      fail(path, std::string("cannot write PLY: ") + e.what());
+    }
+  }
   if (cloud.height() > 1) {
     header += "obj_info num_cols " + std::to_string(cloud.width()) + "\n";
     header += "obj_info num_rows " + std::to_string(cloud.height()) + "\n";
@@ -192,6 +200,17 @@ void writePly(const std::string &path, const PointBuffer &cloud, PlyContent cont
 
 void writePly(AtomicFile &file, const PointBuffer &cloud, PlyContent content) {
   writePlanned(file, planPly(file.target(), cloud, content), cloud);
+}
+
+void writePly(const std::string &path, const PointBuffer &cloud, const SamplingRecord &record) {
+  const PlyPlan plan = planPly(path, cloud, PlyContent::kSamples, &record);
+  AtomicFile file(path);
+  writePlanned(file, plan, cloud);
+  file.commit();
+}
+
+void writePly(AtomicFile &file, const PointBuffer &cloud, const SamplingRecord &record) {
+  writePlanned(file, planPly(file.target(), cloud, PlyContent::kSamples, &record), cloud);
 }
 
 }  // namespace hpds

@@ -207,7 +207,7 @@ TileFinishStats finishTile(const HpdsConfig &given, const TileGrid &grid, const 
   stats.samples = ids.size();
   stats.rounding = positionRounding(cloud);
 
-  writePly(ply_path, cloud, PlyContent::kSamples);  // atomic: a temporary beside it, renamed when complete
+  writePly(ply_path, cloud, SamplingRecord{h.cellSize(), h.maxDepth(), level});  // atomic: a temporary beside it, renamed when complete
   return stats;
 }
 

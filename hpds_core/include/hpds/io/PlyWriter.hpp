@@ -24,6 +24,7 @@
 #include <string>
 
 #include "hpds/io/AtomicFile.hpp"
+#include "hpds/io/SamplingRecord.hpp"
 #include "hpds/points/PointBuffer.hpp"
 
 namespace hpds {
@@ -38,5 +39,9 @@ void writePly(const std::string &path, const PointBuffer &cloud, PlyContent cont
 /// The same bytes into `file` (its target names the file in messages), without committing it: a program writing
 /// several outputs commits them only once all are written, so that a failure leaves every previous output as it was.
 void writePly(AtomicFile &file, const PointBuffer &cloud, PlyContent content = PlyContent::kPoints);
+/// A sampling's output (PlyContent::kSamples) whose header also records the sampling it was made with
+/// (SamplingRecord.hpp), so that `hpds verify` and `hpds analyze` read the cell and depth from the file.
+void writePly(const std::string &path, const PointBuffer &cloud, const SamplingRecord &record);
+void writePly(AtomicFile &file, const PointBuffer &cloud, const SamplingRecord &record);
 
 }  // namespace hpds
