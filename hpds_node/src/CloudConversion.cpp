@@ -44,7 +44,9 @@ CloudError checkLayout(const sensor_msgs::PointCloud2 &msg, hpds::PointLayout &l
       return fail(CloudError::FieldOutsidePoint, why,
                   "field '" + f.name + "' ends at byte " + std::to_string(end) + " beyond point_step " +
                       std::to_string(msg.point_step));
-    if (f.name == "_") continue;
+    // PCL's padding; a nameless field (seen from hand-made messages) no reader can find by name either, and a field
+    // named '' in the output would break PCL's own conversions of it: both are padding.
+    if (f.name == "_" || f.name.empty()) continue;
     if (!names.insert(f.name).second)
       return fail(CloudError::DuplicateField, why, "field '" + f.name + "' appears twice");
     layout.fields.push_back(hpds::PointField{f.name, f.offset, type, f.count});

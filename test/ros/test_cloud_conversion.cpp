@@ -215,6 +215,12 @@ TEST(CloudConversion, PclPaddingFieldsAreLeftOut) {
   EXPECT_EQ(buf.layout().find("_"), nullptr);
   EXPECT_EQ(buf.layout().fields.size(), msg.fields.size() - 2);
   EXPECT_EQ(buf.bytes(), msg.data);
+  // A nameless field is padding too: no output field named ''.
+  PointCloud2 nameless = makeCloud(PointField::FLOAT32, 2, 1);
+  nameless.fields.push_back(field("", 12, PointField::UINT8, 1));
+  ASSERT_EQ(hpds_node::fromRosCloud(nameless, buf), CloudError::None);
+  EXPECT_EQ(buf.layout().find(""), nullptr);
+  EXPECT_EQ(buf.layout().fields.size(), nameless.fields.size() - 1);
 }
 
 TEST(CloudConversion, ZeroSizeCloudIsEmptyNotAnError) {
