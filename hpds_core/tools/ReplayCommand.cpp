@@ -132,7 +132,7 @@ std::string messagesJson(const hpds_node::ProcessorStats &s, std::uint64_t wrong
   j << "}";
   for (int r = 0; r < hpds_node::kDropReasonCount; ++r)
     j << ", \"" << hpds_node::toString(hpds_node::DropReason(r)) << "\": " << s.dropped[r];
-  j << "}}";
+  j << "}, \"pose_jumps\": " << s.pose_jumps << "}";
   return j.str();
 }
 
@@ -238,6 +238,10 @@ int runReplay(const ReplayArgs &a) {
     report.seconds.normals += frame.seconds_normals;
     input_rounding = std::max(input_rounding, frame.input_rounding);
     not_carried.insert(frame.fields_not_carried.begin(), frame.fields_not_carried.end());
+    if (frame.pose_jump)
+      std::cerr << "hpds: warning: at " << msg->header.stamp << ": "
+                << hpds::poseJumpWarning(*frame.pose_jump, "check the bag's tf, or replay its parts on their own")
+                << "\n";
     if (scan)
       for (std::size_t d = 0; d < report.samples_per_level.size(); ++d)
         report.samples_per_level[d] += frame.counters.accepted_per_level[d];
@@ -299,7 +303,7 @@ int runReplay(const ReplayArgs &a) {
     report.output_points = ply.size();
     report.invalid_normals = countInvalidNormals(ply);
     ply_file.emplace(a.output);
-    writePly(*ply_file, ply, PlyContent::kSamples);
+    writePly(*ply_file, ply, samplingRecordOf(pipeline));
     ply_file->finish();
   }
   report.seconds.write += since(t_write);

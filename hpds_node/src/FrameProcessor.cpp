@@ -65,6 +65,7 @@ ProcessorStats &ProcessorStats::operator+=(const ProcessorStats &o) {
   seconds_sum += o.seconds_sum;
   seconds_max = std::max(seconds_max, o.seconds_max);
   points += o.points;
+  pose_jumps += o.pose_jumps;
   return *this;
 }
 
@@ -147,6 +148,7 @@ std::string FrameProcessor::loadMap(const std::string &path) {
   // The loaded map has not been published as a local map yet: send one with the next frame.
   local_map_sent_ = false;
   last_local_map_stamp_ = 0.0;
+  has_last_sensor_ = false;  // where the loaded map's last sensor was is not in the file
   return warning;
 }
 
@@ -157,6 +159,7 @@ std::size_t FrameProcessor::clearMap() {
   loaded_frames_ = 0;
   local_map_sent_ = false;
   last_local_map_stamp_ = 0.0;
+  has_last_sensor_ = false;
   return held;
 }
 
@@ -239,6 +242,14 @@ ProcessedFrame FrameProcessor::process(const sensor_msgs::PointCloud2 &msg, cons
   r.processed = true;
   r.counters = inserted.counters;
   r.seconds_normals += inserted.seconds_normals;  // map mode: the normals the map keeps
+  if (map_mode) {
+    const Eigen::Vector3d sensor = frame.sensor_to_fixed * frame.viewpoint;
+    if (has_last_sensor_) r.pose_jump = hpds::poseJump(last_sensor_, last_sensor_stamp_, sensor, frame.stamp);
+    if (r.pose_jump) ++stats_.pose_jumps;
+    has_last_sensor_ = true;
+    last_sensor_ = sensor;
+    last_sensor_stamp_ = frame.stamp;
+  }
 
   // 3. Outputs, in the target frame (or the input frame), stamped with the input stamp.
   std_msgs::Header header;

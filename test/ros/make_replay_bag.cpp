@@ -1,9 +1,10 @@
 // Writes the replay test's input bag: a synthetic lidar drive (hpds/eval/SyntheticLidar.hpp) as PointCloud2 on
 // /velodyne_points in frame "velodyne", its poses on /tf (odom -> base_link, at each cloud's stamp) and a static
 // base_link -> velodyne mount on /tf_static, plus one truncated cloud that both the node and `hpds replay` must
-// drop and count.
+// drop and count. With JUMP_AT, the odom poses of frames JUMP_AT on are shifted 40 m (a relocalisation), which
+// the node and `hpds replay` must report as a pose jump.
 //
-// Usage: make_replay_bag OUT.bag [frames]
+// Usage: make_replay_bag OUT.bag [frames [JUMP_AT]]
 #include <rosbag/bag.h>
 #include <tf2_eigen/tf2_eigen.h>
 #include <tf2_msgs/TFMessage.h>
@@ -29,7 +30,7 @@ geometry_msgs::TransformStamped transform(const Eigen::Isometry3d &pose, const s
 
 int main(int argc, char **argv) {
   if (argc < 2) {
-    std::cerr << "usage: make_replay_bag OUT.bag [frames]\n";
+    std::cerr << "usage: make_replay_bag OUT.bag [frames [JUMP_AT]]\n";
     return 2;
   }
   hpds::SyntheticLidarConfig lidar;
@@ -37,6 +38,7 @@ int main(int argc, char **argv) {
   lidar.azimuth_steps = 900;
   lidar.frames = argc > 2 ? std::stoi(argv[2]) : 6;
   lidar.speed = 1.5;
+  const int jump_at = argc > 3 ? std::stoi(argv[3]) : -1;
   const hpds::SyntheticLidar sensor(lidar);
 
   Eigen::Isometry3d mount = Eigen::Isometry3d::Identity();
@@ -61,7 +63,9 @@ int main(int argc, char **argv) {
     const ros::Time stamp = t0 + ros::Duration(0.05 + f.frame.stamp);
     // odom -> base_link such that odom -> velodyne is the synthetic sensor pose.
     tf2_msgs::TFMessage tf;
-    tf.transforms.push_back(transform(f.frame.sensor_to_fixed * mount.inverse(), "odom", "base_link", stamp));
+    Eigen::Isometry3d jump = Eigen::Isometry3d::Identity();
+    if (jump_at >= 0 && i >= jump_at) jump.translation() = Eigen::Vector3d(40.0, 0.0, 0.0);
+    tf.transforms.push_back(transform(jump * f.frame.sensor_to_fixed * mount.inverse(), "odom", "base_link", stamp));
     bag.write("/tf", stamp, tf);
 
     std_msgs::Header header;

@@ -430,6 +430,69 @@ TEST(FrameProcessor, ZeroStampedCloudsStillGetALocalMapAtItsRate) {
   EXPECT_GE(std::chrono::steady_clock::now() - start, std::chrono::milliseconds(50));
 }
 
+// Found in a ROS map-mode trial: a relocalisation (map -> odom stepping 40 m) put the next frames 40 m off in the
+// map, which then held the street twice, and nothing said so. Such a frame is processed, marked and counted.
+TEST(FrameProcessor, APoseJumpIsMarkedAndCountedAndClearingTheMapForgetsThePosition) {
+  const hpds::SyntheticLidar lidar(smallLidar());
+  NodeConfig config;
+  config.hpds.mode = hpds::Mode::Map;
+  config.hpds.output.level = 3;
+  config.hpds.hierarchy.cell_size = 4.0;
+  config.hpds.hierarchy.max_depth = 4;
+  config.hpds.normals.enabled = false;
+  config.ros.fixed_frame = "odom";
+  FrameProcessor processor(config);
+  Eigen::Isometry3d jump = Eigen::Isometry3d::Identity();
+  jump.translation() = Eigen::Vector3d(0.0, 40.0, 0.0);
+  // Frames 0.1 s apart, 2 m each (20 m/s); frame 2 jumps 40 m aside, frame 3 follows on from it (no second jump).
+  std::vector<bool> jumped;
+  Eigen::Vector3d previous = Eigen::Vector3d::Zero();
+  for (int i = 0; i < 4; ++i) {
+    const hpds::SyntheticFrame f = lidar.frame(i);
+    const Eigen::Isometry3d pose = i >= 2 ? jump * f.frame.sensor_to_fixed : f.frame.sensor_to_fixed;
+    const auto r = processor.process(toMsg(f.frame.points, 100.0 + 0.1 * i), pose, OutputRequest::none(0));
+    ASSERT_TRUE(r.processed);
+    jumped.push_back(r.pose_jump.has_value());
+    if (r.pose_jump) {
+      EXPECT_NEAR(r.pose_jump->metres, (pose.translation() - previous).norm(), 1e-4);
+      EXPECT_GT(r.pose_jump->metres, 40.0);
+      EXPECT_NEAR(r.pose_jump->seconds, 0.1, 1e-6);
+    }
+    previous = pose.translation();
+  }
+  EXPECT_EQ(jumped, (std::vector<bool>{false, false, true, false}));
+  EXPECT_EQ(processor.stats().pose_jumps, 1u);
+  // After ~clear_map the next frame starts a new map: wherever it is, it is no jump.
+  processor.clearMap();
+  const hpds::SyntheticFrame f = lidar.frame(0);
+  EXPECT_FALSE(processor.process(toMsg(f.frame.points, 100.5), f.frame.sensor_to_fixed, OutputRequest::none(0))
+                   .pose_jump.has_value());
+  // Zero stamps tell no speed: the same 40 m step is not taken for a jump.
+  FrameProcessor unstamped(config);
+  EXPECT_FALSE(unstamped.process(toMsg(f.frame.points, 0.0), f.frame.sensor_to_fixed, OutputRequest::none(0))
+                   .pose_jump.has_value());
+  EXPECT_FALSE(unstamped.process(toMsg(f.frame.points, 0.0), jump * f.frame.sensor_to_fixed, OutputRequest::none(0))
+                   .pose_jump.has_value());
+  EXPECT_EQ(unstamped.stats().pose_jumps, 0u);
+}
+
+TEST(PoseJump, OnlyAFastLongMoveBetweenIncreasingStampsIsAJump) {
+  const Eigen::Vector3d o = Eigen::Vector3d::Zero();
+  EXPECT_TRUE(hpds::poseJump(o, 1.0, Eigen::Vector3d(6.0, 0, 0), 1.1).has_value());   // 60 m/s
+  EXPECT_FALSE(hpds::poseJump(o, 1.0, Eigen::Vector3d(4.0, 0, 0), 1.1).has_value());  // 40 m/s: a fast car
+  EXPECT_FALSE(hpds::poseJump(o, 1.0, Eigen::Vector3d(1.5, 0, 0), 1.01).has_value()); // 150 m/s, but within 2 m
+  EXPECT_FALSE(hpds::poseJump(o, 1.0, Eigen::Vector3d(100, 0, 0), 1.0).has_value());  // same stamp
+  EXPECT_FALSE(hpds::poseJump(o, 2.0, Eigen::Vector3d(100, 0, 0), 1.0).has_value());  // back in time (a looped bag)
+  const auto j = hpds::poseJump(o, 1.0, Eigen::Vector3d(0, 30.0, 40.0), 1.5);
+  ASSERT_TRUE(j.has_value());
+  EXPECT_DOUBLE_EQ(j->metres, 50.0);
+  EXPECT_DOUBLE_EQ(j->seconds, 0.5);
+  const std::string w = hpds::poseJumpWarning(*j, "call ~clear_map to start a new map");
+  EXPECT_NE(w.find("the sensor moved 50 m in 0.5 s"), std::string::npos) << w;
+  EXPECT_NE(w.find("100 m/s"), std::string::npos) << w;
+  EXPECT_NE(w.find("; call ~clear_map to start a new map"), std::string::npos) << w;
+}
+
 TEST(FrameProcessor, DropsAreCountedByReason) {
   NodeConfig config;
   config.hpds.mode = hpds::Mode::Map;

@@ -5,7 +5,9 @@
 // Parameters: ~target (hpds with a deep queue), ~overload_target (hpds with queue_size 1), ~seq_target (hpds for the
 // numbering gaps), ~log_target (hpds without a transform to its output frame, queue_size 1).
 #include <gtest/gtest.h>
+#include <geometry_msgs/TransformStamped.h>
 #include <rosgraph_msgs/Log.h>
+#include <tf2_msgs/TFMessage.h>
 #include <topic_tools/shape_shifter.h>
 
 #include <algorithm>
@@ -420,6 +422,48 @@ TEST_F(HostileTest, EvictionsAreCountedAndSaidOnce) {
       << node.logs.dump();
   ros::WallDuration(0.5).sleep();
   EXPECT_EQ(node.logs.count(rosgraph_msgs::Log::INFO, {"the map evicts samples from now on"}), 1u) << node.logs.dump();
+}
+
+// Found in a ROS map-mode trial: a relocalisation (odom -> sensor stepping 60 m in one frame) put the next frame's
+// points elsewhere in the map, without a word. Counted as a pose jump and warned about; the frame is processed.
+TEST_F(HostileTest, APoseJumpIsCountedAndWarnedAbout) {
+  NodeProbe node(nh_, ros::NodeHandle("~").param<std::string>("slash_target", "/hpds_slash"));
+  ASSERT_TRUE(node.connected());
+  // A plain /tf publisher, not tf2_ros's broadcaster: the test waits for the node's listener to connect, or the
+  // first transform is lost.
+  ros::Publisher tf = nh_.advertise<tf2_msgs::TFMessage>("/tf", 10);
+  ASSERT_TRUE(hpds_test::waitFor([&] { return tf.getNumSubscribers() > 0; }, 30.0)) << "no tf listener";
+  const double processed = node.diag.value("frames processed"), jumps = node.diag.value("pose jumps");
+  // 1 s apart: 0.5 m is a walk, 59.5 m is no vehicle's speed. Stamps after the other tests' (no step back).
+  const double x[3] = {0.0, 0.5, 60.0};
+  for (int i = 0; i < 3; ++i) {
+    const ros::Time stamp(5000 + i, 0);
+    geometry_msgs::TransformStamped t;
+    t.header.stamp = stamp;
+    t.header.frame_id = "odom";
+    t.child_frame_id = "jumpy";
+    t.transform.translation.x = x[i];
+    t.transform.rotation.w = 1.0;
+    tf2_msgs::TFMessage message;
+    message.transforms.push_back(t);
+    tf.publish(message);
+    ros::WallDuration(0.1).sleep();
+    auto m = validCloud(500, 1990 + std::uint32_t(i), stamp);
+    m->header.frame_id = "jumpy";
+    node.pub.publish(m);
+    ros::WallDuration(0.3).sleep();
+  }
+  ASSERT_TRUE(hpds_test::waitFor([&] { return node.diag.value("frames processed") == processed + 3; }, 30.0))
+      << "processed " << node.diag.value("frames processed") << " after " << processed << "\n" << node.logs.dump();
+  EXPECT_TRUE(hpds_test::waitFor([&] { return node.diag.value("pose jumps") == jumps + 1; }, 10.0))
+      << "pose jumps " << node.diag.value("pose jumps") << " after " << jumps;
+  EXPECT_TRUE(hpds_test::waitFor(
+      [&] {
+        return node.logs.has(rosgraph_msgs::Log::WARN,
+                             {"the sensor moved 59.5 m in 1 s", "~clear_map", "counted in /diagnostics as 'pose jumps'"});
+      },
+      10.0))
+      << node.logs.dump();
 }
 
 // Scan mode: a cloud without header.frame_id is processed (its outputs keep the empty frame), warned about once

@@ -21,6 +21,9 @@
 //   Clouds use the OutputCloud layout: x y z float32 first, [normal_x/y/z curvature], level uint8 and the input
 //   fields, every field aligned to its element size and point_step a multiple of 4 (OutputCloud.hpp).
 // - Drops: a message whose fields differ from the map's (map mode) is dropped and counted (LayoutChanged).
+// - Pose jumps (map mode): a processed frame whose sensor moved implausibly fast since the previous processed one
+//   (hpds::poseJump) is processed as any, and marked and counted (ProcessedFrame::pose_jump, stats().pose_jumps);
+//   loadMap and clearMap forget the previous position.
 // - Persistence (map mode): saveMap writes the map and the frame counter (hpds::saveMap, atomic); loadMap replaces
 //   them with a file's (hpds::loadMap: on any error nothing changes) and restarts the local-map clock, so the next
 //   frame continues exactly as it would have after the frames that built the file (same frame index, same
@@ -35,10 +38,12 @@
 #include <Eigen/Geometry>
 #include <array>
 #include <cstdint>
+#include <optional>
 #include <string>
 #include <vector>
 
 #include "hpds/pipeline/Pipeline.hpp"
+#include "hpds/pipeline/PoseJump.hpp"
 #include "hpds_node/CloudConversion.hpp"
 #include "hpds_node/NodeConfig.hpp"
 
@@ -82,6 +87,8 @@ struct ProcessedFrame {
   /// [m] The input's own positionRounding (its float32 x y z as received), measured only when position_rounding
   /// matters (hpds::roundingMatters), else 0: where it matters too, float64 output cannot restore the positions.
   double input_rounding = 0.0;
+  /// Map mode: the sensor moved implausibly fast since the previous processed frame (hpds::poseJump).
+  std::optional<hpds::PoseJump> pose_jump;
 };
 
 /// Running totals for diagnostics and --stats.
@@ -93,6 +100,7 @@ struct ProcessorStats {
   std::array<std::uint64_t, kDropReasonCount> dropped{};    ///< indexed by DropReason
   double seconds_sum = 0.0, seconds_max = 0.0;              ///< processing time of processed frames
   hpds::FrameCounters points;                               ///< pipeline point counters, all frames
+  std::uint64_t pose_jumps = 0;  ///< map mode: processed frames whose sensor jumped (ProcessedFrame::pose_jump)
 
   [[nodiscard]] std::uint64_t malformedTotal() const;
   [[nodiscard]] std::uint64_t droppedTotal() const;  ///< malformed + every DropReason
@@ -157,6 +165,10 @@ class FrameProcessor {
   int loaded_deepest_ = -1;       ///< deepest populated level of the last map loaded (-1: none)
   std::uint32_t loaded_frames_ = 0;  ///< its frame counter
   double last_local_map_stamp_ = 0.0;
+  // The previous processed frame's sensor position in the map and its stamp, for pose jumps (map mode).
+  bool has_last_sensor_ = false;
+  Eigen::Vector3d last_sensor_ = Eigen::Vector3d::Zero();
+  double last_sensor_stamp_ = 0.0;
 };
 
 /// A message's frame_id as tf2 takes it: ROS 1 drivers and old bags still write "/velodyne", which tf2 refuses (and

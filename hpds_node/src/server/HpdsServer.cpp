@@ -522,6 +522,11 @@ void HpdsServer::handle(const sensor_msgs::PointCloud2::ConstPtr &msg, std::size
                                                "map/max_samples ("
                                             << config_.hpds.map.max_samples
                                             << ", 0 = no cap) caps the count; set both to 0 to keep every sample");
+        if (frame.pose_jump && logAllowed("pose_jump"))
+          ROS_WARN_STREAM_NAMED("hpds", tag_ << ": " << hpds::poseJumpWarning(*frame.pose_jump,
+                                                                            "call ~clear_map to start a new map")
+                                            << " (" << statsSoFar(worker).pose_jumps
+                                            << " so far, counted in /diagnostics as 'pose jumps')");
         if (zero_stamp) ++zero_stamps_;
         if (no_frame_id) ++empty_frame_ids_;
         if (frame.counters.out_of_range > 0 && logAllowed("out_of_range"))

@@ -70,6 +70,7 @@ void HpdsServer::diagnose(diagnostic_updater::DiagnosticStatusWrapper &status) {
   status.add("frames empty", t.empty);
   status.add("frames with zero stamp", zero_stamps_.load());
   status.add("frames without frame_id", empty_frame_ids_.load());
+  status.add("pose jumps", t.pose_jumps);
   status.add("processing time mean [ms]", 1e3 * mean(t.seconds_sum - w.seconds_sum, frames_window));
   status.add("processing time max [ms]", 1e3 * s.seconds_max_window);
   status.add("processing time mean, all frames [ms]", 1e3 * mean(t.seconds_sum, t.processed));
