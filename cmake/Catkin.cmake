@@ -18,6 +18,12 @@ endif()
 set(HPDS_CATKIN_COMPONENTS
   roscpp nodelet sensor_msgs std_msgs std_srvs geometry_msgs tf2 tf2_ros tf2_eigen rosbag diagnostic_updater
   diagnostic_msgs)
+# Outside a catkin workspace (this clone's own build) the workspace's setup files (setup.bash, _setup_util.py, .catkin,
+# ...) have no workspace to belong to, and catkin installs them to the prefix of configure time, whatever
+# `cmake --install --prefix` says: /usr/local for everybody who installs elsewhere. A workspace sets this itself.
+if(CMAKE_SOURCE_DIR STREQUAL PROJECT_SOURCE_DIR AND NOT DEFINED CATKIN_INSTALL_INTO_PREFIX_ROOT)
+  set(CATKIN_INSTALL_INTO_PREFIX_ROOT FALSE)
+endif()
 find_package(catkin REQUIRED COMPONENTS ${HPDS_CATKIN_COMPONENTS})
 # A catkin workspace's devel/lib lies outside the build folder, so the link path put it into the installed
 # programs' RUNPATH, where a stale devel space would shadow the installed libraries. The install space's own

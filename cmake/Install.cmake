@@ -63,6 +63,16 @@ if(HPDS_BUILD_NODE)
   # package's, so both configs take the same versions.
   install(FILES ${CMAKE_CURRENT_BINARY_DIR}/hpdsConfigVersion.cmake DESTINATION ${CATKIN_PACKAGE_SHARE_DESTINATION}/cmake
           RENAME hpdsConfig-version.cmake)
+  if(CMAKE_SOURCE_DIR STREQUAL PROJECT_SOURCE_DIR AND NOT CATKIN_INSTALL_INTO_PREFIX_ROOT)
+    # catkin's workspace files are not installed here (cmake/Catkin.cmake), but its marker is what makes roslaunch,
+    # rosrun and pluginlib look for the package's programs and plugins under this prefix: written at install time,
+    # into the prefix of that install.
+    install(CODE [[
+      if(NOT EXISTS "$ENV{DESTDIR}${CMAKE_INSTALL_PREFIX}/.catkin")
+        file(WRITE "$ENV{DESTDIR}${CMAKE_INSTALL_PREFIX}/.catkin" "")
+      endif()
+    ]])
+  endif()
   install(CODE "set(_hpds_configured_prefix \"${CMAKE_INSTALL_PREFIX}\")")
   install(CODE [[
     set(_hpds_pc "$ENV{DESTDIR}${CMAKE_INSTALL_PREFIX}/lib/pkgconfig/hpds.pc")

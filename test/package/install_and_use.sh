@@ -14,6 +14,15 @@ prefix=$work/prefix
 fail() { echo "install_and_use: $* (files kept in $work)" >&2; exit 1; }
 
 cmake --install "$build" --prefix "$prefix" > "$work/install.log" || { cat "$work/install.log"; fail "cmake --install failed"; }
+# Nothing lands outside the prefix asked for: staged with DESTDIR, every file is under the stage's copy of it
+# (catkin installed its workspace setup files to the prefix of configure time, /usr/local, whatever --prefix said).
+DESTDIR="$work/stage" cmake --install "$build" --prefix "$prefix" > "$work/stage.log" ||
+  { cat "$work/stage.log"; fail "cmake --install with DESTDIR failed"; }
+stray=$(cd "$work/stage" && find . \( -type f -o -type l \) -not -path "./${prefix#/}/*" | head -n 5)
+[ -z "$stray" ] || fail "cmake --install --prefix $prefix writes outside it: $stray"
+grep -E "^-- (Installing|Up-to-date): " "$work/install.log" | grep -v -- ": $prefix/" | head -n 5 | grep -q . &&
+  fail "cmake --install --prefix $prefix writes outside it: $(grep -E '^-- (Installing|Up-to-date): ' "$work/install.log" | grep -v -- ": $prefix/" | head -n 5)"
+rm -rf "$work/stage"
 
 # What a user of the library, the tool and the ROS package finds in the prefix.
 config=$(cd "$prefix" && find . -path '*/cmake/hpds/hpdsConfig.cmake' | head -n 1)
