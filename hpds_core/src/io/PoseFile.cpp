@@ -63,9 +63,9 @@ std::string rigidPoseProblem(const Eigen::Isometry3d &pose) {
   return rotationProblem(pose.linear());
 }
 
-std::vector<Eigen::Isometry3d> readKittiPoses(const std::string &path) {
+std::vector<Eigen::Isometry3d> readKittiPoses(const std::string &path, std::size_t caller_alignment) {
   PoseCorrection ignored;
-  return readKittiPoses(path, ignored);
+  return readKittiPoses(path, ignored, caller_alignment);
 }
 
 std::string poseCorrectionWarning(const std::string &path, const PoseCorrection &correction) {
@@ -79,7 +79,17 @@ std::string poseCorrectionWarning(const std::string &path, const PoseCorrection 
   return buf;
 }
 
-std::vector<Eigen::Isometry3d> readKittiPoses(const std::string &path, PoseCorrection &correction) {
+std::vector<Eigen::Isometry3d> readKittiPoses(const std::string &path, PoseCorrection &correction,
+                                              std::size_t caller_alignment) {
+  // The vector is allocated here, aligned for this library's Eigen: code whose Eigen expects more would load its
+  // elements with instructions that fault on them.
+  if (caller_alignment > alignof(Eigen::Isometry3d))
+    throw std::invalid_argument(
+        "hpds::readKittiPoses: the calling code is built with " + std::to_string(caller_alignment) +
+        "-byte Eigen alignment (-mavx, -march=native), hpds with " + std::to_string(alignof(Eigen::Isometry3d)) +
+        ": the poses' vector, allocated by hpds, would not be aligned for it. Compile the calling code with "
+        "-DEIGEN_MAX_STATIC_ALIGN_BYTES=" + std::to_string(alignof(Eigen::Isometry3d)) +
+        ", or build hpds with the same flags");
   correction = PoseCorrection{};
   requireRegularFile(path);
   std::ifstream in(path, std::ios::binary);

@@ -18,6 +18,11 @@
 //   number: wrong number count, formats mixed, non-numeric token, NaN/Inf, invalid rotation or quaternion;
 //   missing/unreadable file; I/O failure.
 //   Also thrown by writeKittiPoses for a non-finite pose.
+// - Alignment: the returned vector is allocated by the library, aligned as its Eigen aligns Eigen::Isometry3d (16
+//   bytes for x86-64's baseline). Code built with vector flags that align it more (-mavx: 32, -march=native) would
+//   fault loading such elements: readKittiPoses then throws std::invalid_argument saying so (its defaulted last
+//   argument is the caller's alignment) rather than return them. Such code compiles its calls with
+//   -DEIGEN_MAX_STATIC_ALIGN_BYTES=16, or builds hpds with the same flags. Frame and the one-call API do not care.
 // - Thread-safety: reentrant; concurrent calls on different paths are safe.
 #pragma once
 
@@ -28,7 +33,9 @@
 
 namespace hpds {
 
-[[nodiscard]] std::vector<Eigen::Isometry3d> readKittiPoses(const std::string &path);
+/// `caller_alignment`: leave it; its default is the caller's alignment of Eigen::Isometry3d (see the contract).
+[[nodiscard]] std::vector<Eigen::Isometry3d> readKittiPoses(const std::string &path,
+                                                            std::size_t caller_alignment = alignof(Eigen::Isometry3d));
 
 /// What reading a pose file changed: the largest correction of a KITTI rotation replaced by the nearest true rotation,
 /// as the distance it moves a point 1 m from the sensor (the largest |sigma - 1| of the rotation part's singular
@@ -38,7 +45,8 @@ struct PoseCorrection {
   std::size_t line = 0;
 };
 /// readKittiPoses, reporting its rotation corrections in `correction`.
-[[nodiscard]] std::vector<Eigen::Isometry3d> readKittiPoses(const std::string &path, PoseCorrection &correction);
+[[nodiscard]] std::vector<Eigen::Isometry3d> readKittiPoses(const std::string &path, PoseCorrection &correction,
+                                                            std::size_t caller_alignment = alignof(Eigen::Isometry3d));
 
 /// [m per m] Corrections up to this are the rounding of a printed pose (KITTI prints ~7 significant digits: ~1e-7;
 /// 6 digits: ~1e-6); above it the file's rotations were scaled or cut short, and the correction moves far points by

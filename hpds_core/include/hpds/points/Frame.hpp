@@ -12,16 +12,23 @@
 #pragma once
 
 #include <Eigen/Geometry>
+#include <cstddef>
 #include <vector>
 
 #include "hpds/points/PointBuffer.hpp"
 
 namespace hpds {
 
+/// Eigen::Isometry3d is aligned as the compiler's vector flags say: 16 bytes at x86-64's baseline (the library's), 32
+/// with -mavx, 64 with -mavx512f. A program built with -march=native laid a Frame out otherwise than the library
+/// (sensor_to_fixed at byte 96 instead of 80), which then read the pose from the wrong bytes. Aligned to 64 here, the
+/// member has one offset, and Frame one size, whatever the flags of either side.
+inline constexpr std::size_t kPoseMemberAlignment = 64;
+
 struct Frame {
   PointBuffer points;
   double stamp = 0.0;
-  Eigen::Isometry3d sensor_to_fixed = Eigen::Isometry3d::Identity();
+  alignas(kPoseMemberAlignment) Eigen::Isometry3d sensor_to_fixed = Eigen::Isometry3d::Identity();
   Eigen::Vector3d viewpoint = Eigen::Vector3d::Zero();
 };
 

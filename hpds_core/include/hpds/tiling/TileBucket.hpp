@@ -36,7 +36,7 @@ namespace hpds {
 /// One frame's points in one tile.
 struct BucketFrame {
   std::uint32_t frame_index = 0;
-  Eigen::Isometry3d sensor_to_fixed = Eigen::Isometry3d::Identity();
+  alignas(kPoseMemberAlignment) Eigen::Isometry3d sensor_to_fixed = Eigen::Isometry3d::Identity();  ///< see Frame
   Eigen::Vector3d viewpoint = Eigen::Vector3d::Zero();  ///< the sensor's position in the records' frame (Frame::viewpoint)
   PointBuffer points;  ///< input records, input order
 };
