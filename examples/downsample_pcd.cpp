@@ -61,11 +61,13 @@ int main(int argc, char **argv) {
     pcl::fromPCLPointCloud2(blob, xyz_cloud);
     pcl::PointCloud<pcl::PointXYZI> cloud;
     pcl::copyPointCloud(xyz_cloud, cloud);
-    if (const int f = pcl::getFieldIndex(blob, "intensity"); f >= 0)
+    if (const int index = pcl::getFieldIndex(blob, "intensity"); index >= 0) {
+      const pcl::PCLPointField &field = blob.fields[static_cast<std::size_t>(index)];
       for (std::size_t i = 0; i < cloud.size(); ++i) {
         const std::size_t at = (i / blob.width) * blob.row_step + (i % blob.width) * blob.point_step;
-        cloud[i].intensity = fieldAsFloat(&blob.data[at + blob.fields[f].offset], blob.fields[f].datatype);
+        cloud[i].intensity = fieldAsFloat(&blob.data[at + field.offset], field.datatype);
       }
+    }
 
     // 1. The PCL call: real input points with every field, and their normals in the same order.
     pcl::PointCloud<pcl::Normal> normals;
@@ -89,7 +91,7 @@ int main(int argc, char **argv) {
         std::cerr << "downsample_pcd: sample " << i << " differs between the two calls\n";
         return 1;
       }
-      valid += std::isfinite(normals[i].normal_x) ? 1 : 0;
+      valid += std::isfinite(normals[i].normal_x) ? 1u : 0u;
     }
 
     pcl::PointCloud<pcl::PointXYZINormal> result;

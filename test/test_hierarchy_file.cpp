@@ -442,6 +442,16 @@ TEST_F(MapFile, MismatchedConfigAndScanModeAreRefusedAndLeaveThePipelineUnchange
   Pipeline s(scan);
   EXPECT_THROW(loadMap(p.string(), s), std::invalid_argument);
   EXPECT_THROW(s.replaceMap(Hierarchy(4.0, 6), 0), std::invalid_argument);
+  // Saving is refused as loading is (found by a library user: a scan-mode save wrote a file its load refused), and
+  // writes nothing.
+  const auto scan_path = p.parent_path() / "scan.hpdsmap";
+  try {
+    saveMap(scan_path.string(), s);
+    ADD_FAILURE() << "a scan-mode pipeline's map was saved";
+  } catch (const std::invalid_argument &e) {
+    EXPECT_NE(std::string(e.what()).find("saving a map needs mode: map"), std::string::npos) << e.what();
+  }
+  EXPECT_FALSE(std::filesystem::exists(scan_path));
   // A frame whose fields differ from the loaded map's is refused by the pipeline, as for a live map.
   Pipeline m(mapConfig());
   loadMap(p.string(), m);

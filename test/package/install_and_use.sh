@@ -179,10 +179,14 @@ CPP
   fi
 fi
 
-# A separate project against the prefix.
-example_flags=()
+# A separate project against the prefix, built as strictly as a user's -Werror project may be (the example indexed
+# PCL's fields with an int, and failed there).
+strict="-Wall -Wextra -Wpedantic -Wshadow -Wconversion -Wsign-conversion -Wold-style-cast -Werror"
+example_flags=(-DCMAKE_CXX_FLAGS="$strict")
+san_flags=()
 if [ "$sanitized" != OFF ]; then
-  example_flags=(-DCMAKE_CXX_FLAGS=-fsanitize=$sanitized -DCMAKE_EXE_LINKER_FLAGS=-fsanitize=$sanitized)
+  example_flags=(-DCMAKE_CXX_FLAGS="$strict -fsanitize=$sanitized" -DCMAKE_EXE_LINKER_FLAGS=-fsanitize=$sanitized)
+  san_flags=(-DCMAKE_CXX_FLAGS=-fsanitize=$sanitized -DCMAKE_EXE_LINKER_FLAGS=-fsanitize=$sanitized)
 fi
 cmake -S "$src/examples" -B "$work/example" -DCMAKE_PREFIX_PATH="$prefix" -DCMAKE_BUILD_TYPE=Release \
   "${example_flags[@]}" > "$work/example-configure.log" 2>&1 || { cat "$work/example-configure.log"; fail "examples/ does not configure"; }
@@ -252,7 +256,7 @@ int main() { return hpds::downsample(std::vector<Eigen::Vector3f>(3, Eigen::Vect
 CPP
   # catkin's scripts need Debian's Python (with the ROS modules), as a catkin workspace's build does.
   PATH=/usr/bin:$PATH cmake -S "$work/catkin_user" -B "$work/catkin_user/build" -DCMAKE_PREFIX_PATH="$prefix" \
-    -DPYTHON_EXECUTABLE=/usr/bin/python3 "${example_flags[@]}" \
+    -DPYTHON_EXECUTABLE=/usr/bin/python3 "${san_flags[@]}" \
     > "$work/catkin_user.log" 2>&1 || { cat "$work/catkin_user.log"; fail "a catkin package asking for hpds does not configure"; }
   grep -q "catkin_INCLUDE_DIRS=$prefix/include" "$work/catkin_user.log" ||
     { cat "$work/catkin_user.log"; fail "catkin_INCLUDE_DIRS lacks $prefix/include"; }

@@ -607,12 +607,23 @@ KeptNormalSettings keptSettingsOf(const Pipeline &pipeline) {
 }
 }  // namespace
 
+namespace {
+// A scan-mode pipeline holds only its last frame's samples: saved, they read as a map that loadMap then refuses.
+void requireMapMode(const Pipeline &pipeline) {
+  if (pipeline.config().mode != Mode::Map)
+    throw std::invalid_argument("saving a map needs mode: map (scan mode keeps no map: its hierarchy holds only the "
+                                "last frame's samples)");
+}
+}  // namespace
+
 void saveMap(const std::string &path, const Pipeline &pipeline) {
+  requireMapMode(pipeline);
   writeMapFile(path, pipeline.hierarchy(), pipeline.framesProcessed(), pipeline.map_normals_.get(),
                keptSettingsOf(pipeline));
 }
 
 void saveMap(AtomicFile &file, const Pipeline &pipeline) {
+  requireMapMode(pipeline);
   writeMap(file, pipeline.hierarchy(), pipeline.framesProcessed(), pipeline.map_normals_.get(),
            keptSettingsOf(pipeline));
 }

@@ -70,7 +70,8 @@ void saveHierarchy(AtomicFile &file, const Hierarchy &hierarchy, std::uint32_t n
 /// can never replace a point cloud, a bag or a config.
 [[nodiscard]] bool isOtherFormatName(const std::string &path);
 
-/// Saves the pipeline's map and its frame counter (framesProcessed()).
+/// Map mode only: saves the pipeline's map and its frame counter (framesProcessed()); std::invalid_argument for a
+/// scan-mode pipeline (nothing written), as loadMap refuses one.
 void saveMap(const std::string &path, const Pipeline &pipeline);
 /// The same into `file`, without committing it.
 void saveMap(AtomicFile &file, const Pipeline &pipeline);

@@ -39,7 +39,8 @@
 //   loadMap: the hierarchy reuses the slots of evicted samples and scan mode starts each frame afresh, so an id kept
 //   across frames may name another sample by then, which cannot be told from a stale id. Keep positions or the
 //   output cloud across frames, not ids.
-// - Not thread-safe: one thread drives a Pipeline. A moved-from Pipeline may only be assigned to or destroyed.
+// - Not thread-safe: one thread drives a Pipeline, const member functions included (normals() and makeCloud() fill
+//   caches). A moved-from Pipeline may only be assigned to or destroyed.
 //   Another thread may stop a long addFrame or normals() through setInterrupt (util/Interrupt.hpp).
 #pragma once
 
