@@ -4,6 +4,7 @@
 
 #include <cmath>
 #include <cstring>
+#include <filesystem>
 #include <fstream>
 #include <map>
 #include <random>
@@ -26,6 +27,20 @@ namespace {
 using test::readText;
 using test::runHpds;
 using test::shellQuote;
+
+// A flat square of n x n float32 points `step` apart at z = 1, as a PCD.
+void writePlanePcd(const std::filesystem::path &path, int n, double step) {
+  PointLayout l;
+  for (const char *axis : {"x", "y", "z"}) l.append(axis, FieldType::Float32);
+  PointBuffer plane(l, 0);
+  for (int i = 0; i < n; ++i)
+    for (int j = 0; j < n; ++j) {
+      plane.resize(plane.size() + 1);
+      const double p[3] = {step * i, step * j, 1.0};
+      for (int a = 0; a < 3; ++a) writeFromDouble(plane.record(plane.size() - 1), l.fields[a], p[a]);
+    }
+  writePcd(path.string(), plane);
+}
 
 int maxLevel(const PointBuffer &b) {
   const PointField *l = b.layout().find("level");
@@ -608,16 +623,7 @@ TEST(Cli, AnUnknownCommandIsNamedWithTheKnownOnes) {
 // and any sampling passes: `verify --spacing 0.1 --max-depth 0` passed a sampling of levels 0..5 whatever it held.
 TEST(Cli, VerifyRefusesLevelsDeeperThanItsSpacingMakes) {
   const auto tmp = test::scratchDir("cli_verify_depth");
-  PointLayout l;
-  for (const char *axis : {"x", "y", "z"}) l.append(axis, FieldType::Float32);
-  PointBuffer plane(l, 0);
-  for (int i = 0; i < 150; ++i)
-    for (int j = 0; j < 150; ++j) {
-      plane.resize(plane.size() + 1);
-      const double p[3] = {0.02 * i, 0.02 * j, 1.0};
-      for (int a = 0; a < 3; ++a) writeFromDouble(plane.record(plane.size() - 1), l.fields[a], p[a]);
-    }
-  writePcd((tmp / "plane.pcd").string(), plane);
+  writePlanePcd(tmp / "plane.pcd", 150, 0.02);
   std::string log;
   ASSERT_EQ(runHpds("sample " + shellQuote(tmp / "plane.pcd") + " --no-normals -o " + shellQuote(tmp / "s.ply"), &log),
             0)
@@ -655,16 +661,7 @@ TEST(Cli, VerifyRefusesLevelsDeeperThanItsSpacingMakes) {
 // which its header did not keep, and a wrong one could pass unnoticed. hpds sample records it; verify reads it.
 TEST(Cli, VerifyAndAnalyzeReadTheCellTheSamplingRecords) {
   const auto tmp = test::scratchDir("cli_verify_record");
-  PointLayout l;
-  for (const char *axis : {"x", "y", "z"}) l.append(axis, FieldType::Float32);
-  PointBuffer plane(l, 0);
-  for (int i = 0; i < 120; ++i)
-    for (int j = 0; j < 120; ++j) {
-      plane.resize(plane.size() + 1);
-      const double p[3] = {0.025 * i, 0.025 * j, 1.0};
-      for (int a = 0; a < 3; ++a) writeFromDouble(plane.record(plane.size() - 1), l.fields[a], p[a]);
-    }
-  writePcd((tmp / "plane.pcd").string(), plane);
+  writePlanePcd(tmp / "plane.pcd", 120, 0.025);
   std::string log;
   ASSERT_EQ(runHpds("sample " + shellQuote(tmp / "plane.pcd") + " --spacing 0.15 --max-depth 6 --no-normals -o " +
                         shellQuote(tmp / "s.ply"),

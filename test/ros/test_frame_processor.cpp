@@ -41,6 +41,18 @@ hpds::SyntheticLidarConfig smallLidar() {
   return c;
 }
 
+// A small map in odom without normals: levels 0..3 of a 4 m cell.
+NodeConfig smallMapConfig() {
+  NodeConfig config;
+  config.hpds.mode = hpds::Mode::Map;
+  config.hpds.output.level = 3;
+  config.hpds.hierarchy.cell_size = 4.0;
+  config.hpds.hierarchy.max_depth = 4;
+  config.hpds.normals.enabled = false;
+  config.ros.fixed_frame = "odom";
+  return config;
+}
+
 // The persistence tests' map: levels 0..4 out of 0..6 in odom.
 NodeConfig persistedMapConfig() {
   NodeConfig config;
@@ -408,13 +420,7 @@ TEST(FrameProcessor, MapOutputIsTheSampleSetHitByTheFrame) {
 // by the steady clock now: at 20 Hz, one at once and another after at least 1 / rate seconds.
 TEST(FrameProcessor, ZeroStampedCloudsStillGetALocalMapAtItsRate) {
   const hpds::SyntheticLidar lidar(smallLidar());
-  NodeConfig config;
-  config.hpds.mode = hpds::Mode::Map;
-  config.hpds.output.level = 3;
-  config.hpds.hierarchy.cell_size = 4.0;
-  config.hpds.hierarchy.max_depth = 4;
-  config.hpds.normals.enabled = false;
-  config.ros.fixed_frame = "odom";
+  NodeConfig config = smallMapConfig();
   config.ros.local_map_rate = 20.0;
   FrameProcessor processor(config);
   const hpds::SyntheticFrame f = lidar.frame(0);
@@ -434,13 +440,7 @@ TEST(FrameProcessor, ZeroStampedCloudsStillGetALocalMapAtItsRate) {
 // map, which then held the street twice, and nothing said so. Such a frame is processed, marked and counted.
 TEST(FrameProcessor, APoseJumpIsMarkedAndCountedAndClearingTheMapForgetsThePosition) {
   const hpds::SyntheticLidar lidar(smallLidar());
-  NodeConfig config;
-  config.hpds.mode = hpds::Mode::Map;
-  config.hpds.output.level = 3;
-  config.hpds.hierarchy.cell_size = 4.0;
-  config.hpds.hierarchy.max_depth = 4;
-  config.hpds.normals.enabled = false;
-  config.ros.fixed_frame = "odom";
+  NodeConfig config = smallMapConfig();
   FrameProcessor processor(config);
   Eigen::Isometry3d jump = Eigen::Isometry3d::Identity();
   jump.translation() = Eigen::Vector3d(0.0, 40.0, 0.0);
