@@ -222,8 +222,7 @@ void runAnalyze(const AnalyzeArgs &a) {
   for (const std::string &in : a.inputs) inputs.push_back({"--input", in});
   checkPaths(inputs, {}, {{"-o", a.out_dir, {"analysis.json", "levels.csv", "rdf.csv", "spectrum.csv"}}});
   CellSizeOptions cell = a.cell;
-  applySamplingRecord(cell, a.sampling, cell.spacing.has_value());
-  const double cell_size = resolveCellSize(cell);
+  const double cell_size = resolveSamplingCell(cell, a.sampling, cell.spacing.has_value());
   if (!a.patch.empty() && a.patch.size() != 3) throw std::invalid_argument("--patch: expected cx,cy,size");
   SamplingCloud cloud = loadSampling(a.sampling);
   if (!cloud.has_level) throw std::invalid_argument(a.sampling + ": no `level` field (not an hpds sampling?)");

@@ -229,26 +229,27 @@ int deepestLevelFor(const CellSizeOptions &o) {
   return resolveOutput(spacingConfig(o)).level;
 }
 
-double resolveCellSize(const CellSizeOptions &o) {
+namespace {
+// The cell --cell-size or --spacing [--max-depth] gives (one of the two is set).
+double cellSizeOfFlags(const CellSizeOptions &o) {
   if (o.cell_size) {
     if (!(*o.cell_size > 0.0)) throw std::invalid_argument("--cell-size: must be > 0");
     return *o.cell_size;
   }
-  if (!o.spacing) throw std::invalid_argument("--cell-size or --spacing is required (the sampling's level-0 cell)");
   const HpdsConfig c = spacingConfig(o);
   if (!(*o.spacing > 0.0)) throw std::invalid_argument("--spacing: must be > 0");
   validateConfig(c);
   return resolveOutput(c).cell_size;
 }
+}  // namespace
 
 SamplingRecord samplingRecordOf(const Pipeline &pipeline) {
   return {pipeline.hierarchy().cellSize(), pipeline.hierarchy().maxDepth(), pipeline.outputLevel()};
 }
 
-void applySamplingRecord(CellSizeOptions &o, const std::string &sampling, bool max_depth_given) {
+double resolveSamplingCell(CellSizeOptions &o, const std::string &sampling, bool max_depth_given) {
   const std::optional<SamplingRecord> record = readSamplingRecord(sampling);
-  const bool flags = o.cell_size || o.spacing;
-  if (!flags) {
+  if (!o.cell_size && !o.spacing) {
     if (!record)
       throw std::invalid_argument("--cell-size or --spacing is required: '" + sampling +
                                   "' does not record the cell it was sampled with (written by another tool or an "
@@ -256,10 +257,10 @@ void applySamplingRecord(CellSizeOptions &o, const std::string &sampling, bool m
     o.cell_size = record->cell_size;
     if (!max_depth_given) o.max_depth = record->max_depth;
     o.recorded_level = record->output_level;
-    return;
+    return record->cell_size;
   }
-  if (!record) return;
-  const double given = resolveCellSize(o);
+  const double given = cellSizeOfFlags(o);
+  if (!record) return given;
   const bool same_cell = std::abs(given - record->cell_size) <= 1e-12 * record->cell_size;
   const bool same_depth = !max_depth_given || o.max_depth == record->max_depth;
   if (!same_cell || !same_depth)
@@ -267,6 +268,7 @@ void applySamplingRecord(CellSizeOptions &o, const std::string &sampling, bool m
               << " m and max_depth " << record->max_depth << " (its header says so), but is checked with cell size "
               << given << " m" << (max_depth_given ? " and max_depth " + std::to_string(o.max_depth) : std::string())
               << " as given; leave out --cell-size, --spacing and --max-depth to use the recorded ones\n";
+  return given;
 }
 
 std::vector<Eigen::Isometry3d> readPosesOption(const std::string &path) {

@@ -55,27 +55,28 @@ void addSamplingOptions(CLI::App &app, SamplingOptions &options);
 [[nodiscard]] HpdsConfig resolveConfig(const SamplingOptions &options);
 
 /// The level-0 cell of a sampling to check: --cell-size C, or --spacing S [--max-depth M] for one written with a
-/// derived cell (hierarchy.cell_size 0), derived as `hpds sample` derives it. Exactly one of the two is required.
+/// derived cell (hierarchy.cell_size 0), derived as `hpds sample` derives it; neither for a sampling whose header
+/// records its cell (resolveSamplingCell).
 struct CellSizeOptions {
   std::optional<double> cell_size;
   std::optional<double> spacing;
   int max_depth = HierarchyConfig{}.max_depth;
-  /// The output level the sampling's header records (applySamplingRecord), when the cell came from there.
+  /// The output level the sampling's header records (resolveSamplingCell), when the cell came from there.
   std::optional<int> recorded_level;
 };
 /// `depth_bounds_keys`: --max-depth also goes with --cell-size, where it only bounds the coordinates the sampler
 /// inserted (verify); else it needs --spacing.
 void addCellSizeOptions(CLI::App &app, CellSizeOptions &options, bool depth_bounds_keys = false);
-[[nodiscard]] double resolveCellSize(const CellSizeOptions &options);
 /// With --spacing: the output level its derived cell is made for (the deepest level such a sampling holds); with
 /// a cell from the sampling's header: the output level recorded there; with --cell-size: -1 (any level).
 [[nodiscard]] int deepestLevelFor(const CellSizeOptions &options);
-/// hpds sample and replay record their cell, max_depth and output level in the output's header (SamplingRecord).
-/// Without --cell-size and --spacing, `options` takes them from the header of `sampling` (--max-depth, when
-/// `max_depth_given`, stays as given); a file without a record then throws std::invalid_argument asking for
-/// --cell-size or --spacing. With either flag the flags are used, and a record that disagrees is warned about on
-/// stderr. Throws std::runtime_error (naming the file) on a malformed record.
-void applySamplingRecord(CellSizeOptions &options, const std::string &sampling, bool max_depth_given);
+/// The level-0 cell to check `sampling` with. hpds sample and replay record their cell, max_depth and output level
+/// in the output's header (SamplingRecord). Without --cell-size and --spacing, `options` takes them from the header
+/// of `sampling` (--max-depth, when `max_depth_given`, stays as given); a file without a record then throws
+/// std::invalid_argument asking for --cell-size or --spacing. With either flag the cell is the flags' (--spacing's
+/// derived as `hpds sample` derives it), and a record that disagrees is warned about on stderr. Throws
+/// std::runtime_error (naming the file) on a malformed record, std::invalid_argument on a bad flag value.
+[[nodiscard]] double resolveSamplingCell(CellSizeOptions &options, const std::string &sampling, bool max_depth_given);
 
 /// What `pipeline`'s output was sampled with, for the header of the PLY it is written to.
 [[nodiscard]] SamplingRecord samplingRecordOf(const Pipeline &pipeline);

@@ -98,8 +98,7 @@ void addVerifyCommand(CLI::App &app) {
       throw CLI::ValidationError("SAMPLING is missing: --input takes every path after it, so '" + a->inputs.back() +
                                  "' was read as an input; give SAMPLING first: hpds verify SAMPLING --input INPUT...");
     a->inputs = expandInputFolders(a->inputs, std::cerr);
-    applySamplingRecord(a->cell, a->sampling, cmd->count("--max-depth") > 0);
-    const double cell_size = resolveCellSize(a->cell);
+    const double cell_size = resolveSamplingCell(a->cell, a->sampling, cmd->count("--max-depth") > 0);
     if (a->cell.recorded_level)
       std::cout << "as its header records: level-0 cell " << cell_size << " m, max_depth " << a->cell.max_depth
                 << ", output level " << *a->cell.recorded_level << "\n";

@@ -148,7 +148,7 @@ std::string FrameProcessor::loadMap(const std::string &path) {
   // The loaded map has not been published as a local map yet: send one with the next frame.
   local_map_sent_ = false;
   last_local_map_stamp_ = 0.0;
-  has_last_sensor_ = false;  // where the loaded map's last sensor was is not in the file
+  last_sensor_.reset();  // where the loaded map's last sensor was is not in the file
   return warning;
 }
 
@@ -159,7 +159,7 @@ std::size_t FrameProcessor::clearMap() {
   loaded_frames_ = 0;
   local_map_sent_ = false;
   last_local_map_stamp_ = 0.0;
-  has_last_sensor_ = false;
+  last_sensor_.reset();
   return held;
 }
 
@@ -244,11 +244,9 @@ ProcessedFrame FrameProcessor::process(const sensor_msgs::PointCloud2 &msg, cons
   r.seconds_normals += inserted.seconds_normals;  // map mode: the normals the map keeps
   if (map_mode) {
     const Eigen::Vector3d sensor = frame.sensor_to_fixed * frame.viewpoint;
-    if (has_last_sensor_) r.pose_jump = hpds::poseJump(last_sensor_, last_sensor_stamp_, sensor, frame.stamp);
+    if (last_sensor_) r.pose_jump = hpds::poseJump(last_sensor_->position, last_sensor_->stamp, sensor, frame.stamp);
     if (r.pose_jump) ++stats_.pose_jumps;
-    has_last_sensor_ = true;
-    last_sensor_ = sensor;
-    last_sensor_stamp_ = frame.stamp;
+    last_sensor_ = SensorAt{sensor, frame.stamp};
   }
 
   // 3. Outputs, in the target frame (or the input frame), stamped with the input stamp.

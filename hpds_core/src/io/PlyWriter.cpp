@@ -189,13 +189,17 @@ void writePlanned(AtomicFile &file, const PlyPlan &plan, const PointBuffer &clou
   }
 }
 
-}  // namespace
-
-void writePly(const std::string &path, const PointBuffer &cloud, PlyContent content) {
-  const PlyPlan plan = planPly(path, cloud, content);
+// The plan (made first: what no reader takes is refused before any file is touched) into a new file at `path`.
+void writePlannedFile(const std::string &path, const PlyPlan &plan, const PointBuffer &cloud) {
   AtomicFile file(path);
   writePlanned(file, plan, cloud);
   file.commit();
+}
+
+}  // namespace
+
+void writePly(const std::string &path, const PointBuffer &cloud, PlyContent content) {
+  writePlannedFile(path, planPly(path, cloud, content), cloud);
 }
 
 void writePly(AtomicFile &file, const PointBuffer &cloud, PlyContent content) {
@@ -203,10 +207,7 @@ void writePly(AtomicFile &file, const PointBuffer &cloud, PlyContent content) {
 }
 
 void writePly(const std::string &path, const PointBuffer &cloud, const SamplingRecord &record) {
-  const PlyPlan plan = planPly(path, cloud, PlyContent::kSamples, &record);
-  AtomicFile file(path);
-  writePlanned(file, plan, cloud);
-  file.commit();
+  writePlannedFile(path, planPly(path, cloud, PlyContent::kSamples, &record), cloud);
 }
 
 void writePly(AtomicFile &file, const PointBuffer &cloud, const SamplingRecord &record) {

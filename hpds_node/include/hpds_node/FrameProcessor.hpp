@@ -165,10 +165,13 @@ class FrameProcessor {
   int loaded_deepest_ = -1;       ///< deepest populated level of the last map loaded (-1: none)
   std::uint32_t loaded_frames_ = 0;  ///< its frame counter
   double last_local_map_stamp_ = 0.0;
-  // The previous processed frame's sensor position in the map and its stamp, for pose jumps (map mode).
-  bool has_last_sensor_ = false;
-  Eigen::Vector3d last_sensor_ = Eigen::Vector3d::Zero();
-  double last_sensor_stamp_ = 0.0;
+  // The previous processed frame's sensor position in the map and its stamp, for pose jumps (map mode); none after
+  // a load or clear.
+  struct SensorAt {
+    Eigen::Vector3d position;
+    double stamp;
+  };
+  std::optional<SensorAt> last_sensor_;
 };
 
 /// A message's frame_id as tf2 takes it: ROS 1 drivers and old bags still write "/velodyne", which tf2 refuses (and
