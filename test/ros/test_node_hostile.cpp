@@ -434,21 +434,24 @@ TEST_F(HostileTest, APoseJumpIsCountedAndWarnedAbout) {
   ros::Publisher tf = nh_.advertise<tf2_msgs::TFMessage>("/tf", 10);
   ASSERT_TRUE(hpds_test::waitFor([&] { return tf.getNumSubscribers() > 0; }, 30.0)) << "no tf listener";
   const double processed = node.diag.value("frames processed"), jumps = node.diag.value("pose jumps");
-  // 1 s apart: 0.5 m is a walk, 59.5 m is no vehicle's speed. Stamps after the other tests' (no step back).
+  // 1 s apart: 0.5 m is a walk, 59.5 m is no vehicle's speed. Stamps after the other tests' (no step back). The
+  // three transforms go out well before the clouds: on a loaded machine one sent just before its cloud could arrive
+  // after the node's ros/tf_timeout (0.2 s) and drop the frame as no_transform.
   const double x[3] = {0.0, 0.5, 60.0};
+  tf2_msgs::TFMessage transforms;
   for (int i = 0; i < 3; ++i) {
-    const ros::Time stamp(5000 + i, 0);
     geometry_msgs::TransformStamped t;
-    t.header.stamp = stamp;
+    t.header.stamp = ros::Time(5000 + i, 0);
     t.header.frame_id = "odom";
     t.child_frame_id = "jumpy";
     t.transform.translation.x = x[i];
     t.transform.rotation.w = 1.0;
-    tf2_msgs::TFMessage message;
-    message.transforms.push_back(t);
-    tf.publish(message);
-    ros::WallDuration(0.1).sleep();
-    auto m = validCloud(500, 1990 + std::uint32_t(i), stamp);
+    transforms.transforms.push_back(t);
+  }
+  tf.publish(transforms);
+  ros::WallDuration(1.0).sleep();
+  for (int i = 0; i < 3; ++i) {
+    auto m = validCloud(500, 1990 + std::uint32_t(i), ros::Time(5000 + i, 0));
     m->header.frame_id = "jumpy";
     node.pub.publish(m);
     ros::WallDuration(0.3).sleep();
